@@ -1,0 +1,49 @@
+"""The ``rce`` command line.
+
+Each command lives in its own module that exposes ``register(subparsers)``; the module adds one
+sub-parser and sets ``func`` to a callable taking the parsed ``argparse.Namespace`` and returning an
+exit code. :func:`main` turns :class:`~rce_gtsam.errors.RceError` into a one-line message and exit
+code 2 instead of a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from .errors import RceError
+
+#: Modules that contribute sub-commands, in the order ``rce --help`` lists them.
+COMMAND_MODULES = (
+    "rce_gtsam.commands.analyze",
+)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="rce",
+        description="Relative compliance of plant branches from monocular video "
+                    "(tracking, GTSAM smoothing, rank-1 compliance, model diagnosis).",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMAND_MODULES:
+        importlib.import_module(name).register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except RceError as exc:
+        print(f"rce {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"rce {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
