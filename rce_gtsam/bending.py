@@ -1,0 +1,146 @@
+"""Bending angles at every joint, their deviation from rest, an outlier mask and their variance.
+
+For a bend (g, j, c) with u = p_g - p_j and v = p_c - p_j (pixels):
+
+* unsigned (paper): theta = arccos(u.v / |u||v|) in [0, 180] degrees, 180 = straight;
+* signed: the turning angle phi = atan2(a x b, a . b) with a = p_j - p_g, b = p_c - p_j, in
+  (-180, 180] degrees, 0 = straight, positive = counter-clockwise in image coordinates.
+
+delta(t) = angle(t) - rest, where rest is the angle at the bend's first common frame (paper) or the
+median over its frames (robust). The outlier mask is the Iglewicz-Hoaglin modified z-score on delta:
+inlier <=> 0.6745 |delta - median| / MAD <= threshold.
+
+With the joint covariance of the three nodes (from the smoother's marginals) the per-frame angle
+variance follows to first order: var = J Sigma J^T with J the 1x6 gradient of the angle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .graph import Bend, BranchGraph
+from .presets import BendingConfig
+
+_RAD2DEG = 180.0 / np.pi
+_TINY = 1e-12
+MAD_SCALE = 0.6745  # 1 / 1.4826: makes the MAD a consistent sigma estimate for Gaussian data
+
+
+@dataclass(frozen=True, eq=False)
+class BendingResult:
+    """Per-bend angle series, aligned on frames 0..F-1.
+
+    bends: the (grandparent, joint, child) triplets, rows of every array.
+    angle_deg: (B, F) angle in degrees (NaN where any of the three nodes is missing).
+    rest_deg: (B,) rest angle in degrees.
+    delta_deg: (B, F) angle - rest, degrees.
+    inlier: (B, F) bool, finite and within the MAD threshold.
+    variance_deg2: (B, F) first-order angle variance in deg^2, or None without covariances.
+    signed: whether angles are signed turning angles (True) or unsigned interior angles.
+    """
+
+    bends: tuple[Bend, ...]
+    angle_deg: np.ndarray
+    rest_deg: np.ndarray
+    delta_deg: np.ndarray
+    inlier: np.ndarray
+    variance_deg2: np.ndarray | None
+    signed: bool
+
+    @property
+    def edges(self) -> list[tuple[int, int]]:
+        """The downstream edge (joint, child) of every bend."""
+        return [b.edge for b in self.bends]
+
+
+def bend_angles(pg: np.ndarray, pj: np.ndarray, pc: np.ndarray, signed: bool) -> np.ndarray:
+    """Angle in degrees at ``pj`` for arrays of points (..., 2); NaN for degenerate segments."""
+    u = pg - pj
+    v = pc - pj
+    nu = np.hypot(u[..., 0], u[..., 1])
+    nv = np.hypot(v[..., 0], v[..., 1])
+    bad = (nu < _TINY) | (nv < _TINY)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        if signed:
+            a = -u  # p_j - p_g
+            cross = a[..., 0] * v[..., 1] - a[..., 1] * v[..., 0]
+            dot = a[..., 0] * v[..., 0] + a[..., 1] * v[..., 1]
+            ang = np.arctan2(cross, dot) * _RAD2DEG
+        else:
+            cosang = (u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1]) / (nu * nv)
+            ang = np.degrees(np.arccos(np.clip(cosang, -1.0, 1.0)))
+    return np.where(bad, np.nan, ang)
+
+
+def angle_gradient(pg: np.ndarray, pj: np.ndarray, pc: np.ndarray) -> np.ndarray:
+    """(..., 6) gradient of the turning angle (radians) w.r.t. (p_g, p_j, p_c) in pixels.
+
+    The unsigned interior angle is 180 deg - |turning angle|, so it has the same gradient up to a
+    sign and the same first-order variance.
+    """
+    a = pj - pg
+    b = pc - pj
+    na2 = np.maximum(np.sum(a * a, axis=-1, keepdims=True), _TINY)
+    nb2 = np.maximum(np.sum(b * b, axis=-1, keepdims=True), _TINY)
+    da = np.stack([-a[..., 1], a[..., 0]], axis=-1) / na2  # d atan2(a) / d a
+    db = np.stack([-b[..., 1], b[..., 0]], axis=-1) / nb2
+    return np.concatenate([da, -db - da, db], axis=-1)
+
+
+def mad_inliers(delta: np.ndarray, threshold: float) -> np.ndarray:
+    """Modified z-score mask per row of ``delta`` (B, F); non-finite entries are never inliers."""
+    finite = np.isfinite(delta)
+    out = np.zeros_like(finite)
+    for b in range(delta.shape[0]):
+        vals = delta[b, finite[b]]
+        if vals.size < 3:
+            out[b] = finite[b]
+            continue
+        med = np.median(vals)
+        mad = np.median(np.abs(vals - med))
+        if mad <= 1e-9:
+            out[b] = finite[b]
+            continue
+        with np.errstate(invalid="ignore"):
+            z = MAD_SCALE * np.abs(delta[b] - med) / mad
+        out[b] = finite[b] & (z <= threshold)
+    return out
+
+
+def compute_bending(xy: np.ndarray, node_ids, graph: BranchGraph, config: BendingConfig,
+                    frame_cov: np.ndarray | None = None) -> BendingResult:
+    """Angles of every bend of ``graph`` from positions ``xy`` (N, F, 2), NaN = not usable.
+
+    ``frame_cov`` (F, 2N, 2N), the joint covariance of all nodes at each frame in px^2 (node order
+    = ``node_ids``), enables the propagated angle variance.
+    """
+    row = {int(n): i for i, n in enumerate(node_ids)}
+    bends = graph.bends
+    n_frames = xy.shape[1]
+    angle = np.full((len(bends), n_frames), np.nan)
+    rest = np.full(len(bends), np.nan)
+    variance = None if frame_cov is None else np.full((len(bends), n_frames), np.nan)
+    for k, bend in enumerate(bends):
+        ig, ij, ic = (row[n] for n in bend.nodes)
+        angle[k] = bend_angles(xy[ig], xy[ij], xy[ic], config.signed)
+        finite = np.flatnonzero(np.isfinite(angle[k]))
+        if finite.size == 0:
+            continue
+        if config.rest == "first":
+            rest[k] = angle[k, finite[0]]
+        else:
+            rest[k] = np.median(angle[k, finite])
+        if variance is not None:
+            grad = angle_gradient(xy[ig], xy[ij], xy[ic])  # (F, 6)
+            sel = np.concatenate([[2 * i, 2 * i + 1] for i in (ig, ij, ic)])
+            cov6 = frame_cov[:, sel][:, :, sel]  # (F, 6, 6)
+            var = np.einsum("fi,fij,fj->f", grad, cov6, grad) * _RAD2DEG**2
+            variance[k] = np.where(np.isfinite(angle[k]), var, np.nan)
+    delta = angle - rest[:, None]
+    if config.signed:
+        delta = (delta + 180.0) % 360.0 - 180.0  # keep deviations continuous across +-180
+    inlier = mad_inliers(delta, config.mad_threshold)
+    return BendingResult(bends=bends, angle_deg=angle, rest_deg=rest, delta_deg=delta, inlier=inlier,
+                         variance_deg2=variance, signed=config.signed)
