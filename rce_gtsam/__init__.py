@@ -1,8 +1,21 @@
-"""rce_gtsam: relative compliance of plant branches from monocular video."""
+"""rce_gtsam: relative compliance of plant branches from monocular video.
+
+Python API in one line: ``result = rce_gtsam.analyze("tracks.csv", "graph.json", preset="default")``.
+"""
 
 from .errors import InputError, RceError
 from .graph import Bend, BranchGraph, load_graph
+from .presets import PRESETS, Preset, get_preset
 from .tracks import Tracks, load_tracks
 
-__all__ = ["InputError", "RceError", "Bend", "BranchGraph", "load_graph", "Tracks", "load_tracks"]
 __version__ = "0.1.0"
+
+
+def analyze(*args, **kwargs):
+    """See :func:`rce_gtsam.pipeline.analyze`."""
+    from .pipeline import analyze as _analyze
+    return _analyze(*args, **kwargs)
+
+
+__all__ = ["InputError", "RceError", "Bend", "BranchGraph", "load_graph", "Tracks", "load_tracks",
+           "PRESETS", "Preset", "get_preset", "analyze", "__version__"]

@@ -1,0 +1,235 @@
+"""The analysis pipeline: tracks -> smoothed tracks -> bends -> response matrix -> rank-1 compliance.
+
+Every stage is a plain function of typed values; :func:`analyze` chains them and times each one.
+Which numbers and switches each stage uses comes from a :class:`~rce_gtsam.presets.Preset`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .bending import BendingResult, compute_bending
+from .compliance import BootstrapCI, Rank1Fit, bootstrap_kappa, fit_rank1
+from .geometry import Geometry, compute_geometry, edge_lengths
+from .graph import BranchGraph, load_graph
+from .presets import Preset, get_preset
+from .smooth import SmoothedTracks, smooth_tracks
+from .tracks import Tracks, load_tracks
+
+
+@dataclass(frozen=True, eq=False)
+class Response:
+    """The data the rank-1 model is fitted to.
+
+    Y: (E, T) bending response in degrees (|delta| for the paper's ``abs`` response, signed delta
+       otherwise); NaN where the bend is missing or an outlier.
+    variance: (E, T) propagated angle variance in deg^2, or None.
+    edges: the downstream edge (joint, child) of each row; rows are ordered by root distance, then
+       joint, then child.
+    bend_rows: index of each row in ``BendingResult.bends``.
+    root_distance_px: (E,) root distance of each edge's child (pixels); root_distance: (E,) the same
+       divided by the branch's largest root distance (0..1).
+    frames: (T,) video frame index of each column (frames where any bend has a finite angle).
+    """
+
+    Y: np.ndarray
+    variance: np.ndarray | None
+    edges: list[tuple[int, int]]
+    bend_rows: np.ndarray
+    root_distance_px: np.ndarray
+    root_distance: np.ndarray
+    frames: np.ndarray
+
+    @property
+    def weights(self) -> np.ndarray | None:
+        """(E, T) inverse-variance weights (1/deg^2) normalised to mean 1 over finite entries, or None."""
+        if self.variance is None:
+            return None
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w = 1.0 / self.variance
+        w = np.where(np.isfinite(w) & np.isfinite(self.Y), w, 0.0)
+        mean = w[w > 0].mean() if (w > 0).any() else 1.0
+        return w / mean
+
+
+@dataclass(frozen=True, eq=False)
+class SmoothingMetrics:
+    """How much smoothing changed the bending and edge-length statistics (reference doc §2.11).
+
+    bend_rms_raw_deg / bend_rms_smoothed_deg: (B,) filtered RMS of delta over inlier frames per bend,
+    on the presmoothed ("raw") and the smoothed tracks; edge_cv_raw / edge_cv_smoothed: (edges,)
+    coefficient of variation of each edge's length over its observed frames. Reductions are
+    1 - mean(smoothed) / mean(raw), in percent.
+    """
+
+    bend_rms_raw_deg: np.ndarray
+    bend_rms_smoothed_deg: np.ndarray
+    edge_cv_raw: np.ndarray
+    edge_cv_smoothed: np.ndarray
+
+    @staticmethod
+    def _reduction(raw, smoothed) -> float:
+        return float(100.0 * (1.0 - np.nanmean(smoothed) / np.nanmean(raw)))
+
+    def as_dict(self) -> dict:
+        return {
+            "mean_bend_rms_raw_deg": float(np.nanmean(self.bend_rms_raw_deg)),
+            "mean_bend_rms_smoothed_deg": float(np.nanmean(self.bend_rms_smoothed_deg)),
+            "bend_rms_reduction_pct": self._reduction(self.bend_rms_raw_deg, self.bend_rms_smoothed_deg),
+            "mean_edge_length_cv_raw": float(np.nanmean(self.edge_cv_raw)),
+            "mean_edge_length_cv_smoothed": float(np.nanmean(self.edge_cv_smoothed)),
+            "edge_length_cv_reduction_pct": self._reduction(self.edge_cv_raw, self.edge_cv_smoothed),
+            "n_bends": int(self.bend_rms_raw_deg.size),
+            "n_edges": int(self.edge_cv_raw.size),
+        }
+
+
+def observed_positions(smoothed: SmoothedTracks) -> np.ndarray:
+    """(N, F, 2) smoothed positions at the input's observed frames only, NaN elsewhere.
+
+    Missing frames are never interpolated into the analysis: the smoother estimates them (and they
+    carry its covariance), but bends and lengths only use frames a tracker actually saw.
+    """
+    xy = smoothed.tracks.xy.copy()
+    xy[~smoothed.observed] = np.nan
+    return xy
+
+
+def filtered_rms(bending: BendingResult) -> np.ndarray:
+    """(B,) sqrt(mean delta^2) over each bend's inlier frames, degrees."""
+    d2 = np.where(bending.inlier, bending.delta_deg**2, np.nan)
+    with np.errstate(invalid="ignore"):
+        import warnings
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return np.sqrt(np.nanmean(d2, axis=1))
+
+
+def length_cv(xy: np.ndarray, node_ids, graph: BranchGraph) -> np.ndarray:
+    """(edges,) population std / mean of each edge's length over its common frames."""
+    row = {int(n): i for i, n in enumerate(node_ids)}
+    out = []
+    for e in graph.edges:
+        L = edge_lengths(xy, row, e)
+        L = L[np.isfinite(L)]
+        out.append(float(L.std() / L.mean()) if L.size and L.mean() > 0 else float("nan"))
+    return np.array(out)
+
+
+def build_response(bending: BendingResult, geometry: Geometry, preset: Preset) -> Response:
+    """Arrange the bends as the (edges x frames) matrix the compliance model fits."""
+    keys = [(geometry.root_distance_px[b.child], b.joint, b.child) for b in bending.bends]
+    order = np.array(sorted(range(len(keys)), key=lambda k: keys[k]), dtype=int)
+    frames = np.flatnonzero(np.isfinite(bending.delta_deg).any(axis=0))
+    delta = bending.delta_deg[order][:, frames]
+    inlier = bending.inlier[order][:, frames]
+    Y = np.abs(delta) if preset.compliance.response == "abs" else delta.copy()
+    Y[~inlier] = np.nan
+    variance = None
+    if bending.variance_deg2 is not None:
+        variance = bending.variance_deg2[order][:, frames].copy()
+        variance[~inlier] = np.nan
+    rd = np.array([geometry.root_distance_px[bending.bends[k].child] for k in order])
+    top = max(geometry.root_distance_px.values())
+    return Response(Y=Y, variance=variance, edges=[bending.bends[k].edge for k in order], bend_rows=order,
+                    root_distance_px=rd, root_distance=rd / top if top > 0 else np.zeros_like(rd),
+                    frames=frames)
+
+
+@dataclass(frozen=True, eq=False)
+class AnalysisResult:
+    """Everything one analysis computed; :mod:`rce_gtsam.results` turns it into tables and files."""
+
+    graph: BranchGraph
+    tracks: Tracks
+    preset: Preset
+    smoothed: SmoothedTracks
+    geometry: Geometry
+    bending: BendingResult
+    raw_bending: BendingResult
+    response: Response
+    fit: Rank1Fit
+    ci: BootstrapCI | None
+    smoothing: SmoothingMetrics
+    timings_s: dict[str, float] = field(default_factory=dict)
+    inputs: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def kappa(self) -> dict[tuple[int, int], float]:
+        """Relative compliance per edge (joint, child)."""
+        return {e: float(k) for e, k in zip(self.response.edges, self.fit.kappa)}
+
+    @property
+    def uncertainty(self) -> np.ndarray | None:
+        """(E,) U_e = (CI high - CI low) / kappa_e, or None without a bootstrap."""
+        if self.ci is None:
+            return None
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self.fit.kappa > 1e-9, (self.ci.high - self.ci.low) / self.fit.kappa, np.nan)
+
+    def summary(self):
+        from .results import compliance_summary
+        return compliance_summary(self)
+
+    def write(self, out_dir: str | Path, **kwargs) -> dict[str, Path]:
+        from .results import write_outputs
+        return write_outputs(self, out_dir, **kwargs)
+
+
+def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset: str | Preset = "default",
+            seed: int | None = None, n_boot: int | None = None) -> AnalysisResult:
+    """Run the whole analysis on saved tracks.
+
+    ``tracks`` and ``graph`` may be objects or file paths. ``seed`` and ``n_boot`` override the preset's
+    bootstrap seed and resample count.
+    """
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    inputs = {}
+    if not isinstance(graph, BranchGraph):
+        inputs["graph"] = str(graph)
+        graph = load_graph(graph)
+    if not isinstance(tracks, Tracks):
+        inputs["tracks"] = str(tracks)
+        tracks = load_tracks(tracks, graph)
+    preset = get_preset(preset)
+    overrides = {}
+    if seed is not None:
+        overrides["seed"] = int(seed)
+    if n_boot is not None:
+        overrides["n_boot"] = int(n_boot)
+    if overrides:
+        preset = preset.with_(compliance=overrides)
+    timings["load"] = time.perf_counter() - t0
+
+    t = time.perf_counter()
+    smoothed = smooth_tracks(tracks, graph, preset.smoother)
+    timings["smooth"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    xy = observed_positions(smoothed)
+    raw_xy = smoothed.presmoothed.xy
+    geometry = compute_geometry(xy, tracks.node_ids, graph, rest=preset.bending.rest)
+    bending = compute_bending(xy, tracks.node_ids, graph, preset.bending, frame_cov=smoothed.frame_cov)
+    raw_bending = compute_bending(raw_xy, tracks.node_ids, graph, preset.bending)
+    smoothing = SmoothingMetrics(
+        bend_rms_raw_deg=filtered_rms(raw_bending), bend_rms_smoothed_deg=filtered_rms(bending),
+        edge_cv_raw=length_cv(raw_xy, tracks.node_ids, graph), edge_cv_smoothed=length_cv(xy, tracks.node_ids, graph))
+    response = build_response(bending, geometry, preset)
+    timings["bending"] = time.perf_counter() - t
+
+    t = time.perf_counter()
+    weights = response.weights if preset.compliance.weighted else None
+    fit = fit_rank1(response.Y, preset.compliance, weights)
+    timings["fit"] = time.perf_counter() - t
+    t = time.perf_counter()
+    ci = bootstrap_kappa(response.Y, preset.compliance, weights)
+    timings["bootstrap"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t0
+    return AnalysisResult(graph=graph, tracks=tracks, preset=preset, smoothed=smoothed, geometry=geometry,
+                          bending=bending, raw_bending=raw_bending, response=response, fit=fit, ci=ci,
+                          smoothing=smoothing, timings_s=timings, inputs=inputs)

@@ -1,0 +1,177 @@
+"""Tables and files of an :class:`~rce_gtsam.pipeline.AnalysisResult`.
+
+Output folder (all CSV, one header row):
+
+* ``compliance_summary.csv`` — one row per edge, ordered by root distance: parent, child, depth, zone,
+  root_distance_px, rest_length_px, kappa, kappa_ci_low, kappa_ci_high, uncertainty (U_e = CI width /
+  kappa), direction (+1/-1, sign of the fitted gain), relative_stiffness (1/kappa), n_frames (frames
+  with a usable bend response), fit_rmse_deg, fit_r2, bend_rms_deg (filtered RMS of delta). The root
+  edge has no bend, so its kappa columns are empty.
+* ``excitation.csv`` — frame, z (degrees).
+* ``bending.csv`` — grandparent, joint, child, frame, angle_deg, delta_deg, inlier (0/1), angle_var_deg2.
+* ``smoothed_tracks.csv`` — point_id, frame, x, y (pixels, every frame), observed (0/1), cov_xx,
+  cov_xy, cov_yy (marginal covariance, px^2).
+* ``report.json`` — inputs, preset, convergence, smoothing metrics, timings.
+
+The folder is written through a temporary sibling directory, so a failure leaves no half-written files.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from . import __version__
+
+
+def compliance_summary(result) -> pd.DataFrame:
+    """One row per edge of the graph, ordered by root distance (see module docstring)."""
+    g, geo, resp, fit = result.graph, result.geometry, result.response, result.fit
+    row_of = {e: i for i, e in enumerate(resp.edges)}
+    pred = fit.predict()
+    bend_rms = dict(zip([b.edge for b in result.bending.bends], _filtered_rms(result.bending)))
+    U = result.uncertainty
+    records = []
+    for e in sorted(g.edges, key=lambda e: (geo.root_distance_px[e[1]], e[0], e[1])):
+        p, c = e
+        rec = {"parent": p, "child": c, "depth": g.depth[c], "zone": geo.zone[c],
+               "root_distance_px": geo.root_distance_px[c], "rest_length_px": geo.rest_length_px[e]}
+        i = row_of.get(e)
+        if i is None:
+            rec.update(kappa=np.nan, kappa_ci_low=np.nan, kappa_ci_high=np.nan, uncertainty=np.nan,
+                       direction=np.nan, relative_stiffness=np.nan, n_frames=0, fit_rmse_deg=np.nan,
+                       fit_r2=np.nan, bend_rms_deg=np.nan)
+        else:
+            y = resp.Y[i]
+            ok = np.isfinite(y)
+            res = y[ok] - pred[i, ok]
+            ss_tot = float(np.sum((y[ok] - y[ok].mean()) ** 2)) if ok.any() else np.nan
+            k = float(fit.kappa[i])
+            rec.update(
+                kappa=k,
+                kappa_ci_low=float(result.ci.low[i]) if result.ci is not None else np.nan,
+                kappa_ci_high=float(result.ci.high[i]) if result.ci is not None else np.nan,
+                uncertainty=float(U[i]) if U is not None else np.nan,
+                direction=int(fit.direction[i]),
+                relative_stiffness=1.0 / k if k > 1e-9 else np.nan,
+                n_frames=int(ok.sum()),
+                fit_rmse_deg=float(np.sqrt(np.mean(res**2))) if ok.any() else np.nan,
+                fit_r2=float(1 - np.sum(res**2) / ss_tot) if ss_tot > 1e-6 else np.nan,
+                bend_rms_deg=float(bend_rms[e]),
+            )
+        records.append(rec)
+    return pd.DataFrame.from_records(records)
+
+
+def _filtered_rms(bending):
+    from .pipeline import filtered_rms
+    return filtered_rms(bending)
+
+
+def excitation_table(result) -> pd.DataFrame:
+    return pd.DataFrame({"frame": result.response.frames, "z": result.fit.z})
+
+
+def bending_table(result) -> pd.DataFrame:
+    b = result.bending
+    rows, frames = np.nonzero(np.isfinite(b.angle_deg))
+    trip = np.array([bend.nodes for bend in b.bends], dtype=int)
+    var = b.variance_deg2[rows, frames] if b.variance_deg2 is not None else np.full(rows.size, np.nan)
+    return pd.DataFrame({"grandparent": trip[rows, 0], "joint": trip[rows, 1], "child": trip[rows, 2],
+                         "frame": frames, "angle_deg": b.angle_deg[rows, frames],
+                         "delta_deg": b.delta_deg[rows, frames], "inlier": b.inlier[rows, frames].astype(int),
+                         "angle_var_deg2": var})
+
+
+def smoothed_table(result) -> pd.DataFrame:
+    s = result.smoothed
+    N, F, _ = s.tracks.xy.shape
+    n, f = np.meshgrid(np.arange(N), np.arange(F), indexing="ij")
+    n, f = n.ravel(), f.ravel()
+    cov = s.cov if s.cov is not None else np.full((N, F, 2, 2), np.nan)
+    return pd.DataFrame({"point_id": s.tracks.node_ids[n], "frame": f,
+                         "x": s.tracks.xy[n, f, 0], "y": s.tracks.xy[n, f, 1],
+                         "observed": s.observed[n, f].astype(int),
+                         "cov_xx": cov[n, f, 0, 0], "cov_xy": cov[n, f, 0, 1], "cov_yy": cov[n, f, 1, 1]})
+
+
+def _jsonable(obj):
+    if isinstance(obj, dict):
+        return {str(k): _jsonable(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_jsonable(v) for v in obj]
+    if isinstance(obj, (np.floating, float)):
+        return None if not np.isfinite(obj) else float(obj)
+    if isinstance(obj, (np.integer,)):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if isinstance(obj, np.ndarray):
+        return _jsonable(obj.tolist())
+    return obj
+
+
+def report_dict(result) -> dict:
+    """The machine-readable report (``report.json``)."""
+    fit, ci, sm = result.fit, result.ci, result.smoothed.report
+    return _jsonable({
+        "rce_gtsam_version": __version__,
+        "inputs": {**result.inputs, "n_nodes": result.tracks.n_nodes, "n_frames": result.tracks.n_frames,
+                   "n_observations": int(result.tracks.observed.sum()), "root": result.graph.root,
+                   "n_edges": len(result.graph.edges), "n_bends": len(result.bending.bends)},
+        "preset": {"name": result.preset.name, **{k: asdict(v) for k, v in
+                                                  (("smoother", result.preset.smoother),
+                                                   ("bending", result.preset.bending),
+                                                   ("compliance", result.preset.compliance))}},
+        "convergence": {
+            "smoother": asdict(sm),
+            "compliance": {"iterations": fit.iterations, "converged": fit.converged,
+                           "max_log_kappa_change": fit.max_log_change},
+            "bootstrap": None if ci is None else {"n_boot": ci.n_boot, "block_length": ci.block_length,
+                                                  "seed": ci.seed},
+        },
+        "smoothing_metrics": result.smoothing.as_dict(),
+        "excitation_rms_deg": float(np.sqrt(np.mean(fit.z**2))),
+        "timings_s": result.timings_s,
+    })
+
+
+def write_outputs(result, out_dir: str | Path, extra_writers=()) -> dict[str, Path]:
+    """Write every output file into ``out_dir`` without leaving half-written files behind.
+
+    ``extra_writers``: callables ``writer(result, tmp_dir) -> dict[name, Path]`` (figures, recordings)
+    that run inside the same temporary folder.
+    """
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    try:
+        tables = {"compliance_summary.csv": compliance_summary(result),
+                  "excitation.csv": excitation_table(result),
+                  "bending.csv": bending_table(result),
+                  "smoothed_tracks.csv": smoothed_table(result)}
+        for name, df in tables.items():
+            df.to_csv(tmp / name, index=False)
+        (tmp / "report.json").write_text(json.dumps(report_dict(result), indent=2) + "\n")
+        for writer in extra_writers:
+            writer(result, tmp)
+        written = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
+        if not out_dir.exists():
+            os.replace(tmp, out_dir)
+        else:
+            for rel in written:
+                dest = out_dir / rel
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(tmp / rel, dest)
+            shutil.rmtree(tmp, ignore_errors=True)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return {str(rel): out_dir / rel for rel in written}
