@@ -1,0 +1,660 @@
+"""Ground-truth simulator of a wind-excited branch with switchable physical effects.
+
+What it produces (all deterministic given ``SimulationConfig.seed``):
+
+* a planar branch (a chain, or a small tree with one side branch) of ``n_nodes`` nodes with node ids
+  ``0..n_nodes-1`` (root 0), segment lengths in pixels (10-30 px, like the real plants) and a gently
+  curved rest shape (rest turning angles of a few degrees per joint);
+* a per-edge compliance ``kappa_true`` (log-normal, geometric mean exactly 1) for every edge that has a bend
+  (every edge whose parent is not the root);
+* a signed wind excitation ``z_true[t]`` in degrees (calm start, gusts, a periodic sway, coloured noise;
+  RMS 1.5 degrees by default, like the real plants' 1.2-1.7 degrees);
+* the true bend response ``y[e, t]`` in degrees = deviation of the signed turning angle at the bend's joint
+  from its rest value. Baseline (no effect): ``y[e, t] = kappa_e * z_t``. Effects (``EFFECTS``) modify it,
+  see :func:`bend_response`;
+* planar forward kinematics -> true node positions (pixels, x right, y down) in a 640x480 image;
+* tracker-like noisy tracks (see :class:`NoiseConfig`): anisotropic white noise (along the branch >> across),
+  slow AR(1) drift, occlusion gaps (absent rows), occasional jumps.
+
+Angle convention (shared with the analysis): the signed turning angle at joint j of bend (g, j, c) is
+``atan2(cross(u, v), dot(u, v))`` with ``u = p_j - p_g``, ``v = p_c - p_j`` (image coordinates), in degrees;
+0 = straight. See :func:`turning_angles_deg`.
+
+Time unit inside the physics is the video frame (``fps`` frames per second).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import shutil
+import tempfile
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+from scipy import signal
+from scipy.interpolate import make_interp_spline
+
+from .errors import InputError
+from .graph import BranchGraph
+from .tracks import Tracks, write_table_atomic
+
+#: Names of the physical effects the simulator can switch on (and the diagnosis looks for).
+EFFECTS: tuple[str, ...] = ("delay", "dynamics", "second_mode", "offset", "nonlinear")
+
+#: Default strength of each effect and what the number means. The defaults are "modest": on clean
+#: data each effect's misfit to the best rank-1 model is about 0.2-0.3 of the bending signal's RMS
+#: (enforced by tests/test_simulate.py), i.e. visible in the residuals but small next to the signal.
+EFFECT_DEFAULTS: dict[str, float] = {
+    "delay": 15.0,       # tau_tip: lag of the most distal edge behind z, in frames (0.5 s at 30 fps)
+    "dynamics": 1.3,     # tip natural period T_tip in seconds (0.77 Hz); the root edge's period is T_tip / 3
+    "second_mode": 0.25, # RMS of the second-mode term mu_e*w_t divided by RMS of kappa_e*z_t
+    "offset": 0.3,       # RMS of the offset+creep term c_e + d_e*t/T divided by RMS of kappa_e*z_t
+    "nonlinear": 3.0,    # q / y_s: largest linear deflection q (99th pct of |kappa_e z_t|) over saturation y_s
+}
+
+EFFECT_MEANING: dict[str, str] = {
+    "delay": "tau_tip in frames: y_e(t) = kappa_e * z(t - tau_tip * s_e)",
+    "dynamics": "tip natural period in seconds: damped 2nd-order oscillator per edge driven by kappa_e * z",
+    "second_mode": "RMS(mu_e w_t) / RMS(kappa_e z_t): independent second excitation with its own pattern",
+    "offset": "RMS(c_e + d_e t/T) / RMS(kappa_e z_t): constant offset and linear creep per edge",
+    "nonlinear": "q / y_s: saturation y_e = y_s tanh(kappa_e z_t / y_s), q = 99th percentile of |kappa_e z_t|",
+}
+
+
+@dataclass(frozen=True)
+class NoiseConfig:
+    """Tracker-like noise on node positions (what TAPIR gives on real footage). Units: pixels, frames.
+
+    sigma_across_px: white-noise 1-sigma perpendicular to the branch at the root; it grows linearly to
+        ``sigma_across_px * tip_factor`` at the tip (real TAPIR residuals on the two plants: 0.15-1.0 px,
+        growing toward the tip).
+    along_ratio: white-noise sigma along the branch / sigma across it (trackers slide along a featureless
+        stem; brief: ~3; the two real plants show 1.4-2.3 in high-pass residuals).
+    tip_factor: noise multiplier at the tip relative to the root (linear in normalised root distance).
+    drift_px: stationary 1-sigma of the slow AR(1) drift along the branch (across: drift_px / along_ratio).
+    drift_time_s: correlation time of the drift in seconds.
+    gap_rate: expected number of occlusion gaps per node per 30 s at mid-branch; the rate grows
+        linearly from 0.2x at the root to 1.8x at the tip (distal nodes pass behind leaves more often).
+    gap_median_frames, gap_max_frames: gap lengths are log-normal (sigma_log 1.1) with this median,
+        clipped to [1, gap_max_frames] — many 1-3 frame dropouts and a few of tens of frames, as in the
+        real tracks (about 2 % of rows missing).
+    jump_prob: probability per observation that a jump (outlier) starts there.
+    jump_px: (min, max) jump magnitude in pixels; a jump lasts 1-3 frames.
+    emit_sigma: if True, tracks carry a per-observation ``sigma_px`` (the isotropic-equivalent white-noise
+        sigma of that node) and ``tracks.csv`` gets a ``sigma_px`` column.
+    enabled: False = noise-free tracks (positions exactly true_xy, no gaps).
+    """
+
+    sigma_across_px: float = 0.25
+    along_ratio: float = 3.0
+    tip_factor: float = 1.8
+    drift_px: float = 0.4
+    drift_time_s: float = 2.0
+    gap_rate: float = 5.0
+    gap_median_frames: float = 2.0
+    gap_max_frames: int = 50
+    jump_prob: float = 0.001
+    jump_px: tuple[float, float] = (3.0, 8.0)
+    emit_sigma: bool = False
+    enabled: bool = True
+
+
+@dataclass(frozen=True)
+class SimulationConfig:
+    """What to simulate.
+
+    n_nodes: number of tracked nodes (>= 3 so there is a bend); n_frames: video frames; fps: frames/s.
+    effects: names from :data:`EFFECTS` to switch on (composable). effect_strength: per-effect overrides of
+        :data:`EFFECT_DEFAULTS` (see :data:`EFFECT_MEANING` for units).
+    noise: tracker noise model. seed: master seed (every random step derives from it).
+    image_size: (width, height) in pixels. branch_layout: ``"chain"`` or ``"tree"`` (a main chain with one
+        side branch of about n_nodes/4 nodes).
+    z_rms_deg: RMS of the excitation z_true in degrees. kappa_sigma_log: spread of log kappa.
+    segment_px: (min, max) segment length in pixels. root_sway_deg: RMS rigid sway of the root edge heading
+        (0 = root edge fixed; the sway rotates the whole branch and changes no turning angle).
+    """
+
+    n_nodes: int = 20
+    n_frames: int = 900
+    fps: float = 30.0
+    effects: tuple[str, ...] = ()
+    effect_strength: dict | None = None
+    noise: NoiseConfig = field(default_factory=NoiseConfig)
+    seed: int = 0
+    image_size: tuple[int, int] = (640, 480)
+    branch_layout: Literal["chain", "tree"] = "chain"
+    z_rms_deg: float = 1.5
+    kappa_sigma_log: float = 0.5
+    segment_px: tuple[float, float] = (12.0, 28.0)
+    root_sway_deg: float = 0.0
+
+    def strength(self, effect: str) -> float:
+        """The strength of ``effect`` (override or default)."""
+        over = self.effect_strength or {}
+        return float(over.get(effect, EFFECT_DEFAULTS[effect]))
+
+    def validate(self) -> None:
+        src = "simulation config"
+        if not isinstance(self.n_nodes, int) or self.n_nodes < 3:
+            raise InputError(src, f"n_nodes must be an integer >= 3 (a bend needs 3 nodes), got {self.n_nodes!r}")
+        if self.branch_layout == "tree" and self.n_nodes < 7:
+            raise InputError(src, f"a tree layout needs n_nodes >= 7, got {self.n_nodes}")
+        if self.branch_layout not in ("chain", "tree"):
+            raise InputError(src, f"branch_layout must be 'chain' or 'tree', got {self.branch_layout!r}")
+        if not isinstance(self.n_frames, int) or self.n_frames < 10:
+            raise InputError(src, f"n_frames must be an integer >= 10, got {self.n_frames!r}")
+        if not self.fps > 0:
+            raise InputError(src, f"fps must be > 0, got {self.fps!r}")
+        unknown = [e for e in self.effects if e not in EFFECTS]
+        if unknown:
+            raise InputError(src, f"unknown effect(s) {unknown}; known: {', '.join(EFFECTS)}")
+        for k, v in (self.effect_strength or {}).items():
+            if k not in EFFECTS:
+                raise InputError(src, f"effect_strength names an unknown effect {k!r}; known: {', '.join(EFFECTS)}")
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise InputError(src, f"effect_strength[{k!r}] must be a finite number >= 0, got {v!r}")
+        w, h = self.image_size
+        if w < 64 or h < 64:
+            raise InputError(src, f"image_size must be at least 64x64, got {self.image_size}")
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Excitation
+# ----------------------------------------------------------------------------------------------------------
+
+def make_excitation(n_frames: int, fps: float, rng: np.random.Generator, rms_deg: float = 1.5,
+                    calm_s: float = 0.5, ramp_s: float = 1.0) -> np.ndarray:
+    """A signed wind excitation z[t] in degrees, RMS ``rms_deg``.
+
+    Sum of: gusts (smooth asymmetric bumps, fast rise ~0.3-1 s, slower decay, 80 % in the prevailing
+    direction, on average one every 6 s), a slow periodic sway (0.25-0.6 Hz, slowly amplitude-modulated) and
+    coloured noise (white noise through a 4th-order Butterworth low-pass at 1 Hz). The first ``calm_s``
+    seconds are exactly 0 (the branch is at rest there) and a raised-cosine ramp of ``ramp_s`` seconds
+    blends the wind in. Wind content is kept below ~1.5 Hz, as in the real plants' excitation.
+    """
+    t = np.arange(n_frames) / fps
+    dur = n_frames / fps
+    z = np.zeros(n_frames)
+    n_gusts = max(1, rng.poisson(dur / 6.0))
+    for _ in range(n_gusts):
+        t0 = rng.uniform(0, dur)
+        rise = rng.uniform(0.3, 1.0)
+        decay = rng.uniform(0.8, 2.5)
+        amp = rng.uniform(0.6, 1.4) * (1 if rng.uniform() < 0.8 else -1)
+        dt = t - t0
+        bump = np.where(dt < 0, np.exp(-0.5 * (dt / rise) ** 2), np.exp(-0.5 * (dt / decay) ** 2))
+        z += amp * bump
+    f0 = rng.uniform(0.25, 0.6)
+    mod = 1 + 0.5 * np.sin(2 * np.pi * t / rng.uniform(8, 20) + rng.uniform(0, 2 * np.pi))
+    z += 0.35 * mod * np.sin(2 * np.pi * f0 * t + rng.uniform(0, 2 * np.pi))
+    b, a = signal.butter(4, min(1.0 / (fps / 2), 0.99))
+    noise = signal.filtfilt(b, a, rng.standard_normal(n_frames + 200))[100:-100]
+    noise /= max(np.std(noise), 1e-12)
+    z += 0.3 * noise
+    n_calm = int(round(calm_s * fps))
+    n_ramp = max(1, int(round(ramp_s * fps)))
+    env = np.ones(n_frames)
+    env[:n_calm] = 0.0
+    k = np.arange(n_ramp)
+    ramp_end = min(n_frames, n_calm + n_ramp)
+    env[n_calm:ramp_end] = 0.5 - 0.5 * np.cos(np.pi * k[: ramp_end - n_calm] / n_ramp)
+    z = (z - z[min(n_calm, n_frames - 1)]) * env
+    rms = np.sqrt(np.mean(z ** 2))
+    return z * (rms_deg / rms) if rms > 0 else z
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Effects
+# ----------------------------------------------------------------------------------------------------------
+
+def delayed(z: np.ndarray, tau: float) -> np.ndarray:
+    """z(t - tau) for a fractional delay ``tau`` >= 0 in frames (cubic-spline interpolation; z(t<0) = z(0))."""
+    t = np.arange(len(z), dtype=float)
+    spline = make_interp_spline(t, z, k=3)
+    return spline(np.clip(t - tau, 0.0, None))
+
+
+def oscillator_response(u: np.ndarray, omega: float, zeta: float) -> np.ndarray:
+    """Response of  y'' + 2 zeta omega y' + omega^2 y = omega^2 u  (time unit: frames, omega in rad/frame).
+
+    Discretised exactly for an input that is linear between frames (first-order hold,
+    ``scipy.signal.cont2discrete(method="foh")``), zero initial state. Static gain 1.
+    """
+    A = np.array([[0.0, 1.0], [-omega ** 2, -2 * zeta * omega]])
+    B = np.array([[0.0], [omega ** 2]])
+    C = np.array([[1.0, 0.0]])
+    D = np.array([[0.0]])
+    Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, B, C, D), dt=1.0, method="foh")
+    _, y, _ = signal.dlsim((Ad, Bd, Cd, Dd, 1.0), u.reshape(-1, 1))
+    return y[:, 0]
+
+
+def bend_response(kappa: np.ndarray, s: np.ndarray, z: np.ndarray, effects: tuple[str, ...],
+                  strength: dict[str, float], fps: float, rng: np.random.Generator) -> tuple[np.ndarray, dict]:
+    """True bend responses y[e, t] in degrees and the parameters of every active effect.
+
+    Parameters: ``kappa`` (E,) compliance; ``s`` (E,) child's root distance normalised to [0, 1];
+    ``z`` (F,) excitation in degrees; ``strength`` per effect (see :data:`EFFECT_MEANING`).
+
+    Baseline: ``y[e,t] = kappa_e z_t``. Effects, applied in this order when several are on:
+
+    1. ``delay``:  the load reaches distal segments later:  ``u_e(t) = kappa_e z(t - tau_e)``,
+       ``tau_e = tau_tip * s_e`` frames (fractional, cubic interpolation).  Params: ``tau_frames`` per edge.
+    2. ``dynamics``: each edge is a damped 2nd-order oscillator driven by its quasi-static load u_e:
+       ``y'' + 2 zeta_e omega_e y' + omega_e^2 y = omega_e^2 u_e`` (frames; omega_e in rad/frame). The natural
+       period falls linearly from T_tip (strength, seconds) at the tip to T_tip/3 at the root; zeta_e is
+       uniform in [0.1, 0.3] (seeded). Params: ``omega_rad_per_frame``, ``freq_hz``, ``zeta`` per edge.
+    3. ``nonlinear``: large-deflection stiffening of each joint: ``y_e = y_s tanh(u_e / y_s)`` with a
+       saturation angle ``y_s = q / strength`` degrees, q = 99th percentile of |kappa_e z_t| (the larger
+       gusts). Note: a saturation of the *shared* z (kappa_e z_s tanh(z/z_s)) would still be exactly rank 1
+       and so invisible to any residual test; saturating each joint's own deflection is not rank 1, because
+       compliant joints saturate more. Params: ``y_s_deg``.
+    4. ``second_mode``: an independent second excitation w_t (crosswind / out-of-plane swing; generated
+       like z with its own seed, RMS 1 degree) with its own spatial pattern mu_e (a half-cosine along the
+       branch plus independent per-edge variation: not proportional to kappa):
+       ``y_e += mu_e w_t``, scaled so RMS(mu w) = strength * RMS(kappa z). Params: ``mu``, ``w``.
+    5. ``offset``: the true rest pose is not the first frame's pose and creeps (gravity sag, relaxation):
+       ``y_e += c_e + d_e t / T`` with T = n_frames, c_e and d_e independent normals of equal spread, scaled
+       so RMS(c + d t/T) = strength * RMS(kappa z). Params: ``c_deg``, ``d_deg`` per edge.
+    """
+    E, F = len(kappa), len(z)
+    params: dict[str, dict] = {}
+    base = np.outer(kappa, z)
+    u = base
+    if "delay" in effects:
+        tau_tip = strength["delay"]
+        tau = tau_tip * s
+        u = np.stack([kappa[e] * delayed(z, tau[e]) for e in range(E)])
+        params["delay"] = {"tau_tip_frames": tau_tip, "tau_frames": tau.tolist()}
+    if "dynamics" in effects:
+        T_tip = strength["dynamics"]
+        period_s = T_tip / 3 + (T_tip - T_tip / 3) * s
+        zeta = rng.uniform(0.1, 0.3, E)
+        if T_tip > 0:
+            omega = 2 * np.pi / (period_s * fps)
+            u = np.stack([oscillator_response(u[e], omega[e], zeta[e]) for e in range(E)])
+        else:
+            omega = np.full(E, np.inf)
+        params["dynamics"] = {"tip_period_s": T_tip, "omega_rad_per_frame": omega.tolist(),
+                              "freq_hz": (1 / period_s if T_tip > 0 else np.full(E, np.inf)).tolist(),
+                              "zeta": zeta.tolist()}
+    if "nonlinear" in effects:
+        ratio = strength["nonlinear"]
+        q = float(np.quantile(np.abs(base), 0.99))
+        if ratio > 0 and q > 0:
+            y_s = q / ratio
+            u = y_s * np.tanh(u / y_s)
+        else:
+            y_s = math.inf
+        params["nonlinear"] = {"q_deg": q, "y_s_deg": y_s, "ratio": ratio}
+    y = u
+    ref_rms = float(np.sqrt(np.mean(base ** 2)))
+    if "second_mode" in effects:
+        w = make_excitation(F, fps, rng, rms_deg=1.0)
+        mu = np.cos(np.pi * s) + 0.5 * rng.standard_normal(E)
+        term = np.outer(mu, w)
+        r = np.sqrt(np.mean(term ** 2))
+        scale = strength["second_mode"] * ref_rms / r if r > 0 else 0.0
+        mu = mu * scale
+        y = y + np.outer(mu, w)
+        params["second_mode"] = {"ratio": strength["second_mode"], "mu": mu.tolist(), "w": w.tolist()}
+    if "offset" in effects:
+        c = rng.standard_normal(E)
+        d = rng.standard_normal(E)
+        tt = np.arange(F) / F
+        term = c[:, None] + d[:, None] * tt[None, :]
+        r = np.sqrt(np.mean(term ** 2))
+        scale = strength["offset"] * ref_rms / r if r > 0 else 0.0
+        c, d = c * scale, d * scale
+        y = y + c[:, None] + d[:, None] * tt[None, :]
+        params["offset"] = {"ratio": strength["offset"], "c_deg": c.tolist(), "d_deg": d.tolist()}
+    return y, params
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Geometry and kinematics
+# ----------------------------------------------------------------------------------------------------------
+
+def turning_angles_deg(xy: np.ndarray, node_ids, bends) -> np.ndarray:
+    """Signed turning angles (E, F) in degrees at each bend: atan2(cross(u, v), dot(u, v)),
+    u = p_j - p_g, v = p_c - p_j; ``xy`` is (N, F, 2) with rows in ``node_ids`` order. NaN propagates."""
+    row = {int(n): i for i, n in enumerate(node_ids)}
+    g = xy[[row[b.grandparent] for b in bends]]
+    j = xy[[row[b.joint] for b in bends]]
+    c = xy[[row[b.child] for b in bends]]
+    u, v = j - g, c - j
+    cross = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    dot = (u * v).sum(-1)
+    return np.degrees(np.arctan2(cross, dot))
+
+
+def _build_graph(cfg: SimulationConfig, rng: np.random.Generator) -> tuple[BranchGraph, dict[tuple[int, int], float]]:
+    """Topology and the rest turning angle (degrees) of every non-root edge."""
+    n = cfg.n_nodes
+    if cfg.branch_layout == "chain":
+        edges = [(i, i + 1) for i in range(n - 1)]
+        side: list[tuple[int, int]] = []
+    else:
+        k = max(2, n // 4)
+        m = n - k
+        edges = [(i, i + 1) for i in range(m - 1)]
+        attach = max(2, int(round(0.4 * m)))
+        side = [(attach, m)] + [(m + i, m + i + 1) for i in range(k - 1)]
+        edges += side
+    graph = BranchGraph.from_edges(0, edges, source="simulated branch")
+    bow = rng.uniform(15, 45) * rng.choice([-1, 1])  # total rest curvature of the main axis (degrees)
+    n_bends = len(graph.bends)
+    rest = {}
+    for b in graph.bends:
+        rest[b.edge] = bow / n_bends + rng.normal(0, 3.0)
+    if side:
+        rest[side[0]] = -np.sign(bow) * rng.uniform(25, 45)  # the side branch leaves at an angle
+    return graph, rest
+
+
+def forward_kinematics(graph: BranchGraph, lengths: dict, root_heading_rad: np.ndarray,
+                       turn_deg: dict) -> np.ndarray:
+    """Node positions (N, F, 2) in graph.nodes order, root at the origin.
+
+    ``root_heading_rad`` (F,): heading of every root edge (atan2 convention in image coordinates);
+    ``turn_deg[(j, c)]`` (F,): total turning angle (rest + deviation) of edge (j, c) relative to its
+    parent edge; ``lengths[(p, c)]``: segment length in pixels.
+    """
+    F = len(root_heading_rad)
+    row = {nid: i for i, nid in enumerate(graph.nodes)}
+    pos = np.zeros((len(graph.nodes), F, 2))
+    heading: dict[int, np.ndarray] = {}
+    for c in graph.nodes[1:]:
+        p = graph.parent[c]
+        h = root_heading_rad if p == graph.root else heading[p] + np.radians(turn_deg[(p, c)])
+        heading[c] = h
+        pos[row[c]] = pos[row[p]] + lengths[(p, c)] * np.stack([np.cos(h), np.sin(h)], axis=-1)
+    return pos
+
+
+def _root_distance(graph: BranchGraph, lengths: dict) -> dict[int, float]:
+    d = {graph.root: 0.0}
+    for c in graph.nodes[1:]:
+        d[c] = d[graph.parent[c]] + lengths[(graph.parent[c], c)]
+    return d
+
+
+def _place_in_image(pos: np.ndarray, image_size, rng, margin: float = 30.0) -> tuple[np.ndarray, float, np.ndarray]:
+    """Rotate (about the root) and translate positions so that every frame fits the image.
+
+    Tries headings in 5-degree steps and keeps the fitting one closest to a seeded preferred direction
+    (upward-diagonal, like a branch leaving a stem); if none fits, the shape is scaled down.
+    Returns (positions, rotation in radians, root pixel position).
+    """
+    w, h = image_size
+    avail = np.array([w - 2 * margin, h - 2 * margin])
+    pref = np.radians(rng.uniform(-150, -30))  # image y is down: negative = upward
+    chord = pos[:, 0].mean(axis=0)
+    chord_ang = math.atan2(chord[1], chord[0]) if np.linalg.norm(chord) > 0 else 0.0
+    best = None
+    for rot in np.radians(np.arange(0, 360, 5)):
+        cr, sr = math.cos(rot), math.sin(rot)
+        p = pos @ np.array([[cr, sr], [-sr, cr]])
+        size = p.reshape(-1, 2).max(0) - p.reshape(-1, 2).min(0)
+        fit = float(np.min(avail / np.maximum(size, 1e-9)))
+        dang = abs((chord_ang + rot - pref + np.pi) % (2 * np.pi) - np.pi)
+        key = (min(fit, 1.0), -dang)
+        if best is None or key > best[0]:
+            best = (key, rot, p, fit)
+    _, rot, p, fit = best
+    if fit < 1.0:
+        p = p * fit
+    flat = p.reshape(-1, 2)
+    centre = (flat.max(0) + flat.min(0)) / 2
+    root_px = np.array([w / 2, h / 2]) - centre
+    return p + root_px, float(rot), root_px
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Noise
+# ----------------------------------------------------------------------------------------------------------
+
+def _tangents(graph: BranchGraph, xy: np.ndarray) -> np.ndarray:
+    """Unit branch direction (N, F, 2) at each node: sum of unit incoming and outgoing segment directions."""
+    row = {nid: i for i, nid in enumerate(graph.nodes)}
+    t = np.zeros_like(xy)
+    for p, c in graph.edges:
+        d = xy[row[c]] - xy[row[p]]
+        d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
+        t[row[c]] += d
+        t[row[p]] += d
+    return t / np.maximum(np.linalg.norm(t, axis=-1, keepdims=True), 1e-12)
+
+
+def add_tracker_noise(graph: BranchGraph, true_xy: np.ndarray, s_node: np.ndarray, noise: NoiseConfig,
+                      fps: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """Noisy positions (N, F, 2) with NaN at occlusion gaps, and the nominal white-noise sigma (N,) in px.
+
+    Per node i with normalised root distance s_i: white noise with sigma_across = sigma_across_px *
+    (1 + (tip_factor - 1) s_i) across the branch and along_ratio times that along it; plus an AR(1) drift
+    (correlation time drift_time_s, stationary sigma drift_px along / drift_px/along_ratio across, also
+    growing toward the tip); plus jumps; then occlusion gaps (see :class:`NoiseConfig`).
+    """
+    N, F, _ = true_xy.shape
+    if not noise.enabled:
+        return true_xy.copy(), np.full(N, np.nan)
+    grow = 1 + (noise.tip_factor - 1) * s_node  # (N,)
+    s_across = noise.sigma_across_px * grow
+    s_along = s_across * noise.along_ratio
+    tan = _tangents(graph, true_xy)
+    nrm = np.stack([-tan[..., 1], tan[..., 0]], axis=-1)
+    along = rng.standard_normal((N, F)) * s_along[:, None]
+    across = rng.standard_normal((N, F)) * s_across[:, None]
+    rho = math.exp(-1.0 / (noise.drift_time_s * fps))
+    innov = math.sqrt(1 - rho ** 2)
+    e = rng.standard_normal((N, F, 2))
+    # stationary AR(1): x[0] = e[0], x[t] = rho x[t-1] + sqrt(1 - rho^2) e[t]
+    drift = signal.lfilter([innov], [1.0, -rho], e, axis=1, zi=e[:, :1] * (1 - innov))[0]
+    drift_along = drift[..., 0] * noise.drift_px * grow[:, None]
+    drift_across = drift[..., 1] * noise.drift_px / noise.along_ratio * grow[:, None]
+    xy = true_xy + (along + drift_along)[..., None] * tan + (across + drift_across)[..., None] * nrm
+    # jumps
+    starts = rng.uniform(size=(N, F)) < noise.jump_prob
+    for i, f in zip(*np.nonzero(starts)):
+        L = int(rng.integers(1, 4))
+        ang = rng.uniform(0, 2 * np.pi)
+        mag = rng.uniform(*noise.jump_px)
+        xy[i, f:f + L] += mag * np.array([math.cos(ang), math.sin(ang)])
+    # occlusion gaps
+    for i in range(N):
+        rate = noise.gap_rate * (0.2 + 1.6 * s_node[i]) * F / (30.0 * fps)
+        for _ in range(rng.poisson(rate)):
+            L = int(np.clip(round(noise.gap_median_frames * math.exp(1.1 * rng.standard_normal())), 1,
+                            noise.gap_max_frames))
+            f0 = int(rng.integers(0, F))
+            xy[i, f0:f0 + L] = np.nan
+    # frame 0 is the user's annotation: the tracker returns the query point there exactly (as TAPIR does
+    # on the real plant 2), so every node is observed, noise-free, in frame 0.
+    xy[:, 0] = true_xy[:, 0]
+    sigma = np.sqrt((s_along ** 2 + s_across ** 2) / 2)
+    return xy, sigma
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Simulation
+# ----------------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class Simulation:
+    """A simulated recording with its ground truth.
+
+    config: the :class:`SimulationConfig`. graph: the branch (node ids 0..N-1, root 0).
+    tracks: noisy tracker-like :class:`~rce_gtsam.tracks.Tracks` (rows in graph.nodes order; NaN = occluded).
+    true_xy: (N, F, 2) true node positions in pixels, rows in graph.nodes order (= tracks.node_ids).
+    kappa_true: {(parent, child): kappa} for every edge with a bend (geometric mean exactly 1).
+    z_true: (F,) excitation in degrees. response_true: (E, F) true bend deviations from rest in degrees, rows
+    in graph.bends order. rest_turn_deg: {(joint, child): rest turning angle in degrees}.
+    segment_px: {(parent, child): length in pixels}. effect_params: parameters of the active effects.
+    """
+
+    config: SimulationConfig
+    graph: BranchGraph
+    tracks: Tracks
+    true_xy: np.ndarray
+    kappa_true: dict
+    z_true: np.ndarray
+    response_true: np.ndarray
+    effect_params: dict
+    rest_turn_deg: dict = field(default_factory=dict)
+    segment_px: dict = field(default_factory=dict)
+    root_px: tuple[float, float] = (0.0, 0.0)
+
+    def truth_json(self) -> dict:
+        """Ground truth as a JSON-ready dict: kappa_true keyed "parent->child", z_true, response_true
+        (keyed like kappa), effects and their parameters, seed, config, geometry."""
+        key = lambda e: f"{e[0]}->{e[1]}"  # noqa: E731
+        cfg = asdict(self.config)
+        cfg["effects"] = list(self.config.effects)
+        cfg["strengths"] = {e: self.config.strength(e) for e in self.config.effects}
+        return {
+            "format": "rce_gtsam simulation truth v1",
+            "seed": self.config.seed,
+            "fps": self.config.fps,
+            "n_frames": int(self.z_true.shape[0]),
+            "units": {"kappa": "relative (geometric mean 1)", "z_true": "degrees", "response": "degrees",
+                      "positions": "pixels", "time": "frames"},
+            "effects": list(self.config.effects),
+            "effect_params": _jsonable(self.effect_params),
+            "kappa_true": {key(e): float(k) for e, k in self.kappa_true.items()},
+            "z_true": [round(float(v), 6) for v in self.z_true],
+            "response_true": {key(b.edge): [round(float(v), 6) for v in self.response_true[i]]
+                              for i, b in enumerate(self.graph.bends)},
+            "rest_turn_deg": {key(e): float(v) for e, v in self.rest_turn_deg.items()},
+            "segment_px": {key(e): float(v) for e, v in self.segment_px.items()},
+            "root_px": [float(v) for v in self.root_px],
+            "config": _jsonable(cfg),
+        }
+
+    def write(self, out_dir: str | Path, video: bool = False) -> dict[str, Path]:
+        """Write tracks.csv, true_tracks.csv, graph.json, truth.json, annotations.json (+ video.mp4).
+
+        Atomic: files are written into a temporary folder next to ``out_dir`` that then replaces it.
+        Refuses to overwrite a non-empty folder that holds anything this method does not write.
+        Returns {name: path}.
+        """
+        out = Path(out_dir)
+        names = set(WRITTEN_FILES)
+        if out.exists():
+            if not out.is_dir():
+                raise InputError(out, "output path exists and is not a folder")
+            foreign = sorted(p.name for p in out.iterdir() if p.name not in names)
+            if foreign:
+                raise InputError(out, f"refusing to overwrite a non-empty folder holding files this command "
+                                      f"does not write: {foreign[:5]}; choose an empty or new --out folder")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+        try:
+            df = self.tracks.to_frame()
+            write_table_atomic(df.round(4), tmp / "tracks.csv")
+            tt = Tracks(self.tracks.node_ids, self.true_xy, source="truth").to_frame()
+            write_table_atomic(tt.round(4), tmp / "true_tracks.csv")
+            (tmp / "graph.json").write_text(json.dumps(self.graph.to_json()) + "\n")
+            (tmp / "truth.json").write_text(json.dumps(self.truth_json()) + "\n")
+            row = {nid: i for i, nid in enumerate(self.tracks.node_ids)}
+            pts = [[round(float(v), 4) for v in self.true_xy[row[n], 0]] for n in sorted(row)]
+            (tmp / "annotations.json").write_text(json.dumps({"points": pts}) + "\n")
+            if video:
+                from .render import render_video
+                render_video(self, tmp / "video.mp4")
+            if out.exists():
+                old = out.parent / f".{out.name}.old.{os.getpid()}"
+                out.rename(old)
+                tmp.rename(out)
+                shutil.rmtree(old, ignore_errors=True)
+            else:
+                tmp.rename(out)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+        return {p.name: p for p in sorted(out.iterdir()) if p.name in names}
+
+
+#: Files :meth:`Simulation.write` may write.
+WRITTEN_FILES = ("tracks.csv", "true_tracks.csv", "graph.json", "truth.json", "annotations.json", "video.mp4")
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        v = float(x)
+        return v if math.isfinite(v) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
+
+def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
+    """Simulate a wind-excited branch and a tracker's view of it. Deterministic in ``config.seed``.
+
+    Independent random streams (spawned from the seed) drive geometry, kappa, the excitation, the effects
+    and the noise, so switching an effect on does not change the geometry, kappa or z of the same seed.
+    """
+    config.validate()
+    ss = np.random.SeedSequence(config.seed)
+    r_geom, r_kappa, r_z, r_eff, r_noise, r_place = (np.random.default_rng(s) for s in ss.spawn(6))
+    F = config.n_frames
+    graph, rest = _build_graph(config, r_geom)
+    lo, hi = config.segment_px
+    mid, half = (np.log(lo) + np.log(hi)) / 2, (np.log(hi) - np.log(lo)) / 2
+    lengths = {e: float(np.exp(np.clip(r_geom.normal(mid, half / 1.5), mid - half, mid + half))) for e in graph.edges}
+    dist = _root_distance(graph, lengths)
+    dmax = max(dist.values())
+    bends = graph.bends
+    s_edge = np.array([dist[b.child] / dmax for b in bends])
+    logk = r_kappa.normal(0, config.kappa_sigma_log, len(bends))
+    kappa = np.exp(logk - logk.mean())
+    z = make_excitation(F, config.fps, r_z, rms_deg=config.z_rms_deg)
+    strength = {e: config.strength(e) for e in EFFECTS}
+    y, params = bend_response(kappa, s_edge, z, tuple(config.effects), strength, config.fps, r_eff)
+    turn = {b.edge: rest[b.edge] + y[i] for i, b in enumerate(bends)}
+    sway = config.root_sway_deg * z / max(np.sqrt(np.mean(z ** 2)), 1e-12)
+    pos0 = forward_kinematics(graph, lengths, np.radians(sway), turn)
+    true_xy, rot, root_px = _place_in_image(pos0, config.image_size, r_place)
+    if not np.isclose(np.linalg.norm(true_xy[1, 0] - true_xy[0, 0]), lengths[graph.edges[0]]):
+        scale = np.linalg.norm(true_xy[1, 0] - true_xy[0, 0]) / lengths[graph.edges[0]]
+        lengths = {e: L * scale for e, L in lengths.items()}
+    s_node = np.array([dist[n] / dmax for n in graph.nodes])
+    noisy, sigma = add_tracker_noise(graph, true_xy, s_node, config.noise, config.fps, r_noise)
+    sigma_px = None
+    if config.noise.emit_sigma and config.noise.enabled:
+        sigma_px = np.where(np.isfinite(noisy[..., 0]), sigma[:, None], np.nan)
+    tracks = Tracks(node_ids=np.array(graph.nodes), xy=noisy, sigma_px=sigma_px,
+                    source=f"simulated (seed {config.seed})")
+    return Simulation(config=config, graph=graph, tracks=tracks, true_xy=true_xy,
+                      kappa_true={b.edge: float(k) for b, k in zip(bends, kappa)}, z_true=z,
+                      response_true=y, effect_params=params, rest_turn_deg=rest, segment_px=lengths,
+                      root_px=(float(root_px[0]), float(root_px[1])))
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Measurements used by the tests and the report
+# ----------------------------------------------------------------------------------------------------------
+
+def rank1_misfit(Y: np.ndarray) -> tuple[float, float]:
+    """(RMS of Y - best rank-1 approximation (truncated SVD), RMS of Y), both in Y's units."""
+    U, S, Vt = np.linalg.svd(Y, full_matrices=False)
+    R = Y - S[0] * np.outer(U[:, 0], Vt[0])
+    return float(np.sqrt(np.mean(R ** 2))), float(np.sqrt(np.mean(Y ** 2)))
+
+
+def angle_noise_deg(sim: Simulation) -> float:
+    """RMS over bends and observed frames of (turning angle from noisy tracks - from true positions), degrees."""
+    a = turning_angles_deg(sim.tracks.xy, sim.tracks.node_ids, sim.graph.bends)
+    b = turning_angles_deg(sim.true_xy, sim.tracks.node_ids, sim.graph.bends)
+    d = (a - b + 180) % 360 - 180
+    return float(np.sqrt(np.nanmean(d ** 2)))

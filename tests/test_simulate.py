@@ -1,0 +1,160 @@
+"""Tests of the ground-truth simulator (rce_gtsam.simulate)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from rce_gtsam.errors import InputError
+from rce_gtsam.graph import load_graph
+from rce_gtsam.simulate import (EFFECTS, NoiseConfig, SimulationConfig, angle_noise_deg, delayed,
+                                oscillator_response, rank1_misfit, simulate, turning_angles_deg)
+from rce_gtsam.tracks import load_tracks
+
+CLEAN = NoiseConfig(enabled=False)
+
+
+def _rest(sim):
+    return np.array([sim.rest_turn_deg[b.edge] for b in sim.graph.bends])
+
+
+def test_deterministic_and_seed_dependent():
+    a = simulate(SimulationConfig(n_frames=120, seed=3))
+    b = simulate(SimulationConfig(n_frames=120, seed=3))
+    c = simulate(SimulationConfig(n_frames=120, seed=4))
+    np.testing.assert_array_equal(a.tracks.xy, b.tracks.xy)
+    np.testing.assert_array_equal(a.z_true, b.z_true)
+    assert not np.allclose(a.z_true, c.z_true)
+
+
+def test_effect_does_not_change_geometry_kappa_or_z():
+    base = simulate(SimulationConfig(n_frames=150, seed=1))
+    eff = simulate(SimulationConfig(n_frames=150, seed=1, effects=("delay",)))
+    assert base.kappa_true == eff.kappa_true
+    np.testing.assert_array_equal(base.z_true, eff.z_true)
+    assert base.segment_px == eff.segment_px
+
+
+@pytest.mark.parametrize("layout", ["chain", "tree"])
+def test_kinematics_reproduce_response_and_geometry(layout):
+    sim = simulate(SimulationConfig(n_frames=200, n_nodes=21, seed=2, branch_layout=layout,
+                                    effects=EFFECTS, noise=CLEAN))
+    g = sim.graph
+    assert len(g.nodes) == 21 and sorted(g.nodes) == list(range(21)) and g.root == 0
+    if layout == "tree":
+        assert any(len(ch) == 2 for ch in g.children.values())
+    ang = turning_angles_deg(sim.true_xy, sim.tracks.node_ids, g.bends)
+    np.testing.assert_allclose(ang - _rest(sim)[:, None], sim.response_true, atol=1e-9)
+    # segments are rigid and of the stated length
+    row = {n: i for i, n in enumerate(sim.tracks.node_ids)}
+    for (p, c), L in sim.segment_px.items():
+        d = np.linalg.norm(sim.true_xy[row[c]] - sim.true_xy[row[p]], axis=-1)
+        np.testing.assert_allclose(d, L, rtol=1e-9)
+        assert 8 <= L <= 32
+    # the whole motion stays inside the 640x480 image; root fixed
+    assert sim.true_xy[..., 0].min() > 0 and sim.true_xy[..., 0].max() < 640
+    assert sim.true_xy[..., 1].min() > 0 and sim.true_xy[..., 1].max() < 480
+    assert np.ptp(sim.true_xy[row[0]], axis=0).max() == 0
+
+
+def test_kappa_and_excitation_are_realistic():
+    sim = simulate(SimulationConfig(seed=0))
+    k = np.array(list(sim.kappa_true.values()))
+    assert len(k) == len(sim.graph.bends) == 18
+    assert abs(np.exp(np.mean(np.log(k))) - 1) < 1e-12
+    assert 0.2 < np.std(np.log(k)) < 1.0
+    z = sim.z_true
+    assert np.sqrt(np.mean(z ** 2)) == pytest.approx(1.5)
+    assert np.all(z[:15] == 0)                      # calm start
+    assert z.min() < -0.2 and z.max() > 1.0         # signed, with gusts
+    # baseline: the response is exactly rank 1
+    np.testing.assert_allclose(sim.response_true, np.outer(k, z), atol=1e-12)
+
+
+def test_noise_is_anisotropic_gappy_and_realistic():
+    sim = simulate(SimulationConfig(seed=0))
+    obs = sim.tracks.observed
+    assert obs[:, 0].all()                          # frame 0 = the annotation
+    frac = 1 - obs.mean()
+    assert 0.005 < frac < 0.06
+    # distal half misses more than the proximal half
+    half = obs.shape[0] // 2
+    assert (~obs[half:]).mean() > (~obs[:half]).mean()
+    from rce_gtsam.simulate import _tangents
+    t = _tangents(sim.graph, sim.true_xy)
+    d = sim.tracks.xy - sim.true_xy
+    along = np.nanmedian(np.abs((d * t).sum(-1)))
+    across = np.nanmedian(np.abs(d[..., 0] * -t[..., 1] + d[..., 1] * t[..., 0]))
+    assert 2.0 < along / across < 4.0
+    assert 0.1 < across < 0.6
+    assert 1.0 < angle_noise_deg(sim) < 5.0         # real TAPIR tracks: ~1.7-3.7 deg high-pass angle noise
+
+
+def test_clean_noise_config_gives_exact_positions():
+    sim = simulate(SimulationConfig(n_frames=100, seed=5, noise=CLEAN))
+    np.testing.assert_array_equal(sim.tracks.xy, sim.true_xy)
+
+
+@pytest.mark.parametrize("effect", EFFECTS)
+def test_default_effects_are_modest_but_not_rank1(effect):
+    """Each default effect leaves a misfit to the best rank-1 model that is visible (> 3 % of the signal)
+    but at most ~1/3 of the bending signal's RMS and below the per-frame angle noise of the raw tracks."""
+    for seed in range(4):
+        clean = simulate(SimulationConfig(seed=seed, effects=(effect,), noise=CLEAN))
+        misfit, rms = rank1_misfit(clean.response_true)
+        noise = angle_noise_deg(simulate(SimulationConfig(seed=seed)))
+        assert 0.02 * rms < misfit <= rms / 3, (effect, seed, misfit / rms)
+        assert misfit < noise, (effect, seed, misfit, noise)
+
+
+def test_effect_equations():
+    z = np.sin(np.arange(300) / 10.0)
+    np.testing.assert_allclose(delayed(z, 2.5)[10:], np.sin((np.arange(10, 300) - 2.5) / 10.0), atol=1e-5)
+    step = np.r_[np.zeros(10), np.ones(600)]
+    y = oscillator_response(step, omega=0.2, zeta=0.2)
+    assert y[-1] == pytest.approx(1.0, abs=1e-3)   # static gain 1
+    assert y.max() > 1.3                            # under-damped overshoot: exp(-pi zeta / sqrt(1-zeta^2)) = 0.53
+    sim = simulate(SimulationConfig(n_frames=300, seed=0, effects=("delay",), noise=CLEAN))
+    tau = np.array(sim.effect_params["delay"]["tau_frames"])
+    assert tau.max() == pytest.approx(15.0, rel=0.05) and np.all(np.diff(tau) > 0)
+    sim = simulate(SimulationConfig(n_frames=300, seed=0, effects=("offset",), noise=CLEAN))
+    p = sim.effect_params["offset"]
+    k = np.array(list(sim.kappa_true.values()))
+    t = np.arange(300) / 300
+    expect = np.outer(k, sim.z_true) + np.array(p["c_deg"])[:, None] + np.outer(p["d_deg"], t)
+    np.testing.assert_allclose(sim.response_true, expect, atol=1e-12)
+
+
+def test_bad_config_is_an_input_error():
+    with pytest.raises(InputError, match="unknown effect"):
+        simulate(SimulationConfig(effects=("wobble",)))
+    with pytest.raises(InputError, match="n_nodes"):
+        simulate(SimulationConfig(n_nodes=2))
+    with pytest.raises(InputError, match="effect_strength"):
+        simulate(SimulationConfig(effect_strength={"delay": -1.0}))
+
+
+def test_write_round_trips_and_is_safe(tmp_path):
+    sim = simulate(SimulationConfig(n_frames=90, seed=7, effects=("delay", "offset")))
+    out = tmp_path / "sim"
+    files = sim.write(out)
+    assert set(files) == {"tracks.csv", "true_tracks.csv", "graph.json", "truth.json", "annotations.json"}
+    g = load_graph(out / "graph.json")
+    assert g == sim.graph
+    tr = load_tracks(out / "tracks.csv", g)
+    np.testing.assert_allclose(tr.xy, sim.tracks.xy, atol=1e-4)
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["effects"] == ["delay", "offset"] and truth["seed"] == 7
+    assert set(truth["kappa_true"]) == {f"{b.joint}->{b.child}" for b in g.bends}
+    assert len(truth["z_true"]) == 90
+    ann = json.loads((out / "annotations.json").read_text())["points"]
+    np.testing.assert_allclose(ann, sim.true_xy[:, 0], atol=1e-4)
+    # rewriting our own folder is fine; a folder with foreign files is refused and left untouched
+    sim.write(out)
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(InputError, match="refusing"):
+        sim.write(out)
+    assert (out / "notes.txt").read_text() == "mine"
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp leftovers
