@@ -1,0 +1,321 @@
+"""Default tracker: OpenCV Lucas-Kanade, re-anchored to each node's first-frame appearance.
+
+Plain frame-to-frame LK accumulates drift (each frame's small error is inherited by the next) and
+never recovers after an occlusion. This tracker uses frame-to-frame pyramidal LK only as a
+*prediction*; every measurement is made against the node's **first-frame template**:
+
+1. **Predict** where node i is in frame f: pyramidal LK from frame f-1 (``cv2.calcOpticalFlowPyrLK``,
+   ``pyr_levels`` levels, so swings of tens of pixels per frame are followed) when its forward-backward
+   check passes; otherwise, with a graph, from the parent's new position plus the rest-pose segment
+   vector rotated by the node's current rotation (the branch is locally rigid); otherwise the last position.
+2. **Anchor**: rotate the frame-0 neighbourhood of the node by the node's current rotation (the angle
+   change of the branch direction since frame 0, measured over a baseline of >= 2 patch radii along
+   the graph so that it is not dominated by pixel noise), and find it in a window around the
+   prediction with normalised cross-correlation (``cv2.matchTemplate``, ``TM_CCOEFF_NORMED``; search
+   radius = patch radius when the node was visible in the previous frame, twice that to re-acquire a
+   lost node). Then refine to sub-pixel with LK *from the frame-0 template* (gain/bias compensated), and
+   run it backwards for a forward-backward error. Because the measurement always compares with frame 0,
+   errors do not accumulate: a node that returns to its first pose is measured where it is.
+3. **Decide visibility** -- a node is marked invisible (position = the prediction, ``visible=False``)
+   rather than guessed when: the correlation peak is below ``min_ncc``; the forward-backward error
+   exceeds ``max_fb_fraction`` of the patch radius; or, with a graph, the distance to its parent
+   (when the parent is visible) stretches beyond ``(1 + max_stretch) * L0 + length_tol_px`` or
+   shrinks below ``min_length_fraction * L0 - length_tol_px`` (L0 = frame-0 segment length; a branch
+   segment does not stretch, but it may foreshorten when it turns out of the image plane).
+4. **Uncertainty**: ``sigma_px = sqrt(s_lk^2 + (fb/2)^2 + sigma_floor_px^2)`` with the LK
+   least-squares standard error ``s_lk = sqrt(residual_variance / lambda_min(G))`` (G = structure
+   tensor of the template, residual = template minus the matched patch, so appearance change counts)
+   and fb the forward-backward error. Invisible entries get sigma = the search radius.
+
+Constants and why they are what they are (none is tuned to a video):
+
+* patch radius h: ``clip(0.75 * median segment length, 6, 15)`` px -- large enough to hold texture (LK
+  windows below ~13 px are noise-dominated), small enough that the patch covers little more than the
+  node's own segment neighbourhood (which moves rigidly with it). Without a graph: 10 px (21x21, a
+  common LK window).
+* ``min_ncc = 0.5``: the template then explains >= 25 % of the patch variance, while an unrelated
+  patch of n pixels correlates at about +-1/sqrt(n) (< 0.08 for n >= 169), so this is far above chance
+  at every patch size used, yet tolerant of the lighting/rotation change a swinging branch shows.
+* ``max_fb_fraction = 0.1``: a well-posed LK round trip closes to << 0.1 px; a gap of a tenth of the
+  patch radius (~1 px for the typical 21 px window, the usual FB threshold in the literature) means the
+  match is not a stable minimum.
+* ``max_stretch = 0.25``, ``min_length_fraction = 0.4``, ``length_tol_px = 1.5``: relative to L0 so that
+  they hold at any zoom; the absolute tolerance covers two nodes' localisation error on short segments.
+
+Limits: the template is rotated, not scaled (a branch that moves a lot toward the camera changes scale);
+a node hidden from frame 0 onwards cannot be tracked.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..errors import InputError
+from ..graph import BranchGraph
+from .result import TrackResult
+from .sources import FrameSource
+
+
+@dataclass(frozen=True)
+class LKConfig:
+    """Settings of :class:`LKTracker` (pixels unless stated; see the module docstring for the reasons).
+
+    patch_radius_px: template half-size h; None = ``clip(0.75 * median segment length, 6, 15)``
+        (10 without a graph).
+    pyr_levels: pyramid levels of the frame-to-frame prediction (motion up to ~h * 2**levels px/frame).
+    min_ncc: minimum normalised cross-correlation of the first-frame template at the match.
+    max_fb_fraction: forward-backward error limit as a fraction of h (never below ``min_fb_px``).
+    min_fb_px: floor of the forward-backward limit.
+    max_stretch, min_length_fraction, length_tol_px: segment-length plausibility (needs a graph).
+    sigma_floor_px: smallest reported 1-sigma (interpolation/quantisation limit).
+    rotate_templates: rotate the first-frame template by the branch's rotation (needs a graph).
+    """
+
+    patch_radius_px: int | None = None
+    pyr_levels: int = 3
+    min_ncc: float = 0.5
+    max_fb_fraction: float = 0.1
+    min_fb_px: float = 0.5
+    max_stretch: float = 0.25
+    min_length_fraction: float = 0.4
+    length_tol_px: float = 1.5
+    sigma_floor_px: float = 0.05
+    rotate_templates: bool = True
+
+
+_LK_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01)
+
+
+def _parabola_peak(m: np.ndarray, u: int, v: int) -> tuple[float, float]:
+    """Sub-pixel offset of a 2-D peak at column u, row v by separable parabola fits."""
+    def fit(a, b, c):
+        den = a - 2 * b + c
+        return 0.0 if den >= 0 else float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
+    du = fit(m[v, u - 1], m[v, u], m[v, u + 1]) if 0 < u < m.shape[1] - 1 else 0.0
+    dv = fit(m[v - 1, u], m[v, u], m[v + 1, u]) if 0 < v < m.shape[0] - 1 else 0.0
+    return du, dv
+
+
+class LKTracker:
+    """Drift-free Lucas-Kanade tracker (see module docstring). ``LKTracker(LKConfig()).track(src, pts, graph)``."""
+
+    def __init__(self, config: LKConfig | None = None):
+        self.config = config or LKConfig()
+
+    # -- set-up -------------------------------------------------------------------------------
+    def _setup(self, q: np.ndarray, graph: BranchGraph | None, source: str):
+        cfg = self.config
+        n = len(q)
+        self.order = list(range(n))
+        self.parent = [-1] * n
+        self.rest_len = np.zeros(n)
+        if graph is not None:
+            missing = [v for v in graph.nodes if not 0 <= v < n]
+            if missing:
+                raise InputError(graph.source, f"graph node {missing[0]} has no annotated point "
+                                               f"(annotations list {n} points, ids 0..{n - 1})", f"node {missing[0]}")
+            self.order = list(graph.nodes) + [i for i in range(n) if i not in set(graph.nodes)]
+            for c, p in graph.parent.items():
+                self.parent[c] = p
+                self.rest_len[c] = float(np.hypot(*(q[c] - q[p])))
+        lengths = self.rest_len[self.rest_len > 0]
+        if cfg.patch_radius_px is not None:
+            h = int(cfg.patch_radius_px)
+        elif lengths.size:
+            h = int(np.clip(round(0.75 * float(np.median(lengths))), 6, 15))
+        else:
+            h = 10
+        if h < 2:
+            raise InputError(source, f"patch radius must be >= 2 px, got {h}")
+        self.h = h
+        # Rotation baseline partner: walk toward the root until >= 2h away, else toward the tip.
+        self.partner = [-1] * n
+        if graph is not None and cfg.rotate_templates:
+            children = graph.children
+            for i in graph.nodes:
+                j = i
+                while self.parent[j] >= 0 and np.hypot(*(q[j] - q[i])) < 2 * h:
+                    j = self.parent[j]
+                if np.hypot(*(q[j] - q[i])) < 2 * h:
+                    k = i
+                    while children.get(k) and np.hypot(*(q[k] - q[i])) < 2 * h:
+                        k = children[k][0]
+                    j = k if np.hypot(*(q[k] - q[i])) > np.hypot(*(q[j] - q[i])) else j
+                self.partner[i] = j if j != i else -1
+
+    def _rotation(self, i: int, est: np.ndarray, vis: np.ndarray, q0: np.ndarray, last: np.ndarray) -> float:
+        j = self.partner[i]
+        if j < 0:
+            return 0.0
+        if vis[i] and vis[j]:
+            a = est[j] - est[i]
+            b = q0[j] - q0[i]
+            last[i] = math.atan2(a[1], a[0]) - math.atan2(b[1], b[0])
+        return float(last[i])
+
+    # -- measurement against frame 0 ------------------------------------------------------------
+    def _anchor(self, gray0, gray, p0, q, theta, r):
+        """Locate node (frame-0 position p0) near q in ``gray``; returns (xy, ncc, fb, sigma) or None."""
+        h = self.h
+        k = 2 * (h + r) + 1
+        c = float(h + r)
+        m = cv2.getRotationMatrix2D((float(p0[0]), float(p0[1])), -math.degrees(theta), 1.0)
+        m[:, 2] += (c - p0[0], c - p0[1])
+        prev = cv2.warpAffine(gray0, m, (k, k), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1])))
+        tmpl = prev[r:r + 2 * h + 1, r:r + 2 * h + 1]
+        if float(tmpl.std()) < 1e-3:
+            return None  # textureless template: nothing to match
+        res = cv2.matchTemplate(cur, tmpl, cv2.TM_CCOEFF_NORMED)
+        _, score, _, (u, v) = cv2.minMaxLoc(res)
+        du, dv = _parabola_peak(res, u, v)
+        d = np.array([u - r + du, v - r + dv])
+        # Gain/bias compensation so LK (which assumes brightness constancy) sees the template's levels.
+        mu_p, sd_p = float(prev.mean()), float(prev.std()) + 1e-6
+        mu_c, sd_c = float(cur.mean()), float(cur.std()) + 1e-6
+        cur_n = np.clip((cur - mu_c) * (sd_p / sd_c) + mu_p, 0, 255)
+        p8, c8 = prev.astype(np.uint8), cur_n.astype(np.uint8)
+        start = np.array([[c, c]], np.float32)
+        guess = (start + d).astype(np.float32)
+        win = (2 * h + 1, 2 * h + 1)
+        nxt, st, _ = cv2.calcOpticalFlowPyrLK(p8, c8, start, guess.copy(), winSize=win, maxLevel=0,
+                                              criteria=_LK_CRITERIA, flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
+        ok = bool(st[0, 0]) and np.all(np.isfinite(nxt)) and float(np.hypot(*(nxt[0] - guess[0]))) < 2.0
+        if ok:
+            back, st2, _ = cv2.calcOpticalFlowPyrLK(c8, p8, nxt, start.copy(), winSize=win, maxLevel=0,
+                                                    criteria=_LK_CRITERIA, flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
+            ok = bool(st2[0, 0])
+            fb = float(np.hypot(*(back[0] - start[0]))) if ok else math.inf
+        if not ok:
+            return None
+        loc = nxt[0].astype(float)
+        # LK least-squares standard error from the template's structure tensor and the match residual.
+        t = tmpl.astype(np.float32)
+        gx = cv2.Sobel(t, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+        gy = cv2.Sobel(t, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+        gxx, gyy, gxy = float((gx * gx).sum()), float((gy * gy).sum()), float((gx * gy).sum())
+        lam_min = 0.5 * (gxx + gyy - math.sqrt((gxx - gyy) ** 2 + 4 * gxy * gxy))
+        patch = cv2.getRectSubPix(cur_n.astype(np.float32), win, (float(loc[0]), float(loc[1])))
+        res_var = float(((patch - t) ** 2).mean())
+        s_lk = math.sqrt(res_var / max(lam_min, 1e-9))
+        xy = np.asarray(q, float) + (loc - c)
+        return xy, float(score), fb, s_lk
+
+    # -- main loop ------------------------------------------------------------------------------
+    def track(self, source: FrameSource, query_points, graph: BranchGraph | None = None,
+              max_frames: int | None = None, progress: Callable[[int], object] | None = None) -> TrackResult:
+        """Track ``query_points`` (P, 2) original pixels on the first frame of ``source``.
+
+        ``graph`` (node id = annotation index) enables rotation-compensated templates, graph-based
+        prediction of lost nodes and segment-length checks. ``progress(1)`` is called per frame.
+        """
+        cfg = self.config
+        q0 = np.asarray(query_points, dtype=float)
+        src_name = getattr(source, "path", "<video>")
+        if q0.ndim != 2 or q0.shape[1] != 2 or len(q0) == 0:
+            raise InputError("query points", f"expected a (P, 2) array, got {q0.shape}")
+        self._setup(q0, graph, src_name)
+        h, n = self.h, len(q0)
+        fb_max = max(cfg.min_fb_px, cfg.max_fb_fraction * h)
+        lk_params = dict(winSize=(2 * h + 1, 2 * h + 1), maxLevel=cfg.pyr_levels, criteria=_LK_CRITERIA)
+        xs, vis_all, sig_all = [], [], []
+        gray0 = prev_gray = None
+        est = q0.copy()
+        vis = np.ones(n, bool)
+        theta_last = np.zeros(n)
+        counts = {"anchored": 0, "invisible": 0, "rejected_ncc": 0, "rejected_fb": 0, "rejected_length": 0,
+                  "lost_match": 0, "predicted_from_graph": 0}
+        t0 = time.perf_counter()
+        n_done = 0
+        for frame in source:
+            if max_frames is not None and n_done >= max_frames:
+                break
+            img = frame.image
+            if img.ndim != 3 or img.shape[2] != 3:
+                raise InputError(src_name, f"frame {frame.index} is not an RGB image (shape {img.shape})")
+            gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+            if gray0 is None:
+                gray0 = gray
+                hh, ww = gray.shape
+                out = (q0[:, 0] < -0.5) | (q0[:, 0] > ww - 0.5) | (q0[:, 1] < -0.5) | (q0[:, 1] > hh - 0.5)
+                if out.any():
+                    i = int(np.flatnonzero(out)[0])
+                    raise InputError(src_name, f"annotated point {i} {q0[i].tolist()} is outside the {ww}x{hh} frame",
+                                     f"point {i}")
+                sig = np.full(n, cfg.sigma_floor_px)
+            else:
+                prev_pts = est.astype(np.float32).reshape(-1, 1, 2)
+                f2f, st, _ = cv2.calcOpticalFlowPyrLK(prev_gray, gray, prev_pts, None, **lk_params)
+                back, st_b, _ = cv2.calcOpticalFlowPyrLK(gray, prev_gray, f2f, prev_pts.copy(),
+                                                         flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **lk_params)
+                fb_f2f = np.hypot(*(back - prev_pts).reshape(-1, 2).T)
+                f2f_ok = (st.ravel() == 1) & (st_b.ravel() == 1) & (fb_f2f < fb_max) & np.isfinite(f2f.reshape(-1, 2)).all(1)
+                f2f = f2f.reshape(-1, 2).astype(float)
+                prev_est, prev_vis = est.copy(), vis.copy()
+                new_est, new_vis, sig = prev_est.copy(), np.zeros(n, bool), np.zeros(n)
+                done = np.zeros(n, bool)
+                for i in self.order:
+                    # rotation from the latest estimates (this frame's where already done)
+                    cur_est = np.where(done[:, None], new_est, prev_est)
+                    cur_vis = np.where(done, new_vis, prev_vis)
+                    theta = self._rotation(i, cur_est, cur_vis, q0, theta_last)
+                    p = self.parent[i]
+                    if f2f_ok[i] and prev_vis[i]:
+                        pred, r = f2f[i], h
+                    elif p >= 0:
+                        ct, sn = math.cos(theta), math.sin(theta)
+                        v0 = q0[i] - q0[p]
+                        pred = new_est[p] + np.array([ct * v0[0] - sn * v0[1], sn * v0[0] + ct * v0[1]])
+                        r = 2 * h
+                        counts["predicted_from_graph"] += 1
+                    else:
+                        pred, r = (f2f[i] if f2f_ok[i] else prev_est[i]), 2 * h
+                    m = self._anchor(gray0, gray, q0[i], pred, theta, r)
+                    ok = m is not None
+                    if not ok:
+                        counts["lost_match"] += 1
+                    else:
+                        xy, score, fb, s_lk = m
+                        if score < cfg.min_ncc:
+                            ok = False
+                            counts["rejected_ncc"] += 1
+                        elif fb > fb_max:
+                            ok = False
+                            counts["rejected_fb"] += 1
+                        elif p >= 0 and new_vis[p]:
+                            d = float(np.hypot(*(xy - new_est[p])))
+                            l0 = self.rest_len[i]
+                            if d > (1 + cfg.max_stretch) * l0 + cfg.length_tol_px or d < cfg.min_length_fraction * l0 - cfg.length_tol_px:
+                                ok = False
+                                counts["rejected_length"] += 1
+                    if ok:
+                        new_est[i], new_vis[i] = xy, True
+                        sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
+                        counts["anchored"] += 1
+                    else:
+                        new_est[i], new_vis[i], sig[i] = pred, False, float(r)
+                        counts["invisible"] += 1
+                    done[i] = True
+                hh, ww = gray.shape
+                new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
+                new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)
+                est, vis = new_est, new_vis
+            prev_gray = gray
+            xs.append(est.copy())
+            vis_all.append(vis.copy())
+            sig_all.append(np.maximum(sig, cfg.sigma_floor_px))
+            n_done += 1
+            if progress is not None:
+                progress(1)
+        if n_done == 0:
+            raise InputError(src_name, "the video has no frames")
+        info = {"tracker": "lk-anchored", "patch_radius_px": h, "frames": n_done,
+                "time_total_s": time.perf_counter() - t0, **counts}
+        return TrackResult(point_ids=np.arange(n), xy=np.stack(xs, axis=1), visible=np.stack(vis_all, axis=1),
+                           sigma_px=np.stack(sig_all, axis=1), fps=source.fps, info=info)

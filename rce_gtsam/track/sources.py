@@ -1,0 +1,246 @@
+"""Frame sources: stream RGB frames from a video file or an Intel RealSense recording.
+
+Every source is a context manager and an iterable of :class:`Frame`; frames are decoded one at a
+time, so a long video is never held in memory. Images are ``(H, W, 3)`` ``uint8`` **RGB**.
+
+* :class:`VideoFileSource` -- anything OpenCV's FFmpeg backend reads (mp4/H.264, avi, mov, mkv ...).
+* :class:`RealSenseSource` -- ``.bag`` (ROS1, librealsense < 2.58) and ``.db3`` (ROS2, written by
+  librealsense >= 2.58) recordings, colour stream, played back *not* in real time so no frame is dropped.
+* :class:`ArraySource` -- frames already in memory (tests, notebooks).
+
+:func:`open_video` picks the right one from the file suffix.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import InputError, MissingDependencyError
+
+#: File suffixes played back through pyrealsense2.
+REALSENSE_SUFFIXES = (".bag", ".db3")
+
+REALSENSE_FIX = ("install the RealSense extra with `pip install 'rce_gtsam[realsense]'` "
+                 "(pyrealsense2) and its system library with `apt-get install libusb-1.0-0`")
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """One video frame.
+
+    index: 0-based frame number in the order the source delivers them.
+    image: (H, W, 3) uint8 RGB.
+    timestamp_s: seconds since the first frame.
+    """
+
+    index: int
+    image: np.ndarray
+    timestamp_s: float
+
+
+class FrameSource(ABC):
+    """A stream of :class:`Frame` objects. Use as ``with open_video(p) as src: for fr in src: ...``.
+
+    Attributes: ``path`` (or a description), ``fps`` (frames per second), ``size`` ``(W, H)`` pixels,
+    ``n_frames`` (frame count, ``None`` when the container does not say).
+    """
+
+    path: str
+    fps: float
+    size: tuple[int, int]
+    n_frames: int | None
+
+    def __enter__(self) -> "FrameSource":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        """Release the decoder."""
+
+    @abstractmethod
+    def __iter__(self) -> Iterator[Frame]:
+        ...
+
+
+class ArraySource(FrameSource):
+    """Frames already in memory: a sequence of (H, W, 3) uint8 RGB arrays (or an (F, H, W, 3) array)."""
+
+    def __init__(self, frames: Sequence[np.ndarray] | np.ndarray, fps: float = 30.0, path: str = "<array>"):
+        if len(frames) == 0:
+            raise InputError(path, "no frames")
+        first = np.asarray(frames[0])
+        if first.ndim != 3 or first.shape[2] != 3 or first.dtype != np.uint8:
+            raise InputError(path, f"frames must be (H, W, 3) uint8 RGB, got {first.shape} {first.dtype}")
+        self._frames = frames
+        self.path = path
+        self.fps = float(fps)
+        self.size = (int(first.shape[1]), int(first.shape[0]))
+        self.n_frames = len(frames)
+
+    def __iter__(self) -> Iterator[Frame]:
+        for i, im in enumerate(self._frames):
+            yield Frame(i, np.asarray(im), i / self.fps)
+
+
+class VideoFileSource(FrameSource):
+    """A video file decoded with OpenCV (``cv2.VideoCapture``), converted BGR -> RGB."""
+
+    def __init__(self, path: str | Path):
+        import cv2
+
+        self.path = str(path)
+        self._cv2 = cv2
+        self._cap = cv2.VideoCapture(self.path)
+        if not self._cap.isOpened():
+            self._cap.release()
+            raise InputError(path, "OpenCV cannot open this file as a video (unknown container or codec)")
+        ok, first = self._cap.read()
+        if not ok or first is None:
+            self._cap.release()
+            raise InputError(path, "the video has no readable frames")
+        self._first = first
+        fps = float(self._cap.get(cv2.CAP_PROP_FPS) or 0.0)
+        # Some containers report 0 or absurd rates; fall back to 30 fps and say so in `fps_reported`.
+        self.fps_reported = fps
+        self.fps = fps if 0.0 < fps < 1000.0 else 30.0
+        self.size = (int(first.shape[1]), int(first.shape[0]))
+        n = int(self._cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        self.n_frames = n if n > 0 else None
+        self._used = False
+
+    def __iter__(self) -> Iterator[Frame]:
+        if self._used:
+            raise RuntimeError(f"{self.path}: a VideoFileSource can be iterated once; open the video again")
+        self._used = True
+        cv2 = self._cv2
+        image, i = self._first, 0
+        self._first = None
+        while image is not None:
+            yield Frame(i, cv2.cvtColor(image, cv2.COLOR_BGR2RGB), i / self.fps)
+            ok, image = self._cap.read()
+            if not ok:
+                image = None
+            i += 1
+
+    def close(self) -> None:
+        self._cap.release()
+
+
+def import_pyrealsense2():
+    """Import pyrealsense2 or raise :class:`MissingDependencyError` that says how to install it."""
+    try:
+        import pyrealsense2 as rs
+    except ImportError as exc:
+        what = "its system library libusb-1.0 is missing" if "libusb" in str(exc) else "pyrealsense2 is not installed"
+        raise MissingDependencyError(f"reading RealSense recordings needs pyrealsense2, but {what} ({exc}); "
+                                     f"{REALSENSE_FIX}") from None
+    return rs
+
+
+class RealSenseSource(FrameSource):
+    """The colour stream of a RealSense ``.bag``/``.db3`` recording, played back frame by frame.
+
+    Playback runs with ``set_real_time(False)``: the reader waits for us, so no frame is skipped.
+    ``timestamp_s`` comes from the device timestamps (relative to the first frame); ``n_frames`` is
+    ``None`` (recordings carry a duration, not a frame count).
+    """
+
+    #: How long to wait for the next frame before deciding the recording has ended (milliseconds).
+    #: Non-real-time playback delivers frames as fast as we read them; 2 s is far longer than a decode.
+    timeout_ms = 2000
+    #: Poll interval while waiting (milliseconds); the end of the file is noticed within one poll.
+    poll_ms = 50
+
+    def __init__(self, path: str | Path):
+        rs = import_pyrealsense2()
+        self._rs = rs
+        self.path = str(path)
+        self._pipe = rs.pipeline()
+        cfg = rs.config()
+        try:
+            cfg.enable_device_from_file(self.path, repeat_playback=False)
+            cfg.enable_stream(rs.stream.color)
+            profile = self._pipe.start(cfg)
+        except RuntimeError as exc:
+            raise InputError(path, f"librealsense cannot play this recording or it has no colour stream ({exc}); "
+                                   "note: librealsense >= 2.58 reads .bag and .db3, older versions only .bag") from None
+        self._playback = profile.get_device().as_playback()
+        self._playback.set_real_time(False)
+        vsp = profile.get_stream(rs.stream.color).as_video_stream_profile()
+        self.fps = float(vsp.fps()) or 30.0
+        self.size = (int(vsp.width()), int(vsp.height()))
+        self.n_frames = None
+        self._running = True
+
+    def _to_rgb(self, frame) -> np.ndarray:
+        import cv2
+
+        rs = self._rs
+        data = np.asanyarray(frame.get_data())
+        fmt = frame.get_profile().format()
+        if fmt == rs.format.rgb8:
+            return np.ascontiguousarray(data)
+        if fmt == rs.format.bgr8:
+            return cv2.cvtColor(data, cv2.COLOR_BGR2RGB)
+        if fmt == rs.format.rgba8:
+            return cv2.cvtColor(data, cv2.COLOR_RGBA2RGB)
+        if fmt == rs.format.bgra8:
+            return cv2.cvtColor(data, cv2.COLOR_BGRA2RGB)
+        if fmt == rs.format.yuyv:
+            return cv2.cvtColor(data.reshape(self.size[1], self.size[0], 2), cv2.COLOR_YUV2RGB_YUYV)
+        raise InputError(self.path, f"unsupported colour format {fmt}; expected rgb8, bgr8, rgba8, bgra8 or yuyv")
+
+    def __iter__(self) -> Iterator[Frame]:
+        i, t0, last_number = 0, None, None
+        rs, waited = self._rs, 0
+        while self._running:
+            ok, fs = self._pipe.try_wait_for_frames(self.poll_ms)
+            if not ok:
+                # End of the recording: playback reports 'stopped'. Otherwise keep waiting up to timeout_ms.
+                waited += self.poll_ms
+                if self._playback.current_status() == rs.playback_status.stopped or waited >= self.timeout_ms:
+                    break
+                continue
+            waited = 0
+            c = fs.get_color_frame()
+            if not c:
+                continue
+            number = c.get_frame_number()
+            if number == last_number:  # the same frame delivered twice
+                continue
+            last_number = number
+            t = c.get_timestamp() / 1000.0
+            t0 = t if t0 is None else t0
+            yield Frame(i, self._to_rgb(c), t - t0)
+            i += 1
+
+    def close(self) -> None:
+        if self._running:
+            self._running = False
+            try:
+                self._pipe.stop()
+            except RuntimeError:
+                pass
+
+
+def open_video(path: str | Path) -> FrameSource:
+    """Open a video file or RealSense recording as a :class:`FrameSource` (use it in a ``with`` block).
+
+    Raises :class:`InputError` if the file is missing or unreadable and
+    :class:`~rce_gtsam.errors.MissingDependencyError` if a RealSense file needs pyrealsense2/libusb.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(p, "video file not found")
+    if p.stat().st_size == 0:
+        raise InputError(p, "the video file is empty")
+    if p.suffix.lower() in REALSENSE_SUFFIXES:
+        return RealSenseSource(p)
+    return VideoFileSource(p)
