@@ -103,13 +103,12 @@ def place_nodes_along_polyline(polyline, n_nodes: int) -> tuple[np.ndarray, Bran
     return pts, graph
 
 
-def _write_json_atomic(obj, path: Path) -> None:
+def _write_text_atomic(text: str, path: Path) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "w") as fh:
-            json.dump(obj, fh, indent=1)
-            fh.write("\n")
+            fh.write(text)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
@@ -119,5 +118,6 @@ def _write_json_atomic(obj, path: Path) -> None:
 def write_annotation_files(points, graph: BranchGraph, annotations_path: str | Path, graph_path: str | Path) -> None:
     """Write ``{"points": ...}`` and ``{"root": ..., "edges": ...}`` JSON files, each atomically."""
     pts = validate_points(points)
-    _write_json_atomic({"points": [[round(float(x), 3), round(float(y), 3)] for x, y in pts]}, Path(annotations_path))
-    _write_json_atomic(graph.to_json(), Path(graph_path))
+    rows = ",\n".join(f"  [{round(float(x), 3)}, {round(float(y), 3)}]" for x, y in pts)
+    _write_text_atomic('{"points": [\n' + rows + "\n]}\n", Path(annotations_path))
+    _write_text_atomic(json.dumps(graph.to_json()) + "\n", Path(graph_path))

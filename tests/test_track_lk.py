@@ -1,0 +1,88 @@
+"""The default (anchored Lucas-Kanade) tracker on a synthetic textured swinging branch with a leaf occluder."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rce_gtsam.errors import InputError
+from rce_gtsam.graph import BranchGraph
+from rce_gtsam.track import ArraySource, LKConfig, LKTracker
+
+from track_fixtures import branch_video
+
+
+@pytest.fixture(scope="module")
+def scene():
+    bv = branch_video(n_frames=241, size=(320, 260), tip_amp_px=35, gust_amp_px=12, seed=1)
+    rng = np.random.default_rng(0)  # sensor noise, so LK is not fed a perfect render
+    frames = np.clip(bv.frames + rng.normal(0, 4, bv.frames.shape), 0, 255).astype(np.uint8)
+    graph = BranchGraph.from_edges(0, bv.edges)
+    res = LKTracker(LKConfig()).track(ArraySource(frames), bv.true_xy[:, 0], graph)
+    err = np.hypot(*(res.xy - bv.true_xy).transpose(2, 0, 1))
+    return bv, frames, graph, res, err
+
+
+def test_accuracy_on_visible_frames(scene):
+    bv, _, _, res, err = scene
+    assert res.xy.shape == bv.true_xy.shape
+    ok = res.visible & ~bv.occluded
+    assert np.median(err[ok]) < 0.3
+    assert np.percentile(err[ok], 90) < 1.0
+    # the scene really moves: the tip sweeps tens of pixels
+    assert np.ptp(bv.true_xy[-1, :, 0]) > 30
+
+
+def test_no_drift_returns_to_first_pose(scene):
+    bv, _, _, res, err = scene
+    np.testing.assert_allclose(bv.true_xy[:, -1], bv.true_xy[:, 0], atol=1e-6)  # the clip closes its loop
+    assert res.visible[:, -1].all()
+    assert err[:, -1].max() < 1.0
+
+
+def test_occluded_nodes_marked_invisible_and_recovered(scene):
+    bv, _, _, res, err = scene
+    assert bv.occluded.sum() > 20
+    assert (~res.visible & bv.occluded).sum() >= 0.8 * bv.occluded.sum()
+    # after the leaf has passed every node is found again, accurately
+    last_occ = np.flatnonzero(bv.occluded.any(axis=0)).max()
+    after = slice(last_occ + 5, None)
+    assert res.visible[:, after].mean() > 0.95
+    assert np.median(err[:, after][res.visible[:, after]]) < 0.3
+    # an invisible entry still has a finite position and a large sigma
+    assert np.isfinite(res.xy).all()
+    assert (res.sigma_px[~res.visible] > res.sigma_px[res.visible].max()).all()
+
+
+def test_sigma_is_calibrated_to_a_factor_of_two(scene):
+    bv, _, _, res, _ = scene
+    ok = res.visible & ~bv.occluded
+    z = (res.xy - bv.true_xy)[ok] / res.sigma_px[ok][:, None]
+    assert 0.5 < z.std() < 2.0
+
+
+def test_table_round_trips_through_tracks_loader(scene, tmp_path):
+    from rce_gtsam.tracks import load_tracks
+
+    _, _, graph, res, _ = scene
+    path = res.write_csv(tmp_path / "t.csv")
+    tracks = load_tracks(path, graph)
+    np.testing.assert_allclose(tracks.observed, res.visible)
+    np.testing.assert_allclose(tracks.xy[res.visible], res.xy[res.visible], atol=1e-4)
+
+
+def test_works_without_graph_and_honours_max_frames(scene):
+    bv, frames, _, _, _ = scene
+    res = LKTracker().track(ArraySource(frames[:60]), bv.true_xy[:, 0], None, max_frames=40)
+    assert res.n_frames == 40
+    err = np.hypot(*(res.xy - bv.true_xy[:, :40]).transpose(2, 0, 1))
+    assert np.median(err[res.visible]) < 0.3
+
+
+def test_bad_inputs(scene):
+    bv, frames, _, _, _ = scene
+    with pytest.raises(InputError, match="outside"):
+        LKTracker().track(ArraySource(frames[:2]), [[1000.0, 5.0]])
+    g = BranchGraph.from_edges(0, [[0, 1], [1, 99]])
+    with pytest.raises(InputError, match="node 99"):
+        LKTracker().track(ArraySource(frames[:2]), bv.true_xy[:2, 0], g)
