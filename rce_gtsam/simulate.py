@@ -196,14 +196,11 @@ def make_excitation(n_frames: int, fps: float, rng: np.random.Generator, rms_deg
     noise = signal.filtfilt(b, a, rng.standard_normal(n_frames + 200))[100:-100]
     noise /= max(np.std(noise), 1e-12)
     z += 0.3 * noise
-    n_calm = int(round(calm_s * fps))
+    n_calm = min(int(round(calm_s * fps)), n_frames - 1)
     n_ramp = max(1, int(round(ramp_s * fps)))
-    env = np.ones(n_frames)
-    env[:n_calm] = 0.0
-    k = np.arange(n_ramp)
-    ramp_end = min(n_frames, n_calm + n_ramp)
-    env[n_calm:ramp_end] = 0.5 - 0.5 * np.cos(np.pi * k[: ramp_end - n_calm] / n_ramp)
-    z = (z - z[min(n_calm, n_frames - 1)]) * env
+    t_ramp = np.arange(n_frames) - n_calm
+    env = np.where(t_ramp < 0, 0.0, np.where(t_ramp >= n_ramp, 1.0, 0.5 - 0.5 * np.cos(np.pi * t_ramp / n_ramp)))
+    z = (z - z[n_calm]) * env
     rms = np.sqrt(np.mean(z ** 2))
     return z * (rms_deg / rms) if rms > 0 else z
 
