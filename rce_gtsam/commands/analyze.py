@@ -20,14 +20,53 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=None, help="bootstrap RNG seed (default: the preset's, 0)")
     p.add_argument("--bootstrap", type=int, default=None, metavar="N",
                    help="bootstrap resamples (default: the preset's, 250; 0 disables CIs)")
+    p.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd", help="also save a Rerun recording")
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.set_defaults(func=run)
+
+
+def extra_writers(args: argparse.Namespace, video=None, diagnosis=None) -> list:
+    """Figure, overlay and Rerun writers for ``AnalysisResult.write`` (each skipped if unavailable)."""
+    writers = []
+    if not getattr(args, "no_figures", False):
+        try:
+            from ..viz.figures import write_figures
+            from ..viz.overlays import write_overlays
+        except ImportError:
+            pass
+        else:
+            def figures(result, tmp):
+                out = dict(write_figures(result, tmp / "figures", diagnosis=diagnosis))
+                out.update(write_overlays(result, tmp / "figures", first_frame=_first_frame(video)))
+                return out
+            writers.append(figures)
+    return writers
+
+
+def _first_frame(video):
+    if video is None:
+        return None
+    from ..track import open_video
+    with open_video(video) as src:
+        for frame in src:
+            return frame.image
+    return None
+
+
+def save_recording(args, result, video=None, diagnosis=None) -> None:
+    if args.rerun is None:
+        return
+    from ..viz.rerun_log import save_recording as _save
+    path = _save(result, args.rerun, video_path=video, diagnosis=diagnosis)
+    print(f"wrote Rerun recording {path} (open it with: rerun {path})")
 
 
 def run(args: argparse.Namespace) -> int:
     from ..pipeline import analyze
 
     result = analyze(args.tracks, args.graph, preset=args.preset, seed=args.seed, n_boot=args.bootstrap)
-    files = result.write(args.out)
+    files = result.write(args.out, extra_writers=extra_writers(args))
+    save_recording(args, result)
     print(format_summary(result))
     print(f"wrote {len(files)} files to {args.out}/: {', '.join(sorted(files))}")
     return 0

@@ -1,0 +1,96 @@
+"""``rce run VIDEO ANNOTATIONS GRAPH --out DIR``: track -> analyze -> diagnose, every output in DIR."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from ..presets import PRESETS
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("run", help="end to end: track a video, analyze the tracks, diagnose the model",
+                       description="Track the annotated nodes through VIDEO, smooth and analyze the tracks, "
+                                   "fit relative compliance and diagnose the model. Writes tracks.csv, the "
+                                   "analysis files and diagnosis.json into DIR.")
+    p.add_argument("video", type=Path, help="video file (mp4/avi/...) or RealSense recording (.bag, .db3)")
+    p.add_argument("annotations", type=Path, help='first-frame points JSON {"points": [[x, y], ...]} (pixels)')
+    p.add_argument("graph", type=Path, help='branch graph JSON {"root": id, "edges": [[parent, child], ...]}')
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--model", type=Path, default=None, metavar="DIR_OR_ONNX",
+                   help="TAPIR ONNX export (default: the OpenCV tracker)")
+    p.add_argument("--max-frames", type=int, default=None, metavar="N", help="use only the first N frames")
+    p.add_argument("--preset", choices=sorted(PRESETS), default="default", help="method preset")
+    p.add_argument("--seed", type=int, default=None, help="bootstrap / cross-validation seed")
+    p.add_argument("--bootstrap", type=int, default=None, metavar="N", help="bootstrap resamples")
+    p.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd", help="also save a Rerun recording")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..graph import load_graph
+    from ..pipeline import analyze
+    from ..track import load_annotations, make_tracker, open_video
+    from ..tracks import read_tracks_table, tracks_from_table
+
+    t0 = time.perf_counter()
+    graph = load_graph(args.graph)
+    tracker = make_tracker(args.model)
+    with open_video(args.video) as src:
+        points = load_annotations(args.annotations, image_size=src.size)
+        _check_graph_matches_points(graph, points, args)
+        bar = None
+        if not args.no_progress:
+            from tqdm import tqdm
+            total = src.n_frames if args.max_frames is None else args.max_frames
+            bar = tqdm(total=total, unit="frame", desc="tracking", file=sys.stderr, leave=False)
+        try:
+            tracked = tracker.track(src, points, graph=graph, max_frames=args.max_frames,
+                                    progress=bar.update if bar else None)
+        finally:
+            if bar:
+                bar.close()
+    t_track = time.perf_counter() - t0
+    table = tracked.to_frame()
+    tracks = tracks_from_table(table, graph, source=f"tracks of {args.video}")
+    result = analyze(tracks, graph, preset=args.preset, seed=args.seed, n_boot=args.bootstrap)
+    result.timings_s["track"] = t_track
+    result.inputs.update(video=str(args.video), annotations=str(args.annotations), graph=str(args.graph))
+
+    diagnosis = _diagnose(result, args)
+
+    def write_tracks(_result, tmp: Path) -> dict:
+        table.to_csv(tmp / "tracks.csv", index=False)
+        if diagnosis is not None:
+            (tmp / "diagnosis.json").write_text(json.dumps(diagnosis.to_dict(), indent=2) + "\n")
+        return {}
+
+    from .analyze import extra_writers, format_summary
+    files = result.write(args.out, extra_writers=[write_tracks, *extra_writers(args, video=args.video,
+                                                                                diagnosis=diagnosis)])
+    print(format_summary(result))
+    if diagnosis is not None:
+        print()
+        print(diagnosis.report())
+    print(f"\nwrote {len(files)} files to {args.out}/")
+    return 0
+
+
+def _check_graph_matches_points(graph, points, args) -> None:
+    from ..errors import InputError
+    bad = [n for n in graph.nodes if not 0 <= n < len(points)]
+    if bad:
+        raise InputError(args.graph, f"graph node {bad[0]} has no annotated point: {args.annotations} lists "
+                                     f"{len(points)} points (ids 0..{len(points) - 1})", f"node {bad[0]}")
+
+
+def _diagnose(result, args):
+    try:
+        from ..diagnose import diagnose_result
+    except ImportError:  # diagnosis module not available in this build
+        return None
+    return diagnose_result(result, seed=args.seed if args.seed is not None else 0)
