@@ -540,7 +540,7 @@ class Simulation:
         Returns {name: path}.
         """
         out = Path(out_dir)
-        names = set(WRITTEN_FILES)
+        names = set(WRITTEN_FILES) | {"README.md"}  # README.md: the note write_sample() adds
         if out.exists():
             if not out.is_dir():
                 raise InputError(out, "output path exists and is not a folder")
@@ -573,7 +573,7 @@ class Simulation:
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
-        return {p.name: p for p in sorted(out.iterdir()) if p.name in names}
+        return {p.name: p for p in sorted(out.iterdir()) if p.name in WRITTEN_FILES}
 
 
 #: Files :meth:`Simulation.write` may write.
@@ -655,3 +655,40 @@ def angle_noise_deg(sim: Simulation) -> float:
     b = turning_angles_deg(sim.true_xy, sim.tracks.node_ids, sim.graph.bends)
     d = (a - b + 180) % 360 - 180
     return float(np.sqrt(np.nanmean(d ** 2)))
+
+
+#: The committed sample recordings (folder name under data/ -> effects). Regenerate with
+#: ``python -m rce_gtsam.simulate`` (calls :func:`write_sample`).
+SAMPLES: dict[str, tuple[str, ...]] = {"sample": (), "sample_delay": ("delay",)}
+
+
+def write_sample(data_dir: str | Path = "data", seed: int = 0, n_frames: int = 600,
+                 n_nodes: int = 20) -> dict[str, Path]:
+    """Write the small committed sample recordings (no video) into ``data_dir``/<name>/ with a README.md
+    saying how they were made. Returns {name: folder}."""
+    out = {}
+    for name, effects in SAMPLES.items():
+        cfg = SimulationConfig(n_nodes=n_nodes, n_frames=n_frames, effects=effects, seed=seed)
+        folder = Path(data_dir) / name
+        simulate(cfg).write(folder)
+        eff = ", ".join(effects) or "none"
+        note = (f"# Simulated sample recording `{name}`\n\n"
+                f"Made by `rce_gtsam.simulate.write_sample()` (run `python -m rce_gtsam.simulate [DATA_DIR]`), i.e.\n"
+                f"`rce simulate --seed {seed} --frames {n_frames} --nodes {n_nodes}"
+                f"{' --effect ' + ','.join(effects) if effects else ''} --out {folder}`.\n\n"
+                f"- hidden effect: {eff}\n"
+                f"- `tracks.csv`: noisy tracker-like tracks (point_id,frame,x,y; absent rows = occluded)\n"
+                f"- `true_tracks.csv`: noise-free node positions; `graph.json`: branch graph (root 0)\n"
+                f"- `truth.json`: kappa_true, z_true, response_true (degrees), effect parameters, config\n"
+                f"- `annotations.json`: first-frame node positions (index = point id)\n")
+        tmp = folder / ".README.md.tmp"
+        tmp.write_text(note)
+        os.replace(tmp, folder / "README.md")
+        out[name] = folder
+    return out
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import sys
+    for n, f in write_sample(sys.argv[1] if len(sys.argv) > 1 else "data").items():
+        print(f"wrote {f}")

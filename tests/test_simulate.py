@@ -158,3 +158,45 @@ def test_write_round_trips_and_is_safe(tmp_path):
         sim.write(out)
     assert (out / "notes.txt").read_text() == "mine"
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp leftovers
+
+
+def test_cli_writes_what_simulate_gives(tmp_path, capsys):
+    from rce_gtsam.cli import main
+    out = tmp_path / "run"
+    rc = main(["simulate", "--out", str(out), "--effect", "delay", "--effect", "offset,nonlinear",
+               "--frames", "60", "--nodes", "8", "--seed", "4", "--sigma", "--strength", "delay=5"])
+    assert rc == 0
+    printed = capsys.readouterr().out
+    assert "tracks.csv" in printed and "delay (strength 5)" in printed
+    sim = simulate(SimulationConfig(n_nodes=8, n_frames=60, seed=4, effects=("delay", "offset", "nonlinear"),
+                                    effect_strength={"delay": 5.0}, noise=NoiseConfig(emit_sigma=True)))
+    g = load_graph(out / "graph.json")
+    tr = load_tracks(out / "tracks.csv", g)
+    np.testing.assert_allclose(tr.xy, sim.tracks.xy, atol=1e-4)
+    assert tr.sigma_px is not None and np.nanmin(tr.sigma_px) > 0
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["effect_params"]["delay"]["tau_tip_frames"] == 5.0
+
+
+def test_cli_rejects_bad_effect_names(tmp_path, capsys):
+    from rce_gtsam.cli import main
+    assert main(["simulate", "--out", str(tmp_path / "x"), "--effect", "wobble"]) == 2
+    assert "wobble" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
+
+
+def test_committed_samples_are_current():
+    """data/sample*/ are what write_sample() makes now (regenerate: python -m rce_gtsam.simulate data)."""
+    from pathlib import Path
+
+    from rce_gtsam.simulate import SAMPLES
+    root = Path(__file__).resolve().parents[1] / "data"
+    for name, effects in SAMPLES.items():
+        folder = root / name
+        sim = simulate(SimulationConfig(n_nodes=20, n_frames=600, effects=effects, seed=0))
+        g = load_graph(folder / "graph.json")
+        assert g == sim.graph
+        np.testing.assert_allclose(load_tracks(folder / "tracks.csv", g).xy, sim.tracks.xy, atol=1e-3)
+        truth = json.loads((folder / "truth.json").read_text())
+        assert truth["effects"] == list(effects)
+        np.testing.assert_allclose(truth["z_true"], sim.z_true, atol=1e-5)
