@@ -18,6 +18,7 @@ from .errors import RceError
 COMMAND_MODULES = (
     "rce_gtsam.commands.analyze",
     "rce_gtsam.commands.track",
+    "rce_gtsam.commands.simulate",
     "rce_gtsam.commands.run",
 )
 
