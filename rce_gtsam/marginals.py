@@ -1,0 +1,191 @@
+"""Marginal covariances of the smoother by block-banded selected inversion.
+
+The smoother's variables, in frame-major order, form frames of ``n = 2N`` scalars (N nodes × x, y).
+Temporal factors couple a frame only to its neighbours up to ``b`` frames away (b = 2 with the
+acceleration factor, 1 with only velocity) and edge/measurement factors act inside one frame, so the
+information matrix ``Λ = JᵀJ`` at the solution is block-banded with block bandwidth ``b``.
+
+We take the whitened Jacobian ``J`` of GTSAM's own linearisation at the solution
+(``NonlinearFactorGraph.linearize`` → ``GaussianFactorGraph.sparseJacobian_``; noise models and the
+robust M-estimator weights are baked in exactly as GTSAM applies them, so this is the same
+information matrix ``gtsam.Marginals`` factorises), then compute
+
+* a block Cholesky factor ``Λ = L Lᵀ`` (L block lower-banded, bandwidth b), frame by frame, and
+* the Takahashi / Erisman–Tinney backward recursion for the blocks of ``Σ = Λ⁻¹`` inside the band:
+
+      Σ_ij = G_iiᵀ ( δ_ij G_ii − Σ_{k=i+1}^{i+b} L_kiᵀ Σ_kj ),   j = i..i+b,   G_ii = L_ii⁻¹,
+
+  evaluated for j > i first, then j = i.
+
+Cost: O(F · b² · n³) with small dense n×n blocks, versus one sparse query per key for
+``gtsam.Marginals``. The within-frame blocks ``Σ_tt`` are the joint covariances of all nodes at
+frame t; their 2×2 diagonal blocks are the per-node marginals.
+"""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sp
+
+from .errors import RceError
+
+
+class SingularInformationError(RceError, np.linalg.LinAlgError):
+    """The information matrix is not positive definite: some variable is unconstrained."""
+
+
+def whitened_jacobian(linear: gtsam.GaussianFactorGraph, n_cols: int | None = None) -> tuple[sp.csr_matrix, np.ndarray]:
+    """Sparse whitened Jacobian ``A`` and right-hand side ``b`` of a Gaussian factor graph.
+
+    Columns follow the sorted key order of the graph's variables (each key's scalar dimensions in
+    turn), as ``GaussianFactorGraph::sparseJacobian`` lays them out.
+    """
+    ijs = linear.sparseJacobian_()
+    rows = ijs[0].astype(np.int64) - 1
+    cols = ijs[1].astype(np.int64) - 1
+    vals = ijs[2]
+    n_rows = int(rows.max()) + 1 if rows.size else 0
+    b_col = int(cols.max()) if n_cols is None else n_cols  # sparseJacobian appends b as the last column
+    is_b = cols == b_col
+    A = sp.csr_matrix((vals[~is_b], (rows[~is_b], cols[~is_b])), shape=(n_rows, b_col))
+    b = np.zeros(n_rows)
+    np.add.at(b, rows[is_b], vals[is_b])
+    return A, b
+
+
+def information_matrix(linear: gtsam.GaussianFactorGraph, n_cols: int) -> sp.csc_matrix:
+    """Λ = JᵀJ of a (whitened) Gaussian factor graph, columns in sorted key order."""
+    A, _ = whitened_jacobian(linear, n_cols=n_cols)
+    return (A.T @ A).tocsc()
+
+
+def frame_bandwidth(Lam: sp.spmatrix, n: int) -> int:
+    """Largest frame distance |t - s| with a nonzero block Λ[t, s] (block size ``n``)."""
+    coo = Lam.tocoo()
+    if coo.nnz == 0:
+        return 0
+    return int(np.abs(coo.row // n - coo.col // n).max())
+
+
+def _tridiagonal_blocks(Lam: sp.spmatrix, m: int, T: int) -> tuple[np.ndarray, np.ndarray]:
+    """Dense blocks of a block-tridiagonal matrix: ``diag[t] = Λ[t, t]``, ``sub[t] = Λ[t+1, t]`` (m×m)."""
+    coo = Lam.tocoo()
+    r, c, v = coo.row, coo.col, coo.data
+    tr, tc = r // m, c // m
+    diag = np.zeros((T, m, m))
+    sub = np.zeros((max(T - 1, 0), m, m))
+    on = tr == tc
+    np.add.at(diag, (tr[on], r[on] % m, c[on] % m), v[on])
+    below = tr == tc + 1
+    np.add.at(sub, (tc[below], r[below] % m, c[below] % m), v[below])
+    if np.any(np.abs(tr - tc) > 1):
+        raise ValueError("matrix is not block-tridiagonal in the given block size")
+    return diag, sub
+
+
+def banded_selected_inverse(Lam: sp.spmatrix, block: int) -> np.ndarray:
+    """Within-frame blocks ``Σ_tt`` of ``Σ = Λ⁻¹`` for a symmetric positive-definite block-banded Λ.
+
+    Parameters
+    ----------
+    Lam: (T·n, T·n) sparse symmetric matrix, frame-major, uniform block size ``block`` = n, with
+        any frame bandwidth b (found from the sparsity).
+    block: n, scalars per frame.
+
+    Returns
+    -------
+    (T, n, n) array of the diagonal blocks of the inverse.
+
+    Method: b consecutive frames are grouped into one super-block of size m = b·n, which makes Λ
+    block-tridiagonal (frames b apart fall in adjacent super-blocks); the last group is padded with
+    identity rows, which are decoupled and leave the rest of the inverse unchanged. Then
+
+    * forward block Cholesky:  L_tt = chol(Λ_tt − C_t C_tᵀ),  C_{t+1} = Λ_{t+1,t} L_tt⁻ᵀ;
+    * backward Takahashi recursion with G_t = L_tt⁻¹ and H_t = G_tᵀ C_{t+1}ᵀ:
+      Σ_{T−1,T−1} = G_{T−1}ᵀ G_{T−1},   Σ_tt = G_tᵀ G_t + H_t Σ_{t+1,t+1} H_tᵀ.
+
+    BLAS runs single-threaded here (if ``threadpoolctl`` is installed): the blocks are small, and
+    OpenBLAS worker threads spinning on a shared, busy machine were measured to slow this loop
+    twenty-fold.
+
+    Raises :class:`SingularInformationError` if Λ is not positive definite.
+    """
+    n = int(block)
+    N_tot = Lam.shape[0]
+    if Lam.shape != (N_tot, N_tot) or N_tot % n:
+        raise ValueError(f"information matrix of shape {Lam.shape} is not square in blocks of {n}")
+    T_frames = N_tot // n
+    b = max(frame_bandwidth(Lam, n), 1)
+    m = b * n
+    T = -(-T_frames // b)
+    pad = T * m - N_tot
+    if pad:
+        Lam = sp.block_diag([Lam, sp.identity(pad)], format="csr")
+    with _single_threaded_blas():
+        return _block_tridiagonal_selected_inverse(*_tridiagonal_blocks(Lam, m, T), n, T_frames, b)
+
+
+def _block_tridiagonal_selected_inverse(diag: np.ndarray, sub: np.ndarray, n: int, T_frames: int,
+                                        b: int) -> np.ndarray:
+    T, m, _ = diag.shape
+    L = np.empty_like(diag)      # L[t, t]
+    C = np.empty_like(sub)       # C[t] = L[t+1, t]
+    for t in range(T):
+        S = diag[t] - C[t - 1] @ C[t - 1].T if t > 0 else diag[t]
+        try:
+            L[t] = np.linalg.cholesky(S)
+        except np.linalg.LinAlgError:
+            f0 = t * b
+            raise SingularInformationError(
+                f"the smoother's information matrix is not positive definite near frame {f0}: some "
+                "node position there is not constrained by any factor") from None
+        if t < T - 1:
+            # C[t] = sub[t] · L[t]^-T  ⇔  L[t] · C[t]ᵀ = sub[t]ᵀ
+            C[t] = scipy.linalg.solve_triangular(L[t], sub[t].T, lower=True, check_finite=False).T
+    G = np.linalg.inv(L)                                  # batched L_tt^-1 (triangular)
+    D = np.matmul(np.swapaxes(G, 1, 2), G)                # G_tᵀ G_t = (L_tt L_ttᵀ)^-1
+    H = np.matmul(np.swapaxes(G[:-1], 1, 2), np.swapaxes(C, 1, 2))
+    Sig = np.empty_like(diag)
+    Sig[T - 1] = D[T - 1]
+    for t in range(T - 2, -1, -1):
+        Sig[t] = D[t] + H[t] @ Sig[t + 1] @ H[t].T
+    # Split each super-block's diagonal into its b frame blocks and drop the padding.
+    frames = Sig.reshape(T, b, n, b, n)[:, np.arange(b), :, np.arange(b), :]  # (b, T, n, n)
+    out = np.swapaxes(frames, 0, 1).reshape(T * b, n, n)[:T_frames]
+    return 0.5 * (out + np.swapaxes(out, 1, 2))
+
+
+class _single_threaded_blas:
+    """Context manager limiting BLAS to one thread if threadpoolctl is available (else a no-op)."""
+
+    def __enter__(self):
+        try:
+            from threadpoolctl import threadpool_limits
+        except ImportError:  # optional: correctness does not depend on it
+            self._ctx = None
+            return self
+        self._ctx = threadpool_limits(limits=1, user_api="blas")
+        self._ctx.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        if self._ctx is not None:
+            self._ctx.__exit__(*exc)
+        return False
+
+
+def frame_marginals(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, n_nodes: int,
+                    n_frames: int, linear: gtsam.GaussianFactorGraph | None = None) -> np.ndarray:
+    """(F, 2N, 2N) joint covariance of all nodes at each frame (px²), from GTSAM's linearisation of
+    ``graph`` at ``values`` (pass ``linear`` if you already have it). Keys must sort frame-major with
+    N Point2 variables per frame (as :func:`rce_gtsam.smooth.variable_key` makes them)."""
+    n = 2 * int(n_nodes)
+    if int(values.dim()) != n * int(n_frames):
+        raise ValueError(f"values hold {values.dim()} scalars, expected 2·{n_nodes}·{n_frames}")
+    if linear is None:
+        linear = graph.linearize(values)
+    if len(linear.keys()) != n_nodes * n_frames:
+        raise SingularInformationError("some variables appear in no factor; their covariance is unbounded")
+    return banded_selected_inverse(information_matrix(linear, n * n_frames), n)
