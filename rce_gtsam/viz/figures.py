@@ -1,0 +1,383 @@
+"""Matplotlib figures of an analysis and of a diagnosis (Agg backend, PNG at 150 dpi).
+
+Each ``fig_*`` function returns a :class:`matplotlib.figure.Figure` (tests inspect them);
+:func:`write_figures` / :func:`write_diagnosis_figures` save them and close them.
+
+Figures of an analysis (file names):
+
+* ``smoothing.png`` — (a) filtered bending RMS per bend and (b) edge-length CV per edge against root
+  distance, raw (moving-average) vs smoothed tracks: what the factor-graph smoother removed;
+* ``motion.png`` — (a) root-relative node motion RMS (px) and (b) filtered bending RMS (deg) against root
+  distance, with moving-block bootstrap 95 % CIs, coloured by zone;
+* ``compliance.png`` — (a) kappa per edge with its bootstrap 95 % CI against root distance, zone colours,
+  kappa = 1 (the branch's geometric mean) dashed; (b) U_e = CI width / kappa per edge, root to tip;
+* ``excitation.png`` — the shared excitation z_t (deg) against frame;
+* ``residuals.png`` — residual heatmap observed - predicted (edges x frames, diverging colours centred
+  at 0) with per-frame and per-edge RMS marginals: where and when the rank-1 model fails;
+* ``bending_fit.png`` — observed (with +-2 sigma band) vs predicted bending of the worst-fitted edges.
+
+Figures of a diagnosis: ``heldout_error.png`` (held-out RMSE of the baseline and each candidate effect),
+``residuals_diagnosis.png`` (the diagnosis' residual heatmap) and ``effect_before_after.png`` when the
+diagnosis carries the extended model's prediction.
+"""
+
+from __future__ import annotations
+
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+from .style import (EXCITATION_COLOR, FIG_WIDTH_IN, RAW_COLOR, RC, RESIDUAL_CMAP, SMOOTHED_COLOR,
+                    ZONE_COLORS, robust_abs_max)
+
+
+@contextmanager
+def _style():
+    import matplotlib
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+    with plt.rc_context(RC):
+        yield plt
+
+
+def _zone_legend(ax, zones, loc="upper left", ncol=1):
+    from matplotlib.lines import Line2D
+    present = [z for z in ("proximal", "mid", "distal", "root") if z in set(map(str, zones))]
+    handles = [Line2D([], [], marker="o", ls="", color=ZONE_COLORS[z], label=z, markersize=4) for z in present]
+    if ncol > 1:
+        ax.legend(handles=handles, loc=loc, ncol=ncol, handletextpad=0.2, columnspacing=0.8)
+    else:
+        ax.legend(handles=handles, loc=loc, title="zone", title_fontsize=7)
+
+
+def _errorbars(ax, x, v, lo, hi, zones, marker="o"):
+    """One errorbar per entity (so a figure has exactly one container per entity)."""
+    for xi, vi, l, h, z in zip(x, v, lo, hi, zones):
+        if not np.isfinite(vi):
+            continue
+        yerr = None
+        if np.isfinite(l) and np.isfinite(h):
+            yerr = np.array([[max(vi - l, 0.0)], [max(h - vi, 0.0)]])
+        ax.errorbar([xi], [vi], yerr=yerr, fmt=marker, color=ZONE_COLORS.get(str(z), "#777777"), ms=3.5,
+                    elinewidth=0.9, capsize=1.5, zorder=3)
+
+
+# ------------------------------------------------------------------------------------------- analysis
+def fig_smoothing(result):
+    """Raw vs smoothed: bending RMS per bend and edge-length CV per edge against root distance."""
+    sm, geo, g = result.smoothing, result.geometry, result.graph
+    rd_b = np.array([geo.root_distance_px[b.child] for b in result.bending.bends])
+    rd_e = np.array([geo.root_distance_px[c] for _, c in g.edges])
+    d = sm.as_dict()
+    with _style() as plt:
+        fig, axes = plt.subplots(1, 2, figsize=(FIG_WIDTH_IN, 2.6), constrained_layout=True)
+        for ax, rd, raw, smo, ylabel, title, red in (
+                (axes[0], rd_b, sm.bend_rms_raw_deg, sm.bend_rms_smoothed_deg, "filtered bending RMS (deg)",
+                 "(a) Bending noise", d["bend_rms_reduction_pct"]),
+                (axes[1], rd_e, sm.edge_cv_raw, sm.edge_cv_smoothed, "edge-length CV (std / mean)",
+                 "(b) Segment-length variation", d["edge_length_cv_reduction_pct"])):
+            o = np.argsort(rd)
+            for y, lab, col, ls, mk in ((raw, "raw (moving average)", RAW_COLOR, "--", "o"),
+                                        (smo, "smoothed (factor graph)", SMOOTHED_COLOR, "-", "s")):
+                ok = np.isfinite(y[o])
+                ax.plot(rd[o][ok], y[o][ok], ls=ls, marker=mk, color=col, ms=3, label=lab)
+            ax.set_xlabel("root distance (px)")
+            ax.set_ylabel(ylabel)
+            ax.set_title(f"{title}: mean {red:.0f} % lower")
+            ax.set_ylim(bottom=0)
+        h, lab = axes[0].get_legend_handles_labels()
+        fig.legend(h, lab, loc="outside upper center", ncol=2)
+    return fig
+
+
+def fig_motion(result, seed: int = 0):
+    """Node motion RMS and bending RMS against root distance, with bootstrap CIs, by zone."""
+    from .metrics import bend_rms, node_motion
+    nm, br = node_motion(result, seed=seed), bend_rms(result, seed=seed)
+    with _style() as plt:
+        fig, axes = plt.subplots(1, 2, figsize=(FIG_WIDTH_IN, 2.6), constrained_layout=True)
+        _errorbars(axes[0], nm.root_distance_px, nm.value, nm.low, nm.high, nm.zone)
+        axes[0].set_ylabel("root-relative motion RMS (px)")
+        axes[0].set_title("(a) Node motion")
+        _errorbars(axes[1], br.root_distance_px, br.value, br.low, br.high, br.zone, marker="s")
+        axes[1].set_ylabel("filtered bending RMS |Δβ| (deg)")
+        axes[1].set_title("(b) Bending at each joint")
+        for ax in axes:
+            ax.set_xlabel("root distance (px)")
+            ax.set_ylim(bottom=0)
+        _zone_legend(axes[0], nm.zone)
+    return fig
+
+
+def fig_compliance(result):
+    """kappa with 95 % CI per edge against root distance (zone colours) and U_e bars root -> tip."""
+    resp, fit = result.response, result.fit
+    zones = np.array([result.geometry.zone[c] for _, c in resp.edges])
+    E = len(resp.edges)
+    lo = result.ci.low if result.ci is not None else np.full(E, np.nan)
+    hi = result.ci.high if result.ci is not None else np.full(E, np.nan)
+    U = result.uncertainty if result.uncertainty is not None else np.full(E, np.nan)
+    labels = [f"{j}→{c}" for j, c in resp.edges]
+    with _style() as plt:
+        fig, axes = plt.subplots(1, 2, figsize=(FIG_WIDTH_IN, 2.8), constrained_layout=True,
+                                 gridspec_kw={"width_ratios": [1.1, 1]})
+        ax = axes[0]
+        ax.axhline(1.0, color="0.4", ls="--", lw=0.8, zorder=1)
+        _errorbars(ax, resp.root_distance_px, fit.kappa, lo, hi, zones)
+        ax.set_yscale("log")
+        # Axis range: every CI, but at most a factor 10 beyond the kappa values themselves, so one
+        # unbounded interval cannot squash the rest (a CI running off the axis reads as "unbounded").
+        kpos = fit.kappa[fit.kappa > 0]
+        kmin, kmax = (kpos.min(), kpos.max()) if kpos.size else (1.0, 1.0)
+        top = min(np.nanmax(np.r_[hi[np.isfinite(hi)], kmax]) * 1.3, kmax * 10)
+        bot = max(np.nanmin(np.r_[lo[np.isfinite(lo) & (lo > 0)], kmin]) / 1.3, kmin / 10)
+        ax.set_ylim(bot, top * 4.0)  # head-room for the zone legend row
+        _log_ticks(ax)
+        ax.set_xlabel("root distance of the segment's distal node (px)")
+        ax.set_ylabel("relative compliance κ (log scale)")
+        ax.set_title("(a) Relative compliance, 95 % CI")
+        _zone_legend(ax, zones, loc="upper center", ncol=4)
+        ax = axes[1]
+        x = np.arange(E)
+        ax.bar(x, np.nan_to_num(U), color=[ZONE_COLORS.get(z, "#777") for z in zones], width=0.75)
+        if np.isfinite(U).any():
+            # clip the axis at 4x the median so one unstable edge does not flatten the others; label it
+            cap = 4.0 * float(np.nanmedian(U))
+            if np.nanmax(U) > 1.15 * cap:
+                ax.set_ylim(0, cap * 1.1)
+                for xi, u in zip(x, U):
+                    if np.isfinite(u) and u > cap * 1.1:
+                        ax.text(xi, cap * 1.08, f"{u:.1f}↑", ha="center", va="top", fontsize=6, rotation=90,
+                                color="white", fontweight="bold")
+        ax.set_xticks(x, labels, rotation=90, fontsize=6 if E > 15 else 7)
+        ax.set_xlim(-0.7, E - 0.3)
+        ax.set_xlabel("segment (parent→child), root → tip")
+        ax.set_ylabel("U_e = CI width / κ")
+        ax.set_title("(b) Relative uncertainty")
+        ax.grid(axis="x", visible=False)
+        if np.isfinite(U).any():
+            ax.axhline(float(np.nanmedian(U)), color="0.3", lw=0.7, ls=":")
+            ax.text(E - 0.5, float(np.nanmedian(U)), f" median {np.nanmedian(U):.2f}", ha="right", va="bottom",
+                    fontsize=6.5, color="0.2")
+    return fig
+
+
+def _log_ticks(ax):
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
+    lo, hi = ax.get_ylim()
+    cands = [t * 10.0 ** k for k in range(-3, 3) for t in (1, 2, 5)]
+    ticks = [t for t in cands if lo <= t <= hi]
+    ax.yaxis.set_major_locator(FixedLocator(ticks))
+    ax.yaxis.set_minor_locator(NullLocator())
+    ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+
+
+def fig_excitation(result, fps: float | None = None):
+    """The shared excitation z_t against frame (and seconds when ``fps`` is given)."""
+    resp, fit = result.response, result.fit
+    with _style() as plt:
+        fig, ax = plt.subplots(figsize=(FIG_WIDTH_IN, 2.0), constrained_layout=True)
+        ax.plot(resp.frames, fit.z, color=EXCITATION_COLOR, lw=0.8)
+        ax.axhline(0, color="0.5", lw=0.5)
+        ax.set_xlabel("frame")
+        ax.set_ylabel("excitation z (deg)")
+        rms = float(np.sqrt(np.mean(fit.z ** 2))) if fit.z.size else float("nan")
+        kind = "signed" if result.preset.compliance.response == "signed" else "|Δβ|-based, ≥ 0"
+        ax.set_title(f"Shared excitation z_t ({kind}); RMS {rms:.2f} deg")
+        ax.set_xlim(resp.frames.min(), resp.frames.max())
+        if fps:
+            sec = ax.secondary_xaxis("top", functions=(lambda f: f / fps, lambda s: s * fps))
+            sec.set_xlabel("time (s)")
+    return fig
+
+
+def fig_residual_heatmap(R: np.ndarray, frames: np.ndarray, labels: list[str], title: str):
+    """Heatmap of residuals R (E, T) in degrees, diverging colours centred at 0 with limits at the 99th
+    percentile of |R| (so one outlier does not wash the map out), plus per-frame and per-edge RMS."""
+    from matplotlib.colors import Normalize
+    E, T = R.shape
+    lim = robust_abs_max(R)
+    with np.errstate(invalid="ignore"):
+        import warnings
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            rms_t = np.sqrt(np.nanmean(R ** 2, axis=0))
+            rms_e = np.sqrt(np.nanmean(R ** 2, axis=1))
+    with _style() as plt:
+        fig = plt.figure(figsize=(FIG_WIDTH_IN, 1.2 + 0.16 * E + 0.9), constrained_layout=True)
+        gs = fig.add_gridspec(2, 3, width_ratios=[12, 1.6, 0.25], height_ratios=[1, max(2.0, 0.16 * E)])
+        ax = fig.add_subplot(gs[1, 0])
+        axt = fig.add_subplot(gs[0, 0], sharex=ax)
+        axe = fig.add_subplot(gs[1, 1], sharey=ax)
+        cax = fig.add_subplot(gs[1, 2])
+        f0, f1 = (frames[0], frames[-1]) if T else (0, 1)
+        step = (f1 - f0) / max(T - 1, 1)
+        cmap = plt.get_cmap(RESIDUAL_CMAP).copy()
+        cmap.set_bad("0.85")
+        im = ax.imshow(np.ma.masked_invalid(R), aspect="auto", cmap=cmap, norm=Normalize(-lim, lim),
+                       interpolation="nearest", extent=(f0 - step / 2, f1 + step / 2, E - 0.5, -0.5))
+        ax.set_yticks(np.arange(E), labels, fontsize=6 if E > 15 else 7)
+        ax.set_xlabel("frame")
+        ax.set_ylabel("segment (root → tip)")
+        ax.grid(False)
+        axt.plot(frames, rms_t, color="0.25", lw=0.6)
+        axt.set_ylabel("RMS\n(deg)")
+        axt.set_title(title)
+        axt.tick_params(labelbottom=False)
+        axt.set_ylim(bottom=0)
+        axe.barh(np.arange(E), np.nan_to_num(rms_e), color="0.45", height=0.75)
+        axe.set_xlabel("RMS (deg)")
+        axe.tick_params(labelleft=False)
+        axe.grid(axis="y", visible=False)
+        cb = fig.colorbar(im, cax=cax, extend="both")
+        cb.set_label("residual (deg)")
+    return fig
+
+
+def fig_residuals(result):
+    """Residual heatmap of the rank-1 fit of ``result``."""
+    resp = result.response
+    R = resp.Y - result.fit.predict()
+    return fig_residual_heatmap(R, resp.frames, [f"{j}→{c}" for j, c in resp.edges],
+                                "Residuals of the rank-1 model: observed − κ·z (grey: missing or outlier)")
+
+
+def fig_bending_fit(result, n: int = 3):
+    """Observed bending (with +-2 sigma band) against the rank-1 prediction for the worst-fitted edges."""
+    from .rerun_log import worst_edges
+    from .scene import AnalysisView
+    view = AnalysisView.from_result(result)
+    worst = worst_edges(view, n)
+    with _style() as plt:
+        fig, axes = plt.subplots(len(worst), 1, figsize=(FIG_WIDTH_IN, 1.5 * len(worst) + 0.4), sharex=True,
+                                 constrained_layout=True, squeeze=False)
+        for ax, e in zip(axes[:, 0], worst):
+            i = view.edges.index(e)
+            y, p = view.Y[i], view.pred[i]
+            if view.variance is not None:
+                s2 = 2 * np.sqrt(view.variance[i])
+                ax.fill_between(view.frames, y - s2, y + s2, color=SMOOTHED_COLOR, alpha=0.25, lw=0,
+                                label="observed ± 2σ")
+            ax.plot(view.frames, y, color=SMOOTHED_COLOR, lw=0.7, label="observed")
+            ax.plot(view.frames, p, color="0.1", lw=0.8, label="predicted κ·z")
+            r = (y - p)[np.isfinite(y - p)]
+            ax.set_title(f"segment {e[0]}→{e[1]} ({view.zone[i]}): κ = {view.kappa[i]:.2f}, "
+                         f"residual RMS {np.sqrt(np.mean(r ** 2)):.2f} deg", fontsize=8)
+            ax.set_ylabel("bending (deg)")
+        h, lab = axes[0, 0].get_legend_handles_labels()
+        fig.legend(h, lab, loc="outside upper right", ncol=3)
+        axes[-1, 0].set_xlabel("frame")
+        axes[-1, 0].set_xlim(view.frames.min(), view.frames.max())
+    return fig
+
+
+def _save(fig, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def write_figures(result, out_dir: str | Path, diagnosis=None, fps: float | None = None) -> dict[str, Path]:
+    """Write the analysis figures (and the diagnosis figures when ``diagnosis`` is given) into ``out_dir``.
+
+    Usable as an ``extra_writer`` of :meth:`AnalysisResult.write`. Returns {file name: path}."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    makers = {"smoothing.png": lambda: fig_smoothing(result), "motion.png": lambda: fig_motion(result),
+              "compliance.png": lambda: fig_compliance(result),
+              "excitation.png": lambda: fig_excitation(result, fps=fps),
+              "residuals.png": lambda: fig_residuals(result), "bending_fit.png": lambda: fig_bending_fit(result)}
+    written = {name: _save(make(), out / name) for name, make in makers.items()}
+    if diagnosis is not None:
+        written.update(write_diagnosis_figures(diagnosis, out, result=result))
+    return written
+
+
+# ------------------------------------------------------------------------------------------ diagnosis
+def _get(obj, name, default=None):
+    if isinstance(obj, dict):
+        return obj.get(name, default)
+    return getattr(obj, name, default)
+
+
+def fig_heldout(diagnosis):
+    """Held-out RMSE of the baseline and of the model extended by each candidate effect (best first),
+    with the relative change; the verdict is highlighted."""
+    base = _get(diagnosis, "baseline", {}) or {}
+    b = _get(base, "heldout_rmse")
+    cands = list(_get(diagnosis, "candidates", []) or [])
+    verdict = _get(diagnosis, "verdict")
+    names = ["rank-1\nbaseline"] + [f"+ {_get(c, 'effect')}" for c in cands]
+    vals = np.array([b] + [_get(c, "heldout_rmse") for c in cands], dtype=float)
+    colors = ["0.55"] + ["#d95f02" if _get(c, "effect") == verdict else "#7fa7c9" for c in cands]
+    with _style() as plt:
+        fig, ax = plt.subplots(figsize=(FIG_WIDTH_IN * 0.62, 2.6), constrained_layout=True)
+        x = np.arange(len(vals))
+        ax.bar(x, np.nan_to_num(vals), color=colors, width=0.7)
+        for xi, v in zip(x[1:], vals[1:]):
+            if np.isfinite(v) and b:
+                ax.text(xi, v, f"{100 * (v / b - 1):+.0f} %", ha="center", va="bottom", fontsize=6.5)
+        if np.isfinite(b):
+            ax.axhline(b, color="0.3", lw=0.7, ls="--")
+        ax.set_xticks(x, names, fontsize=7)
+        ax.set_ylabel("held-out RMSE (deg)")
+        ax.grid(axis="x", visible=False)
+        lo = np.nanmin(vals) if np.isfinite(vals).any() else 0
+        ax.set_ylim(max(0.0, lo * 0.8), np.nanmax(vals) * 1.08 if np.isfinite(vals).any() else 1)
+        ax.set_title(f"Held-out error per candidate effect — verdict: {verdict or 'none'}")
+    return fig
+
+
+def fig_before_after(Y, pred_before, pred_after, frames, labels, effect: str, n: int = 3):
+    """Observed vs rank-1 vs extended-model prediction on the edges the effect improves most."""
+    gain = np.nanmean((Y - pred_before) ** 2, axis=1) - np.nanmean((Y - pred_after) ** 2, axis=1)
+    order = np.argsort(-np.nan_to_num(gain, nan=-np.inf))[:n]
+    with _style() as plt:
+        fig, axes = plt.subplots(len(order), 1, figsize=(FIG_WIDTH_IN, 1.5 * len(order) + 0.4), sharex=True,
+                                 constrained_layout=True, squeeze=False)
+        for ax, i in zip(axes[:, 0], order):
+            ax.plot(frames, Y[i], color=SMOOTHED_COLOR, lw=0.7, label="observed")
+            ax.plot(frames, pred_before[i], color="0.35", lw=0.8, ls="--", label="rank-1 κ·z")
+            ax.plot(frames, pred_after[i], color="#d95f02", lw=0.9, label=f"with {effect}")
+            rb = np.sqrt(np.nanmean((Y[i] - pred_before[i]) ** 2))
+            ra = np.sqrt(np.nanmean((Y[i] - pred_after[i]) ** 2))
+            ax.set_title(f"segment {labels[i]}: residual RMS {rb:.2f} → {ra:.2f} deg", fontsize=8)
+            ax.set_ylabel("bending (deg)")
+        h, lab = axes[0, 0].get_legend_handles_labels()
+        fig.legend(h, lab, loc="outside upper right", ncol=3)
+        axes[-1, 0].set_xlabel("frame")
+    return fig
+
+
+def write_diagnosis_figures(diagnosis, out_dir: str | Path, result=None) -> dict[str, Path]:
+    """Write ``heldout_error.png`` and, when the diagnosis carries them, ``residuals_diagnosis.png``
+    (``residuals`` (E, T) degrees) and ``effect_before_after.png`` (``after_prediction`` (E, T), with
+    ``result`` for the observed data and the rank-1 prediction)."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = {"heldout_error.png": _save(fig_heldout(diagnosis), out / "heldout_error.png")}
+    R = _get(diagnosis, "residuals")
+    frames = _get(diagnosis, "frames")
+    edges = _get(diagnosis, "edges")
+    if R is not None:
+        R = np.asarray(R, dtype=float)
+        if frames is None:
+            frames = result.response.frames if result is not None and result.response.Y.shape == R.shape \
+                else np.arange(R.shape[1])
+        if edges is None:
+            edges = result.response.edges if result is not None and len(result.response.edges) == R.shape[0] \
+                else [(i, i + 1) for i in range(R.shape[0])]
+        labels = [f"{e[0]}→{e[1]}" if isinstance(e, (tuple, list)) else str(e) for e in edges]
+        written["residuals_diagnosis.png"] = _save(
+            fig_residual_heatmap(R, np.asarray(frames), labels, "Residuals of the diagnosed baseline model (deg)"),
+            out / "residuals_diagnosis.png")
+    after = _get(diagnosis, "after_prediction")
+    if after is not None and result is not None and np.shape(after) == result.response.Y.shape:
+        resp = result.response
+        written["effect_before_after.png"] = _save(
+            fig_before_after(resp.Y, result.fit.predict(), np.asarray(after, float), resp.frames,
+                             [f"{j}→{c}" for j, c in resp.edges], _get(diagnosis, "verdict") or "effect"),
+            out / "effect_before_after.png")
+    return written

@@ -1,0 +1,114 @@
+"""kappa and U_e drawn on the first video frame (or on a neutral background when there is no video).
+
+Each segment of the first-frame skeleton (smoothed positions at frame 0, pixels) is drawn as a thick
+line coloured by its value: kappa (blue = stiff, red = compliant; log colour scale, since kappa is a
+ratio with geometric mean 1) or U_e = CI width / kappa (green = certain, red = uncertain). The root
+edge has no bend, hence no value, and is drawn grey. The view is cropped to the skeleton plus a margin.
+
+Files: ``kappa_overlay.png`` and ``uncertainty_overlay.png`` (PNG, 150 dpi).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .figures import _save, _style
+from .style import KAPPA_CMAP, MISSING_COLOR, UNCERTAINTY_CMAP
+
+BACKGROUND_RGB = (236, 236, 232)  # neutral light grey when there is no video frame
+MARGIN_PX = 40  # crop margin around the skeleton, pixels of the original image
+
+
+def first_frame_skeleton(result) -> tuple[np.ndarray, list[tuple[int, int]], np.ndarray]:
+    """(N, 2) smoothed node positions at frame 0, the graph edges, and each node's row."""
+    xy = result.smoothed.tracks.xy[:, 0]
+    return xy, list(result.graph.edges), result.tracks.node_ids
+
+
+def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.ndarray | None = None,
+                log: bool = False, title: str = ""):
+    """Draw the first-frame skeleton with each edge coloured by ``values[edge]`` (NaN/missing = grey)."""
+    from matplotlib.collections import LineCollection
+    from matplotlib.colors import LogNorm, Normalize
+    xy, edges, ids = first_frame_skeleton(result)
+    row = {int(n): i for i, n in enumerate(ids)}
+    segs = np.array([[xy[row[p]], xy[row[c]]] for p, c in edges])
+    v = np.array([values.get(e, np.nan) for e in edges], dtype=float)
+    ok = np.isfinite(v) & ((v > 0) if log else True)
+    if first_frame is not None:
+        H, W = first_frame.shape[:2]
+        bg = first_frame
+    else:
+        W = int(max(640, np.nanmax(xy[:, 0]) + MARGIN_PX))
+        H = int(max(480, np.nanmax(xy[:, 1]) + MARGIN_PX))
+        bg = np.broadcast_to(np.array(BACKGROUND_RGB, np.uint8), (H, W, 3))
+    x0, x1 = max(0, np.nanmin(xy[:, 0]) - MARGIN_PX), min(W, np.nanmax(xy[:, 0]) + MARGIN_PX)
+    y0, y1 = max(0, np.nanmin(xy[:, 1]) - MARGIN_PX), min(H, np.nanmax(xy[:, 1]) + MARGIN_PX)
+    if ok.any():
+        lo, hi = float(v[ok].min()), float(v[ok].max())
+        if log:
+            m = max(hi, 1.0 / lo)  # symmetric around kappa = 1 on a log scale
+            norm = LogNorm(1.0 / m, m) if m > 1 else LogNorm(0.5, 2.0)
+        else:
+            # cap the scale at 4x the median so one unstable edge does not wash out the others
+            cap = 4.0 * float(np.median(v[ok]))
+            norm = Normalize(0.0, min(hi, cap) if min(hi, cap) > 0 else 1.0)
+    else:
+        norm = Normalize(0, 1)
+    with _style() as plt:
+        aspect = (x1 - x0) / max(y1 - y0, 1)
+        h = 4.2
+        fig, ax = plt.subplots(figsize=(min(7.16, h * aspect + 1.4), h), constrained_layout=True)
+        ax.imshow(bg, extent=(-0.5, W - 0.5, H - 0.5, -0.5), interpolation="bilinear")
+        ax.imshow(np.full((H, W, 4), [1, 1, 1, 0.25]), extent=(-0.5, W - 0.5, H - 0.5, -0.5))  # fade the photo
+        # a dark casing under every segment keeps pale mid-scale colours visible on a light background
+        ax.add_collection(LineCollection(segs, colors="0.15", linewidths=8.5, capstyle="round", zorder=1.5))
+        ax.add_collection(LineCollection(segs[~ok], colors=MISSING_COLOR, linewidths=6, capstyle="round",
+                                         zorder=2))
+        lc = LineCollection(segs[ok], cmap=cmap, norm=norm, linewidths=6, capstyle="round", zorder=3)
+        lc.set_array(v[ok])
+        ax.add_collection(lc)
+        ax.scatter(xy[:, 0], xy[:, 1], s=9, c="white", edgecolors="k", linewidths=0.5, zorder=5)
+        r = row[result.graph.root]
+        ax.scatter([xy[r, 0]], [xy[r, 1]], s=40, facecolors="none", edgecolors="#1a9850", linewidths=1.5, zorder=6)
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y1, y0)
+        ax.set_aspect("equal")
+        ax.grid(False)
+        ax.set_xlabel("x (px)")
+        ax.set_ylabel("y (px)")
+        ax.set_title(title)
+        extend = "max" if (not log and ok.any() and v[ok].max() > norm.vmax) else "neither"
+        cb = fig.colorbar(lc, ax=ax, shrink=0.85, pad=0.02, extend=extend)
+        cb.set_label(label)
+        if log:
+            from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
+            ticks = [t * 10.0 ** k for k in range(-3, 3) for t in (1, 2, 5) if norm.vmin <= t * 10.0 ** k <= norm.vmax]
+            cb.ax.yaxis.set_major_locator(FixedLocator(ticks))
+            cb.ax.yaxis.set_minor_locator(NullLocator())
+            cb.ax.yaxis.set_major_formatter(FuncFormatter(lambda t, _: f"{t:g}"))
+    return fig
+
+
+def write_overlays(result, out_dir: str | Path, first_frame: np.ndarray | None = None) -> dict[str, Path]:
+    """Write ``kappa_overlay.png`` and ``uncertainty_overlay.png`` into ``out_dir``.
+
+    ``first_frame``: (H, W, 3) uint8 RGB first video frame, or None for a neutral background.
+    Usable as an ``extra_writer`` through ``lambda r, d: write_overlays(r, d, frame)``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    kappa = result.kappa
+    U = result.uncertainty
+    unc = {} if U is None else {e: float(u) for e, u in zip(result.response.edges, U)}
+    where = "first video frame" if first_frame is not None else "first-frame skeleton"
+    written = {
+        "kappa_overlay.png": _save(fig_overlay(result, kappa, "relative compliance κ (log scale)", KAPPA_CMAP,
+                                               first_frame, log=True, title=f"κ per segment on the {where}"),
+                                   out / "kappa_overlay.png"),
+        "uncertainty_overlay.png": _save(fig_overlay(result, unc, "U_e = CI width / κ", UNCERTAINTY_CMAP,
+                                                     first_frame, title=f"Uncertainty U_e on the {where}"),
+                                         out / "uncertainty_overlay.png"),
+    }
+    return written

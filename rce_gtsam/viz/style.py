@@ -1,0 +1,65 @@
+"""Shared look: the paper's colours, colour maps and matplotlib settings.
+
+Zone colours (proximal blue, mid green, distal red), raw/smoothed and excitation colours are those of the
+published figures (reference pipeline doc section 5), so figures can be compared side by side.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+ZONE_COLORS = {"proximal": "#2166ac", "mid": "#4dac26", "distal": "#d7191c", "root": "#777777"}
+RAW_COLOR = "#e66101"
+SMOOTHED_COLOR = "#4393c3"
+EXCITATION_COLOR = "#762a83"
+PREDICTED_COLOR = "#f0f0f0"
+MISSING_COLOR = "#b4b4b4"
+
+#: Colour map of kappa (low = stiff = blue, high = compliant = red), as the published overlays.
+KAPPA_CMAP = "RdYlBu_r"
+#: Colour map of U_e (low = certain = green, high = uncertain = red), as the published overlays.
+UNCERTAINTY_CMAP = "RdYlGn_r"
+#: Diverging colour map of residuals, centred at 0.
+RESIDUAL_CMAP = "RdBu_r"
+
+#: matplotlib rcParams for every figure (two-column paper width, 8-pt text, no top/right spines).
+RC = {
+    "font.size": 8, "axes.titlesize": 9, "axes.labelsize": 8, "xtick.labelsize": 7, "ytick.labelsize": 7,
+    "legend.fontsize": 7, "legend.frameon": False, "axes.spines.top": False, "axes.spines.right": False,
+    "axes.titleweight": "bold", "axes.titlelocation": "left", "figure.dpi": 100, "savefig.dpi": 150,
+    "savefig.bbox": "tight", "savefig.pad_inches": 0.05, "lines.linewidth": 1.0, "axes.grid": True,
+    "grid.alpha": 0.25, "grid.linewidth": 0.5,
+}
+FIG_WIDTH_IN = 7.16  # two-column figure width in inches
+
+
+def hex_to_rgb(color: str) -> tuple[int, int, int]:
+    """'#rrggbb' -> (r, g, b) 0..255."""
+    c = color.lstrip("#")
+    return tuple(int(c[i:i + 2], 16) for i in (0, 2, 4))
+
+
+def zone_rgb(zones) -> np.ndarray:
+    """(n, 3) uint8 colours of zone names."""
+    return np.array([hex_to_rgb(ZONE_COLORS.get(str(z), "#777777")) for z in zones], dtype=np.uint8).reshape(-1, 3)
+
+
+def cmap_rgb(values: np.ndarray, cmap: str, vmin: float, vmax: float, nan_rgb=(180, 180, 180)) -> np.ndarray:
+    """(..., 3) uint8 colours of ``values`` through a matplotlib colour map on [vmin, vmax]; NaN -> grey."""
+    from matplotlib import colormaps
+    v = np.asarray(values, dtype=float)
+    span = vmax - vmin if vmax > vmin else 1.0
+    s = np.clip((v - vmin) / span, 0.0, 1.0)
+    rgb = (colormaps[cmap](np.nan_to_num(s))[..., :3] * 255).round().astype(np.uint8)
+    rgb[~np.isfinite(v)] = nan_rgb
+    return rgb
+
+
+def robust_abs_max(values: np.ndarray, q: float = 99.0) -> float:
+    """q-th percentile of |values| over finite entries (colour limit that one outlier cannot stretch)."""
+    v = np.abs(np.asarray(values, dtype=float))
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return 1.0
+    m = float(np.percentile(v, q))
+    return m if m > 0 else float(v.max() or 1.0)
