@@ -20,6 +20,7 @@ COMMAND_MODULES = (
     "rce_gtsam.commands.track",
     "rce_gtsam.commands.simulate",
     "rce_gtsam.commands.run",
+    "rce_gtsam.commands.view",
 )
 
 
