@@ -93,7 +93,7 @@ class NoiseConfig:
     sigma_across_px: float = 0.25
     along_ratio: float = 3.0
     tip_factor: float = 1.8
-    drift_px: float = 0.4
+    drift_px: float = 0.2
     drift_time_s: float = 2.0
     gap_rate: float = 5.0
     gap_median_frames: float = 2.0
