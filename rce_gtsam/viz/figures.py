@@ -213,8 +213,7 @@ def fig_residual_heatmap(R: np.ndarray, frames: np.ndarray, labels: list[str], t
         cax = fig.add_subplot(gs[1, 2])
         f0, f1 = (frames[0], frames[-1]) if T else (0, 1)
         step = (f1 - f0) / max(T - 1, 1)
-        cmap = plt.get_cmap(RESIDUAL_CMAP).copy()
-        cmap.set_bad("0.85")
+        cmap = plt.get_cmap(RESIDUAL_CMAP).with_extremes(bad="0.85")
         im = ax.imshow(np.ma.masked_invalid(R), aspect="auto", cmap=cmap, norm=Normalize(-lim, lim),
                        interpolation="nearest", extent=(f0 - step / 2, f1 + step / 2, E - 0.5, -0.5))
         ax.set_yticks(np.arange(E), labels, fontsize=6 if E > 15 else 7)
@@ -274,7 +273,8 @@ def fig_bending_fit(result, n: int = 3):
 
 def _save(fig, path: Path) -> Path:
     import matplotlib.pyplot as plt
-    fig.savefig(path)
+    # savefig runs outside the rc_context the figure was built in, so pass the output settings here
+    fig.savefig(path, dpi=RC["savefig.dpi"], bbox_inches="tight", pad_inches=RC["savefig.pad_inches"])
     plt.close(fig)
     return path
 
