@@ -6,6 +6,7 @@ Imported by tests/test_track_*.py (not a conftest: the lead owns tests/conftest.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -292,6 +293,8 @@ def record_realsense(path: Path, frames, fps: int = 30) -> Path:
         fr.frame_number = i
         fr.profile = prof.as_video_stream_profile()
         sensor.on_video_frame(fr)
+        time.sleep(0.01)  # the recorder writes on its own thread; do not outrun it
+    time.sleep(0.2)
     sensor.stop()
     sensor.close()
     rec.pause()

@@ -29,7 +29,7 @@ never recovers after an occlusion. This tracker uses frame-to-frame pyramidal LK
 
 Constants and why they are what they are (none is tuned to a video):
 
-* patch radius h: ``clip(0.75 * median segment length, 6, 15)`` px -- large enough to hold texture (LK
+* patch radius h: ``clip(0.45 * median segment length, 6, 15)`` px -- large enough to hold texture (LK
   windows below ~13 px are noise-dominated), small enough that the patch covers little more than the
   node's own segment neighbourhood (which moves rigidly with it). Without a graph: 10 px (21x21, a
   common LK window).
@@ -66,7 +66,7 @@ from .sources import FrameSource
 class LKConfig:
     """Settings of :class:`LKTracker` (pixels unless stated; see the module docstring for the reasons).
 
-    patch_radius_px: template half-size h; None = ``clip(0.75 * median segment length, 6, 15)``
+    patch_radius_px: template half-size h; None = ``clip(0.45 * median segment length, 6, 15)``
         (10 without a graph).
     pyr_levels: pyramid levels of the frame-to-frame prediction (motion up to ~h * 2**levels px/frame).
     min_ncc: minimum normalised cross-correlation of the first-frame template at the match.
@@ -75,6 +75,10 @@ class LKConfig:
     max_stretch, min_length_fraction, length_tol_px: segment-length plausibility (needs a graph).
     sigma_floor_px: smallest reported 1-sigma (interpolation/quantisation limit).
     rotate_templates: rotate the first-frame template by the branch's rotation (needs a graph).
+    mask_to_branch: weight template pixels by a band around the branch (the graph's segments in frame 0),
+        so the static background inside a patch does not pin the match (needs a graph).
+    band_margin_px: the band extends this far beyond the measured branch half-width, so the branch's
+        own edges (the strongest across-branch gradients) are inside it.
     """
 
     patch_radius_px: int | None = None
@@ -87,6 +91,8 @@ class LKConfig:
     length_tol_px: float = 1.5
     sigma_floor_px: float = 0.05
     rotate_templates: bool = True
+    mask_to_branch: bool = True
+    band_margin_px: float = 1.5
 
 
 _LK_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01)
@@ -100,6 +106,49 @@ def _parabola_peak(m: np.ndarray, u: int, v: int) -> tuple[float, float]:
     du = fit(m[v, u - 1], m[v, u], m[v, u + 1]) if 0 < u < m.shape[1] - 1 else 0.0
     dv = fit(m[v - 1, u], m[v, u], m[v + 1, u]) if 0 < v < m.shape[0] - 1 else 0.0
     return du, dv
+
+
+def _weighted_lk(tmpl, wts, img, start, iters: int = 20, eps: float = 0.01):
+    """Weighted inverse-compositional Lucas-Kanade (translation, gain/bias-normalised).
+
+    Finds the position (x, y) in ``img`` (pixel centres at integers) whose neighbourhood best matches
+    ``tmpl`` (odd-sized, centred) under per-pixel weights ``wts``, starting at ``start``. Returns
+    ``(position, standard_error_px)`` -- the LK least-squares standard error
+    sqrt(weighted residual variance / lambda_min(weighted structure tensor)) -- or None if ill-posed.
+    """
+    t = tmpl.astype(np.float32)
+    w = wts.astype(np.float32)
+    wsum = float(w.sum())
+    mu_t = float((w * t).sum()) / wsum
+    t0 = t - mu_t
+    sd_t = math.sqrt(float((w * t0 * t0).sum()) / wsum) + 1e-6
+    gx = cv2.Sobel(t, cv2.CV_32F, 1, 0, ksize=3) / 8.0
+    gy = cv2.Sobel(t, cv2.CV_32F, 0, 1, ksize=3) / 8.0
+    hxx, hyy, hxy = float((w * gx * gx).sum()), float((w * gy * gy).sum()), float((w * gx * gy).sum())
+    det = hxx * hyy - hxy * hxy
+    if det <= 1e-9:
+        return None
+    pos = np.asarray(start, float).copy()
+    size = (t.shape[1], t.shape[0])
+    e = None
+    for _ in range(iters):
+        patch = cv2.getRectSubPix(img, size, (float(pos[0]), float(pos[1])))
+        mu_p = float((w * patch).sum()) / wsum
+        p0 = patch - mu_p
+        sd_p = math.sqrt(float((w * p0 * p0).sum()) / wsum) + 1e-6
+        e = p0 * (sd_t / sd_p) - t0  # residual after gain/bias compensation
+        bx, by = float((w * gx * e).sum()), float((w * gy * e).sum())
+        dx = (hyy * bx - hxy * by) / det
+        dy = (hxx * by - hxy * bx) / det
+        pos -= (dx, dy)
+        if not np.isfinite(pos).all() or abs(pos[0] - start[0]) > t.shape[1] or abs(pos[1] - start[1]) > t.shape[0]:
+            return None
+        if dx * dx + dy * dy < eps * eps:
+            break
+    lam_min = 0.5 * (hxx + hyy - math.sqrt((hxx - hyy) ** 2 + 4 * hxy * hxy))
+    res_var = float((w * e * e).sum()) / wsum
+    s_lk = math.sqrt(res_var / max(lam_min, 1e-9))
+    return pos, s_lk
 
 
 class LKTracker:
@@ -128,7 +177,7 @@ class LKTracker:
         if cfg.patch_radius_px is not None:
             h = int(cfg.patch_radius_px)
         elif lengths.size:
-            h = int(np.clip(round(0.75 * float(np.median(lengths))), 6, 15))
+            h = int(np.clip(round(0.45 * float(np.median(lengths))), 6, 15))
         else:
             h = 10
         if h < 2:
@@ -149,7 +198,55 @@ class LKTracker:
                     j = k if np.hypot(*(q[k] - q[i])) > np.hypot(*(q[j] - q[i])) else j
                 self.partner[i] = j if j != i else -1
 
-    def _rotation(self, i: int, est: np.ndarray, vis: np.ndarray, q0: np.ndarray, last: np.ndarray) -> float:
+    def _branch_band(self, rgb: np.ndarray, q: np.ndarray, graph: BranchGraph | None) -> np.ndarray | None:
+        """Frame-0 weight image: 1 on a band around the graph's segments, 0 elsewhere (None: no graph).
+
+        The branch half-width is measured, not assumed: across the middle of every segment, the colour
+        profile is compared with the colour on the axis; the half-width is where the difference first
+        exceeds half its maximum (the edge), median over segments, clipped to [1.5 px, h].
+        """
+        if graph is None or not self.config.mask_to_branch:
+            return None
+        h = self.h
+        img = rgb.astype(np.float32)
+        widths = []
+        offs = np.arange(-h, h + 1, dtype=np.float32)
+        for p, c in graph.edges:
+            a, b = q[p], q[c]
+            d = b - a
+            ln = float(np.hypot(*d))
+            if ln < 1e-6:
+                continue
+            nrm = np.array([-d[1], d[0]]) / ln
+            mid = 0.5 * (a + b)
+            mx = (mid[0] + offs * nrm[0]).reshape(1, -1).astype(np.float32)
+            my = (mid[1] + offs * nrm[1]).reshape(1, -1).astype(np.float32)
+            prof = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[0]
+            centre = prof[h - 1:h + 2].mean(axis=0)
+            dist = np.linalg.norm(prof - centre, axis=1)
+            if dist.max() < 1e-3:
+                continue
+            half = 0.5 * dist.max()
+            sides = []
+            for seq in (dist[h:], dist[h::-1]):
+                hit = np.flatnonzero(seq > half)
+                sides.append(float(hit[0]) if hit.size else float(h))
+            widths.append(float(np.mean(sides)))
+        hw = float(np.clip(np.median(widths) if widths else h, 1.5, h)) + self.config.band_margin_px
+        self.branch_halfwidth_px = hw
+        band = np.zeros(img.shape[:2], np.uint8)
+        for p, c in graph.edges:
+            a, b = (np.round(q[p] * 16).astype(int), np.round(q[c] * 16).astype(int))
+            cv2.line(band, tuple(map(int, a)), tuple(map(int, b)), 255, int(round(2 * hw)) + 1, cv2.LINE_AA, shift=4)
+        return band.astype(np.float32) / 255.0
+
+    def _rotation(self, i: int, est: np.ndarray, vis: np.ndarray, q0: np.ndarray, last: np.ndarray,
+                  now: np.ndarray, done: np.ndarray) -> float:
+        """Rotation (radians, image frame) of node i's neighbourhood since frame 0.
+
+        Measured from node i and its baseline partner when both are visible; otherwise borrowed from the
+        parent's rotation in this frame (a lost node turns with the branch it hangs on), else the last value.
+        """
         j = self.partner[i]
         if j < 0:
             return 0.0
@@ -157,6 +254,10 @@ class LKTracker:
             a = est[j] - est[i]
             b = q0[j] - q0[i]
             last[i] = math.atan2(a[1], a[0]) - math.atan2(b[1], b[0])
+            return float(last[i])
+        p = self.parent[i]
+        if p >= 0 and done[p]:
+            return float(now[p])
         return float(last[i])
 
     # -- measurement against frame 0 ------------------------------------------------------------
@@ -170,40 +271,31 @@ class LKTracker:
         prev = cv2.warpAffine(gray0, m, (k, k), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1])))
         tmpl = prev[r:r + 2 * h + 1, r:r + 2 * h + 1]
-        if float(tmpl.std()) < 1e-3:
+        wts = None
+        if self._band is not None:
+            band = cv2.warpAffine(self._band, m, (k, k), flags=cv2.INTER_LINEAR, borderValue=0)
+            wts = band[r:r + 2 * h + 1, r:r + 2 * h + 1]
+            if float(wts.sum()) < 4 * (2 * h + 1):  # fewer pixels than a 2-px-wide strip: use the full patch
+                wts = None
+        if wts is None:
+            wts = np.ones_like(tmpl)
+        wsum = float(wts.sum())
+        mu_t = float((wts * tmpl).sum()) / wsum
+        if float((wts * (tmpl - mu_t) ** 2).sum()) / wsum < 1e-3:
             return None  # textureless template: nothing to match
-        res = cv2.matchTemplate(cur, tmpl, cv2.TM_CCOEFF_NORMED)
+        res = cv2.matchTemplate(cur, tmpl, cv2.TM_CCOEFF_NORMED, mask=wts)
+        res = np.nan_to_num(res, nan=-1.0, posinf=-1.0, neginf=-1.0)
         _, score, _, (u, v) = cv2.minMaxLoc(res)
         du, dv = _parabola_peak(res, u, v)
-        d = np.array([u - r + du, v - r + dv])
-        # Gain/bias compensation so LK (which assumes brightness constancy) sees the template's levels.
-        mu_p, sd_p = float(prev.mean()), float(prev.std()) + 1e-6
-        mu_c, sd_c = float(cur.mean()), float(cur.std()) + 1e-6
-        cur_n = np.clip((cur - mu_c) * (sd_p / sd_c) + mu_p, 0, 255)
-        p8, c8 = prev.astype(np.uint8), cur_n.astype(np.uint8)
-        start = np.array([[c, c]], np.float32)
-        guess = (start + d).astype(np.float32)
-        win = (2 * h + 1, 2 * h + 1)
-        nxt, st, _ = cv2.calcOpticalFlowPyrLK(p8, c8, start, guess.copy(), winSize=win, maxLevel=0,
-                                              criteria=_LK_CRITERIA, flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
-        ok = bool(st[0, 0]) and np.all(np.isfinite(nxt)) and float(np.hypot(*(nxt[0] - guess[0]))) < 2.0
-        if ok:
-            back, st2, _ = cv2.calcOpticalFlowPyrLK(c8, p8, nxt, start.copy(), winSize=win, maxLevel=0,
-                                                    criteria=_LK_CRITERIA, flags=cv2.OPTFLOW_USE_INITIAL_FLOW)
-            ok = bool(st2[0, 0])
-            fb = float(np.hypot(*(back[0] - start[0]))) if ok else math.inf
-        if not ok:
+        guess = np.array([c + u - r + du, c + v - r + dv])
+        fwd = _weighted_lk(tmpl, wts, cur, guess)
+        if fwd is None or float(np.hypot(*(fwd[0] - guess))) > 2.0:
             return None
-        loc = nxt[0].astype(float)
-        # LK least-squares standard error from the template's structure tensor and the match residual.
-        t = tmpl.astype(np.float32)
-        gx = cv2.Sobel(t, cv2.CV_32F, 1, 0, ksize=3) / 8.0
-        gy = cv2.Sobel(t, cv2.CV_32F, 0, 1, ksize=3) / 8.0
-        gxx, gyy, gxy = float((gx * gx).sum()), float((gy * gy).sum()), float((gx * gy).sum())
-        lam_min = 0.5 * (gxx + gyy - math.sqrt((gxx - gyy) ** 2 + 4 * gxy * gxy))
-        patch = cv2.getRectSubPix(cur_n.astype(np.float32), win, (float(loc[0]), float(loc[1])))
-        res_var = float(((patch - t) ** 2).mean())
-        s_lk = math.sqrt(res_var / max(lam_min, 1e-9))
+        loc, s_lk = fwd
+        # backward: the matched patch (same weights) searched for in the frame-0 crop
+        back_t = cv2.getRectSubPix(cur, tmpl.shape[::-1], (float(loc[0]), float(loc[1])))
+        bwd = _weighted_lk(back_t, wts, prev, np.array([c, c]))
+        fb = math.inf if bwd is None else float(np.hypot(*(bwd[0] - c)))
         xy = np.asarray(q, float) + (loc - c)
         return xy, float(score), fb, s_lk
 
@@ -242,6 +334,8 @@ class LKTracker:
             gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
             if gray0 is None:
                 gray0 = gray
+                self.branch_halfwidth_px = None
+                self._band = self._branch_band(img, q0, graph)
                 hh, ww = gray.shape
                 out = (q0[:, 0] < -0.5) | (q0[:, 0] > ww - 0.5) | (q0[:, 1] < -0.5) | (q0[:, 1] > hh - 0.5)
                 if out.any():
@@ -260,11 +354,13 @@ class LKTracker:
                 prev_est, prev_vis = est.copy(), vis.copy()
                 new_est, new_vis, sig = prev_est.copy(), np.zeros(n, bool), np.zeros(n)
                 done = np.zeros(n, bool)
+                theta_now = np.zeros(n)
                 for i in self.order:
                     # rotation from the latest estimates (this frame's where already done)
                     cur_est = np.where(done[:, None], new_est, prev_est)
                     cur_vis = np.where(done, new_vis, prev_vis)
-                    theta = self._rotation(i, cur_est, cur_vis, q0, theta_last)
+                    theta = self._rotation(i, cur_est, cur_vis, q0, theta_last, theta_now, done)
+                    theta_now[i] = theta
                     p = self.parent[i]
                     if f2f_ok[i] and prev_vis[i]:
                         pred, r = f2f[i], h
@@ -315,7 +411,7 @@ class LKTracker:
                 progress(1)
         if n_done == 0:
             raise InputError(src_name, "the video has no frames")
-        info = {"tracker": "lk-anchored", "patch_radius_px": h, "frames": n_done,
+        info = {"tracker": "lk-anchored", "patch_radius_px": h, "branch_halfwidth_px": self.branch_halfwidth_px, "frames": n_done,
                 "time_total_s": time.perf_counter() - t0, **counts}
         return TrackResult(point_ids=np.arange(n), xy=np.stack(xs, axis=1), visible=np.stack(vis_all, axis=1),
                            sigma_px=np.stack(sig_all, axis=1), fps=source.fps, info=info)

@@ -147,37 +147,63 @@ def import_pyrealsense2():
 class RealSenseSource(FrameSource):
     """The colour stream of a RealSense ``.bag``/``.db3`` recording, played back frame by frame.
 
-    Playback runs with ``set_real_time(False)``: the reader waits for us, so no frame is skipped.
+    The recording is opened as a playback device (``rs.context().load_device``) with
+    ``set_real_time(False)`` set *before* streaming starts, and the colour sensor delivers frames to a
+    callback that copies each one into a small bounded queue. The playback thread waits while the queue
+    is full, so no frame is dropped however slowly the frames are consumed, and memory stays bounded.
+    (The ``rs.pipeline`` route starts in real time and was seen to drop the first frame.)
     ``timestamp_s`` comes from the device timestamps (relative to the first frame); ``n_frames`` is
     ``None`` (recordings carry a duration, not a frame count).
     """
 
-    #: How long to wait for the next frame before deciding the recording has ended (milliseconds).
-    #: Non-real-time playback delivers frames as fast as we read them; 2 s is far longer than a decode.
-    timeout_ms = 2000
-    #: Poll interval while waiting (milliseconds); the end of the file is noticed within one poll.
-    poll_ms = 50
+    #: Give up waiting for a next frame after this long (milliseconds) -- only if playback never reports
+    #: the end; non-real-time playback delivers as fast as we read.
+    timeout_ms = 5000
+    #: Frames buffered between the playback thread and the reader.
+    queue_size = 4
 
     def __init__(self, path: str | Path):
+        import queue
+        import threading
+
         rs = import_pyrealsense2()
         self._rs = rs
         self.path = str(path)
-        self._pipe = rs.pipeline()
-        cfg = rs.config()
         try:
-            cfg.enable_device_from_file(self.path, repeat_playback=False)
-            cfg.enable_stream(rs.stream.color)
-            profile = self._pipe.start(cfg)
+            self._ctx = rs.context()
+            dev = self._ctx.load_device(self.path)
         except RuntimeError as exc:
-            raise InputError(path, f"librealsense cannot play this recording or it has no colour stream ({exc}); "
-                                   "note: librealsense >= 2.58 reads .bag and .db3, older versions only .bag") from None
-        self._playback = profile.get_device().as_playback()
+            raise InputError(path, f"librealsense cannot play this recording ({exc}); note: librealsense >= 2.58 "
+                                   "reads .bag and .db3, older versions only .bag") from None
+        self._playback = dev.as_playback()
         self._playback.set_real_time(False)
-        vsp = profile.get_stream(rs.stream.color).as_video_stream_profile()
+        found = [(s, sp) for s in dev.query_sensors() for sp in s.get_stream_profiles()
+                 if sp.stream_type() == rs.stream.color]
+        if not found:
+            raise InputError(path, "the recording has no colour stream")
+        self._sensor, prof = found[0]
+        vsp = prof.as_video_stream_profile()
         self.fps = float(vsp.fps()) or 30.0
         self.size = (int(vsp.width()), int(vsp.height()))
         self.n_frames = None
-        self._running = True
+        self._queue: queue.Queue = queue.Queue(maxsize=self.queue_size)
+        self._closed = threading.Event()
+        self._prof = prof
+        self._started = False
+
+    def _on_frame(self, frame) -> None:
+        import queue
+
+        try:
+            item = (frame.get_timestamp() / 1000.0, self._to_rgb(frame.as_video_frame()))
+        except Exception as exc:  # report in the reader thread, not librealsense's
+            item = exc
+        while not self._closed.is_set():
+            try:
+                self._queue.put(item, timeout=0.1)
+                return
+            except queue.Full:
+                continue
 
     def _to_rgb(self, frame) -> np.ndarray:
         import cv2
@@ -186,7 +212,7 @@ class RealSenseSource(FrameSource):
         data = np.asanyarray(frame.get_data())
         fmt = frame.get_profile().format()
         if fmt == rs.format.rgb8:
-            return np.ascontiguousarray(data)
+            return np.array(data, copy=True)  # own the pixels: librealsense reuses its frame buffers
         if fmt == rs.format.bgr8:
             return cv2.cvtColor(data, cv2.COLOR_BGR2RGB)
         if fmt == rs.format.rgba8:
@@ -198,36 +224,53 @@ class RealSenseSource(FrameSource):
         raise InputError(self.path, f"unsupported colour format {fmt}; expected rgb8, bgr8, rgba8, bgra8 or yuyv")
 
     def __iter__(self) -> Iterator[Frame]:
-        i, t0, last_number = 0, None, None
-        rs, waited = self._rs, 0
-        while self._running:
-            ok, fs = self._pipe.try_wait_for_frames(self.poll_ms)
-            if not ok:
-                # End of the recording: playback reports 'stopped'. Otherwise keep waiting up to timeout_ms.
-                waited += self.poll_ms
-                if self._playback.current_status() == rs.playback_status.stopped or waited >= self.timeout_ms:
+        import queue
+
+        rs = self._rs
+        if self._started:
+            raise RuntimeError(f"{self.path}: a RealSenseSource can be iterated once; open the recording again")
+        self._started = True
+        self._sensor.open(self._prof)
+        self._sensor.start(self._on_frame)
+        i, t0, last_t, waited = 0, None, None, 0.0
+        while not self._closed.is_set():
+            try:
+                item = self._queue.get(timeout=0.05)
+            except queue.Empty:
+                waited += 50
+                if self._playback.current_status() == rs.playback_status.stopped and self._queue.empty():
+                    break
+                if waited >= self.timeout_ms:
                     break
                 continue
-            waited = 0
-            c = fs.get_color_frame()
-            if not c:
+            waited = 0.0
+            if isinstance(item, Exception):
+                raise item
+            t, image = item
+            if last_t is not None and t <= last_t:  # a frame delivered twice
                 continue
-            number = c.get_frame_number()
-            if number == last_number:  # the same frame delivered twice
-                continue
-            last_number = number
-            t = c.get_timestamp() / 1000.0
+            last_t = t
             t0 = t if t0 is None else t0
-            yield Frame(i, self._to_rgb(c), t - t0)
+            yield Frame(i, image, t - t0)
             i += 1
 
     def close(self) -> None:
-        if self._running:
-            self._running = False
-            try:
-                self._pipe.stop()
-            except RuntimeError:
-                pass
+        import queue
+
+        if self._closed.is_set():
+            return
+        self._closed.set()
+        if self._started:
+            while True:  # unblock the callback, then stop the sensor
+                try:
+                    self._queue.get_nowait()
+                except queue.Empty:
+                    break
+            for step in (self._sensor.stop, self._sensor.close):
+                try:
+                    step()
+                except RuntimeError:
+                    pass
 
 
 def open_video(path: str | Path) -> FrameSource:
