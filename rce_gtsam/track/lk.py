@@ -13,8 +13,11 @@ never recovers after an occlusion. This tracker uses frame-to-frame pyramidal LK
    the graph so that it is not dominated by pixel noise), and find it in a window around the
    prediction with normalised cross-correlation (``cv2.matchTemplate``, ``TM_CCOEFF_NORMED``; search
    radius = patch radius when the node was visible in the previous frame, twice that to re-acquire a
-   lost node). Then refine to sub-pixel with LK *from the frame-0 template* (gain/bias compensated), and
-   run it backwards for a forward-backward error. Because the measurement always compares with frame 0,
+   lost node). Then refine to sub-pixel with a weighted inverse-compositional LK *from the frame-0
+   template* (gain/bias compensated), and run it backwards for a forward-backward error. With a graph,
+   template pixels are weighted by a band around the branch (the frame-0 segments, half-width measured
+   from the image): a thin stem fills a small part of its patch, and the static background in the rest
+   would otherwise pin the match to where the node was in frame 0. Because the measurement always compares with frame 0,
    errors do not accumulate: a node that returns to its first pose is measured where it is.
 3. **Decide visibility** -- a node is marked invisible (position = the prediction, ``visible=False``)
    rather than guessed when: the correlation peak is below ``min_ncc``; the forward-backward error
