@@ -69,9 +69,10 @@ def run(args: argparse.Namespace) -> int:
             (tmp / "diagnosis.json").write_text(json.dumps(diagnosis.to_dict(), indent=2) + "\n")
         return {}
 
-    from .analyze import extra_writers, format_summary
+    from .analyze import extra_writers, format_summary, save_recording
     files = result.write(args.out, extra_writers=[write_tracks, *extra_writers(args, video=args.video,
                                                                                 diagnosis=diagnosis)])
+    save_recording(args, result, video=args.video, diagnosis=diagnosis)
     print(format_summary(result))
     if diagnosis is not None:
         print()
