@@ -16,6 +16,8 @@ inside a ``LinearContainerFactor`` linearised at zero: at any values the contain
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import gtsam
 import numpy as np
 
@@ -54,8 +56,15 @@ class AccelerationFactor:
     def create(key_prev: int, key: int, key_next: int, weight: float,
                zeros: gtsam.Values) -> gtsam.LinearContainerFactor:
         """Exact linear factor on the three Point2 variables, weight ``w_a`` baked into A."""
-        s = 1.0 / sigma_from_weight(weight)  # sqrt(w)
-        eye = np.eye(2)
-        jf = gtsam.JacobianFactor(key_prev, s * eye, key, -2.0 * s * eye, key_next, s * eye,
-                                  np.zeros(2), gtsam.noiseModel.Unit.Create(2))
-        return gtsam.LinearContainerFactor(jf, zeros)
+        a0, a1, a2, b, unit = _blocks(float(weight))
+        return gtsam.LinearContainerFactor(gtsam.JacobianFactor(key_prev, a0, key, a1, key_next, a2, b, unit),
+                                           zeros)
+
+
+@lru_cache(maxsize=8)
+def _blocks(weight: float):
+    """Whitened Jacobian blocks sqrt(w) * (I, -2I, I), zero rhs and the unit noise model, built once
+    per weight (building ~20k factors is measurably faster without re-creating them each time)."""
+    s = 1.0 / sigma_from_weight(weight)  # sqrt(w)
+    eye = np.eye(2)
+    return (*(c * s * eye for c in _COEFFS), np.zeros(2), gtsam.noiseModel.Unit.Create(2))

@@ -32,6 +32,10 @@ import scipy.sparse as sp
 from .errors import RceError
 
 
+#: Relative pivot threshold below which the information matrix counts as singular (see use).
+PIVOT_RTOL = 1e-12
+
+
 class SingularInformationError(RceError, np.linalg.LinAlgError):
     """The information matrix is not positive definite: some variable is unconstrained."""
 
@@ -136,11 +140,16 @@ def _block_tridiagonal_selected_inverse(diag: np.ndarray, sub: np.ndarray, n: in
         S = diag[t] - C[t - 1] @ C[t - 1].T if t > 0 else diag[t]
         try:
             L[t] = np.linalg.cholesky(S)
+            # A pivot at rounding level means a direction with (numerically) no information: the
+            # "successful" factor would give variances ~1e20. 1e-12 relative to the block's largest
+            # diagonal entry is ~1e4 times double-precision rounding.
+            if np.min(np.diag(L[t])) ** 2 <= PIVOT_RTOL * np.max(np.diag(S)):
+                raise np.linalg.LinAlgError
         except np.linalg.LinAlgError:
             f0 = t * b
             raise SingularInformationError(
-                f"the smoother's information matrix is not positive definite near frame {f0}: some "
-                "node position there is not constrained by any factor") from None
+                f"the smoother's information matrix is singular near frame {f0}: some node position "
+                "there is not constrained by any factor") from None
         if t < T - 1:
             # C[t] = sub[t] · L[t]^-T  ⇔  L[t] · C[t]ᵀ = sub[t]ᵀ
             C[t] = scipy.linalg.solve_triangular(L[t], sub[t].T, lower=True, check_finite=False).T

@@ -61,5 +61,5 @@ def moving_average(tracks: Tracks, window: int) -> Tracks:
             for axis in (0, 1):
                 xy[i, frames, axis] = moving_average_1d(tracks.xy[i, frames, axis], w)
     sigma = None if tracks.sigma_px is None else tracks.sigma_px.copy()
-    return Tracks(node_ids=tracks.node_ids.copy(), xy=xy, sigma_px=sigma,
-                  source=f"moving average (window {w}) of {tracks.source}")
+    # The source stays the input's, so errors raised downstream name the user's file.
+    return Tracks(node_ids=tracks.node_ids.copy(), xy=xy, sigma_px=sigma, source=tracks.source)

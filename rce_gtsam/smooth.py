@@ -12,7 +12,7 @@ Factors (see :mod:`rce_gtsam.factors` for the residuals):
 
 With the paper's settings the problem is linear least squares (the same quadratic as the
 published LSQR solver, see :mod:`rce_gtsam.smooth_reference`); it is solved here with GTSAM's
-Levenberg-Marquardt, which converges in 1-2 iterations. Marginal covariances come from the
+Levenberg-Marquardt in one exact step (non-linear options take several iterations). Marginal covariances come from the
 linearisation at the solution (robust weights included) through a block-banded selected inversion
 (:mod:`rce_gtsam.marginals`), not per-key ``gtsam.Marginals`` queries.
 
@@ -157,6 +157,17 @@ def _check_inputs(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) ->
         if config.edge_weight > 0 and not (obs[ia] & obs[ib]).any():
             raise InputError(tracks.source, f"nodes {a} and {b} are never observed in the same frame, "
                                             "so the edge has no rest shape", f"edge [{a}, {b}]")
+    if config.velocity_weight <= 0 and config.acceleration_weight <= 0:
+        # Without temporal factors each frame stands alone: an unobserved node position is fixed only by
+        # the offset prior through an observed node of the same frame (the tree is connected); the
+        # length prior fixes only the distance, leaving a direction free.
+        need_all = not (config.edge_weight > 0 and config.edge_prior == "offset")
+        bad = ~obs if need_all else np.broadcast_to(~obs.any(axis=0), obs.shape)
+        if bad.any():
+            r, f = np.argwhere(bad)[0]
+            raise InputError(tracks.source, "with velocity and acceleration weights both 0, this node position is "
+                                            "not determined by any factor (unobserved, no temporal link)",
+                             f"node {tracks.node_ids[r]}, frame {f}")
     if config.robust not in (None, "huber", "cauchy"):
         raise ValueError(f"SmootherConfig.robust must be None, 'huber' or 'cauchy', got {config.robust!r}")
     if config.edge_prior not in ("offset", "length"):
@@ -334,6 +345,7 @@ def smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) ->
     """
     from .marginals import frame_marginals  # local import: marginals imports this module's key layout
 
+    _check_inputs(tracks, graph, config)
     pre = moving_average(tracks, config.presmooth_window)
     linear = is_linear(config)
     t0 = time.perf_counter()
@@ -357,7 +369,6 @@ def smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) ->
                             final_error=diag["final_error"], n_variables=int(problem.initial.size()),
                             n_factors=int(problem.graph.size()), converged=diag["converged"],
                             seconds_build=t1 - t0, seconds_optimize=t2 - t1, seconds_marginals=t3 - t2)
-    out = Tracks(node_ids=tracks.node_ids.copy(), xy=xy, sigma_px=None,
-                 source=f"GTSAM smoother of {tracks.source}")
+    out = Tracks(node_ids=tracks.node_ids.copy(), xy=xy, sigma_px=None, source=tracks.source)
     return SmoothedTracks(tracks=out, observed=tracks.observed.copy(), presmoothed=pre, cov=cov,
                           frame_cov=frame_cov, report=report)

@@ -52,6 +52,16 @@ def test_singular_information_is_reported():
         banded_selected_inverse(sp.csr_matrix(A), 2)
 
 
+def test_rank_deficient_block_is_reported_not_inverted():
+    """A direction with no information (here x0 + y0 only ever seen together) must raise, not return
+    a rounding-level pivot's 1e20 variances."""
+    A = np.eye(6)
+    A[:2, :2] = [[1.0, 1.0], [1.0, 1.0]]
+    A[2:4, :2] = A[:2, 2:4] = 0.1 * np.eye(2)
+    with pytest.raises(SingularInformationError):
+        banded_selected_inverse(sp.csr_matrix(A), 2)
+
+
 def small_tree(n_frames=31, seed=0):
     rng = np.random.default_rng(seed)
     graph = BranchGraph.from_edges(5, [(5, 1), (1, 2), (1, 3)])

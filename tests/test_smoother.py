@@ -196,5 +196,12 @@ def test_input_errors(tree):
     with pytest.raises(InputError, match=r"never observed in the same frame") as e:
         smooth_tracks(bad, graph, PAPER.smoother)
     assert e.value.where == "edge [1, 2]"
+    full, _ = tree_tracks(gaps=False)
+    gap = full.xy.copy()
+    gap[full.index(4), 7] = np.nan
+    no_time = SmootherConfig(presmooth_window=1, velocity_weight=0.0, acceleration_weight=0.0, edge_prior="length")
+    with pytest.raises(InputError, match="not determined") as e:
+        smooth_tracks(Tracks(node_ids=tracks.node_ids, xy=gap, source="t.csv"), graph, no_time)
+    assert e.value.where == "node 4, frame 7" and e.value.source == "t.csv"
     with pytest.raises(ValueError, match="edge_prior"):
         smooth_tracks(tracks, graph, SmootherConfig(edge_prior="rigid"))
