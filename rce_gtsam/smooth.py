@@ -219,40 +219,47 @@ def build_problem(pre: Tracks, graph: BranchGraph, config: SmootherConfig) -> Fa
     """
     _check_inputs(pre, graph, config)
     N, F = pre.n_nodes, pre.n_frames
-    K = np.array([[variable_key(i, t, N) for t in range(F)] for i in range(N)], dtype=np.int64)
+    # Python ints (not numpy scalars) and bound methods: the loops below create ~4 N F factors, and
+    # per-item numpy indexing would cost as much as building the factors themselves.
+    K = [[variable_key(i, t, N) for t in range(F)] for i in range(N)]
     fg = gtsam.NonlinearFactorGraph()
+    add = fg.add
     obs = pre.observed
 
     # Measurement priors.
     use_aniso = config.along_across_ratio != 1.0
     tangents = node_tangents(pre, graph) if use_aniso else None
     sigma_default = 1.0 / np.sqrt(max(float(config.measurement_weight), MEASUREMENT_WEIGHT_FLOOR))
+    make = MeasurementFactor.create
     for i in range(N):
         frames = np.flatnonzero(obs[i])
+        Ki, xy = K[i], pre.xy[i, frames]
         tangent = None if tangents is None else tangents[i]
         if pre.sigma_px is None:
             nm = MeasurementFactor.noise_model(sigma_default, tangent, config.along_across_ratio,
                                                config.robust, config.robust_k)
-            for t in frames:
-                fg.add(MeasurementFactor.create(int(K[i, t]), pre.xy[i, t], nm))
+            for t, m in zip(frames.tolist(), xy):
+                add(make(Ki[t], m, nm))
         else:
-            for t in frames:
-                nm = MeasurementFactor.noise_model(float(pre.sigma_px[i, t]), tangent,
-                                                   config.along_across_ratio, config.robust, config.robust_k)
-                fg.add(MeasurementFactor.create(int(K[i, t]), pre.xy[i, t], nm))
+            for t, m, sigma in zip(frames.tolist(), xy, pre.sigma_px[i, frames].tolist()):
+                nm = MeasurementFactor.noise_model(sigma, tangent, config.along_across_ratio,
+                                                   config.robust, config.robust_k)
+                add(make(Ki[t], m, nm))
 
     # Temporal smoothness along every trajectory.
     if config.velocity_weight > 0:
         nm = VelocityFactor.noise_model(config.velocity_weight)
-        for i in range(N):
-            for t in range(F - 1):
-                fg.add(VelocityFactor.create(int(K[i, t]), int(K[i, t + 1]), nm))
+        make = VelocityFactor.create
+        for Ki in K:
+            for k0, k1 in zip(Ki[:-1], Ki[1:]):
+                add(make(k0, k1, nm))
     if config.acceleration_weight > 0 and F >= 3:
-        zeros = AccelerationFactor.zero_values(K.reshape(-1))
+        zeros = AccelerationFactor.zero_values([k for Ki in K for k in Ki])
         w = float(config.acceleration_weight)
-        for i in range(N):
-            for t in range(1, F - 1):
-                fg.add(AccelerationFactor.create(int(K[i, t - 1]), int(K[i, t]), int(K[i, t + 1]), w, zeros))
+        make = AccelerationFactor.create
+        for Ki in K:
+            for k0, k1, k2 in zip(Ki[:-2], Ki[1:-1], Ki[2:]):
+                add(make(k0, k1, k2, w, zeros))
 
     # Edge shape prior at every frame.
     if config.edge_weight > 0:
@@ -260,19 +267,21 @@ def build_problem(pre: Tracks, graph: BranchGraph, config: SmootherConfig) -> Fa
             if config.edge_prior == "offset":
                 d = EdgeOffsetFactor.rest_offset(pre.xy[ia], pre.xy[ib])
                 nm = EdgeOffsetFactor.noise_model(config.edge_weight)
-                for t in range(F):
-                    fg.add(EdgeOffsetFactor.create(int(K[ia, t]), int(K[ib, t]), d, nm))
+                make = EdgeOffsetFactor.create
+                for ka, kb in zip(K[ia], K[ib]):
+                    add(make(ka, kb, d, nm))
             else:
                 L = EdgeLengthFactor.rest_length(pre.xy[ia], pre.xy[ib])
                 nm = EdgeLengthFactor.noise_model(config.edge_weight)
-                for t in range(F):
-                    fg.add(EdgeLengthFactor.create(int(K[ia, t]), int(K[ib, t]), L, nm))
+                make = EdgeLengthFactor.create
+                for ka, kb in zip(K[ia], K[ib]):
+                    add(make(ka, kb, L, nm))
 
     init = gtsam.Values()
     x0 = initial_positions(pre)
-    for i in range(N):
-        for t in range(F):
-            init.insert(int(K[i, t]), x0[i, t])
+    for Ki, xi in zip(K, x0):
+        for k, p in zip(Ki, xi):
+            init.insert(k, p)
     return FactorGraphProblem(graph=fg, initial=init, n_nodes=N, n_frames=F)
 
 
