@@ -186,15 +186,16 @@ class _single_threaded_blas:
 
 
 def frame_marginals(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, n_nodes: int,
-                    n_frames: int, linear: gtsam.GaussianFactorGraph | None = None) -> np.ndarray:
+                    n_frames: int, jacobian: sp.spmatrix | None = None) -> np.ndarray:
     """(F, 2N, 2N) joint covariance of all nodes at each frame (px²), from GTSAM's linearisation of
-    ``graph`` at ``values`` (pass ``linear`` if you already have it). Keys must sort frame-major with
-    N Point2 variables per frame (as :func:`rce_gtsam.smooth.variable_key` makes them)."""
+    ``graph`` at ``values``. Pass ``jacobian`` (the whitened sparse Jacobian of that linearisation,
+    from :func:`whitened_jacobian`) if you already have it. Keys must sort frame-major with N Point2
+    variables per frame (as :func:`rce_gtsam.smooth.variable_key` makes them)."""
     n = 2 * int(n_nodes)
     if int(values.dim()) != n * int(n_frames):
         raise ValueError(f"values hold {values.dim()} scalars, expected 2·{n_nodes}·{n_frames}")
-    if linear is None:
-        linear = graph.linearize(values)
-    if len(linear.keys()) != n_nodes * n_frames:
-        raise SingularInformationError("some variables appear in no factor; their covariance is unbounded")
-    return banded_selected_inverse(information_matrix(linear, n * n_frames), n)
+    if jacobian is None:
+        jacobian, _ = whitened_jacobian(graph.linearize(values), n_cols=n * n_frames)
+    if jacobian.shape[1] != n * n_frames:
+        raise ValueError(f"Jacobian has {jacobian.shape[1]} columns, expected {n * n_frames}")
+    return banded_selected_inverse((jacobian.T @ jacobian).tocsc(), n)

@@ -322,12 +322,9 @@ def lm_params(problem: FactorGraphProblem, linear: bool) -> gtsam.LevenbergMarqu
     return params
 
 
-def normal_equation_residual(linear_graph: gtsam.GaussianFactorGraph, n_cols: int) -> float:
-    """||J^T r||_inf / (||J||_F ||r||_2) of a linearisation at a candidate solution (0 at an exact
-    least-squares minimum)."""
-    from .marginals import whitened_jacobian
-
-    A, b = whitened_jacobian(linear_graph, n_cols=n_cols)
+def normal_equation_residual(A, b: np.ndarray) -> float:
+    """||A^T b||_inf / (||A||_F ||b||_2) for the whitened linearisation ``A delta = b`` at a candidate
+    solution (``b`` = minus the whitened residual): 0 at an exact least-squares minimum."""
     g = np.abs(A.T @ b).max() if A.nnz else 0.0
     scale = float(np.sqrt(A.multiply(A).sum())) * float(np.linalg.norm(b))
     return float(g / scale) if scale > 0 else 0.0
@@ -336,8 +333,8 @@ def normal_equation_residual(linear_graph: gtsam.GaussianFactorGraph, n_cols: in
 def optimize(problem: FactorGraphProblem, linear: bool) -> tuple[gtsam.Values, dict]:
     """Run GTSAM Levenberg-Marquardt; returns the solution and iteration/error diagnostics."""
     params = lm_params(problem, linear)
-    initial_error = problem.graph.error(problem.initial)
     opt = gtsam.LevenbergMarquardtOptimizer(problem.graph, problem.initial, params)
+    initial_error = opt.error()  # the optimizer state evaluates it on construction
     result = opt.optimize()
     iters = int(opt.iterations())
     return result, {"iterations": iters, "initial_error": float(initial_error),
@@ -352,7 +349,7 @@ def smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) ->
     Raises :class:`~rce_gtsam.errors.InputError` if tracks and graph do not match, a node is never
     observed or an edge's nodes are never observed together.
     """
-    from .marginals import frame_marginals  # local import: marginals imports this module's key layout
+    from .marginals import frame_marginals, whitened_jacobian  # local: marginals uses this key layout
 
     _check_inputs(tracks, graph, config)
     pre = moving_average(tracks, config.presmooth_window)
@@ -361,15 +358,16 @@ def smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) ->
     problem = build_problem(pre, graph, config)
     t1 = time.perf_counter()
     result, diag = optimize(problem, linear)
-    lin = None
-    if linear:  # one exact step: confirm optimality from the linearisation at the solution
-        lin = problem.graph.linearize(result)
-        diag["converged"] = normal_equation_residual(lin, int(result.dim())) < LINEAR_OPTIMALITY_TOL
+    jacobian = None
+    if linear or config.marginals:  # GTSAM's whitened linearisation at the solution, shared below
+        jacobian, rhs = whitened_jacobian(problem.graph.linearize(result), n_cols=int(result.dim()))
+    if linear:  # one exact step: confirm optimality
+        diag["converged"] = normal_equation_residual(jacobian, rhs) < LINEAR_OPTIMALITY_TOL
     t2 = time.perf_counter()
     xy = problem.positions(result)
     cov = frame_cov = None
     if config.marginals:
-        frame_cov = frame_marginals(problem.graph, result, problem.n_nodes, problem.n_frames, linear=lin)
+        frame_cov = frame_marginals(problem.graph, result, problem.n_nodes, problem.n_frames, jacobian=jacobian)
         N = problem.n_nodes
         idx = np.arange(N)
         cov = np.ascontiguousarray(frame_cov.reshape(problem.n_frames, N, 2, N, 2)[:, idx, :, idx, :])
