@@ -17,6 +17,7 @@ from .errors import RceError
 #: Modules that contribute sub-commands, in the order ``rce --help`` lists them.
 COMMAND_MODULES = (
     "rce_gtsam.commands.analyze",
+    "rce_gtsam.commands.diagnose",
     "rce_gtsam.commands.track",
     "rce_gtsam.commands.simulate",
     "rce_gtsam.commands.run",

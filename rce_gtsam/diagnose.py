@@ -1,0 +1,620 @@
+"""Where does the rank-1 model fail, and which physical effect is missing?
+
+:func:`diagnose` fits the baseline y[e, t] = kappa_e z_t and, for each candidate effect, the baseline
+extended by that effect (:mod:`rce_gtsam.effects`), and compares them on **held-out frames**:
+
+* Blocked cross-validation: the frames are cut into ``n_folds`` contiguous test blocks (each at least the
+  bootstrap block length, 25 frames). A buffer of ``block_length`` frames on each side of the test block is
+  also left out of training, because neighbouring frames are dependent (smoothed tracks, delays, ringing):
+  this is the hv-block scheme (Racine 2000) with h = the moving-block bootstrap's block length, i.e. the
+  same independence horizon the bootstrap CIs assume.
+* Held-out z: the excitation (and any other per-frame latent, e.g. the second mode's w) of a test frame is
+  unknown, so it is estimated from the test frames' data with every static parameter frozen from the
+  training fit — but only from half of the edges (A); the other half (B) is scored, then the roles swap.
+  The halves are stratified by root distance (consecutive pairs of edges split at random with ``seed``),
+  so both span root to tip. No number scored was used to fit anything that predicts it.
+* Per-edge parameters (kappa, offsets, mode shapes) are refitted in every fold. The few *shared* nonlinear
+  parameters of an effect (a lag, two frequencies and a damping ratio, a saturation curvature: <= 3 numbers
+  against ~10^4 data) are fitted once on all frames and kept in the folds; the optimism this leaves is of
+  order p / n ~ 1e-4 of the MSE, far below the fold-to-fold noise, and it saves re-running the slow
+  nonlinear searches per fold.
+* Evidence: per fold, log(MSE_baseline / MSE_candidate); evidence = mean / standard error over folds (a
+  paired t statistic). An effect is *supported* when evidence exceeds the one-sided t quantile at
+  alpha / (number of candidates) (Bonferroni) with n_folds - 1 degrees of freedom AND its AIC on all frames
+  is lower than the baseline's. The verdict is the supported effect with the lowest held-out RMSE, or None.
+
+Residual-structure statistics explain *why* (lag regression on dz/dt, acceleration/spectral structure,
+singular values, per-edge offset and trend, curvature against the prediction). Units: degrees, frames.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import signal, stats
+
+from . import effects as effects_mod
+from .model import ModelFit, ResponseModel, validate_inputs
+
+BLOCK_LENGTH = 25  # frames: the moving-block bootstrap's block length (reference §2.9)
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Results
+# ----------------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class CandidateResult:
+    """One candidate effect: its fit on all frames, held-out error and evidence."""
+
+    effect: str
+    fit: ModelFit
+    heldout_rmse: float
+    fold_mse: np.ndarray
+    evidence: float
+    improvement_pct: float
+    delta_aic: float
+    delta_bic: float
+    supported: bool
+    statistics: dict
+
+    def as_dict(self) -> dict:
+        return {"effect": self.effect, "heldout_rmse": _num(self.heldout_rmse), "evidence": _num(self.evidence),
+                "improvement_pct": _num(self.improvement_pct), "delta_aic": _num(self.delta_aic),
+                "delta_bic": _num(self.delta_bic), "supported": bool(self.supported),
+                "fit_rmse": _num(self.fit.rmse), "n_params": int(self.fit.n_params),
+                "fold_mse": [_num(v) for v in self.fold_mse], "statistics": _jsonable(self.statistics),
+                "params": _jsonable(self.fit.effect_summary().get(self.effect, {})),
+                "kappa": [_num(v) for v in self.fit.kappa], "converged": bool(self.fit.converged)}
+
+
+@dataclass(frozen=True, eq=False)
+class Diagnosis:
+    """Result of :func:`diagnose`. ``as_dict()`` is the JSON written by ``rce diagnose``."""
+
+    baseline: ModelFit
+    baseline_heldout_rmse: float
+    baseline_fold_mse: np.ndarray
+    candidates: list  # of CandidateResult, best (lowest held-out RMSE) first
+    verdict: str | None
+    explanation: str
+    worst_edges: list
+    worst_frames: list
+    residual_summary: dict
+    settings: dict
+    edge_labels: list = field(default_factory=list)
+
+    def candidate(self, name: str) -> CandidateResult:
+        for c in self.candidates:
+            if c.effect == name:
+                return c
+        raise KeyError(name)
+
+    def as_dict(self) -> dict:
+        b = self.baseline
+        return {
+            "baseline": {"heldout_rmse": _num(self.baseline_heldout_rmse), "fit_rmse": _num(b.rmse),
+                         "aic": _num(b.aic), "bic": _num(b.bic), "r_squared": _num(b.r_squared),
+                         "n_params": int(b.n_params), "n_obs": int(b.n_obs),
+                         "fold_mse": [_num(v) for v in self.baseline_fold_mse],
+                         "kappa": [_num(v) for v in b.kappa], "converged": bool(b.converged)},
+            "candidates": [c.as_dict() for c in self.candidates],
+            "verdict": self.verdict,
+            "explanation": self.explanation,
+            "worst_edges": _jsonable(self.worst_edges),
+            "worst_frames": _jsonable(self.worst_frames),
+            "residuals": _jsonable(self.residual_summary),
+            "edges": [str(e) for e in self.edge_labels],
+            "settings": _jsonable(self.settings),
+        }
+
+    def to_json(self, **kw) -> str:
+        return json.dumps(self.as_dict(), **kw)
+
+    def report(self) -> str:
+        return render_diagnosis_report(self)
+
+
+def _num(x):
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return None
+    return x if math.isfinite(x) else None
+
+
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return [_jsonable(v) for v in x.tolist()]
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return _num(x)
+    return x
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Cross-validation
+# ----------------------------------------------------------------------------------------------------------
+
+def fold_blocks(T: int, n_folds: int, block_length: int = BLOCK_LENGTH) -> list[tuple[int, int]]:
+    """Contiguous test blocks [a, b) covering the frames; fewer folds if a block would be < block_length."""
+    k = max(2, min(int(n_folds), T // max(block_length, 1)))
+    edges = np.linspace(0, T, k + 1).round().astype(int)
+    return [(int(edges[i]), int(edges[i + 1])) for i in range(k)]
+
+
+def edge_halves(s: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Two interleaved halves of the edges, stratified by root distance (random within each pair)."""
+    order = np.argsort(s, kind="stable")
+    rng = np.random.default_rng(seed)
+    A, B = [], []
+    for i in range(0, len(order), 2):
+        pair = list(order[i:i + 2])
+        if len(pair) == 2 and rng.uniform() < 0.5:
+            pair.reverse()
+        A.append(pair[0])
+        if len(pair) == 2:
+            B.append(pair[1])
+    return np.array(sorted(A)), np.array(sorted(B))
+
+
+def heldout_errors(model: ResponseModel, full: ModelFit, Y, W, s, blocks, halves, gap: int,
+                   cv_iter: int = 60) -> tuple[np.ndarray, np.ndarray]:
+    """Per-fold held-out sum of squared errors and counts (degrees^2, entries) of ``model``."""
+    E, T = Y.shape
+    sse = np.zeros(len(blocks))
+    cnt = np.zeros(len(blocks))
+    for k, (a, b) in enumerate(blocks):
+        lo, hi = max(0, a - gap), min(T, b + gap)
+        Ytr = Y.copy()
+        Ytr[:, lo:hi] = np.nan
+        Wtr = W.copy()
+        Wtr[:, lo:hi] = 0.0
+        if not (Wtr > 0).any(axis=1).all():
+            continue  # an edge has no training data in this fold: skip the fold for every model alike
+        z0 = full.z.copy()
+        z0[lo:hi] = 0.0
+        st0 = {eff.name: _blank_latents(st, lo, hi) for eff, st in zip(full.model.effects, full.states)}
+        tr = model._fit(Ytr, Wtr, s, start=(full.kappa.copy(), z0, st0), max_iter=cv_iter, refit_shared=False)
+        free = np.zeros(T, bool)
+        free[lo:hi] = True
+        for A, B in (halves, halves[::-1]):
+            if len(A) == 0 or len(B) == 0:
+                continue
+            Yte = np.full_like(Y, np.nan)
+            Yte[np.ix_(A, np.arange(a, b))] = Y[np.ix_(A, np.arange(a, b))]
+            Wte = np.where(np.isfinite(Yte), W, 0.0)
+            st = {eff.name: s_ for eff, s_ in zip(model.effects, tr.states)}
+            est = model._fit(Yte, Wte, s, start=(tr.kappa.copy(), tr.z.copy(), st), frozen=True, free=free,
+                             max_iter=cv_iter)
+            pred = est.predict()[np.ix_(B, np.arange(a, b))]
+            y = Y[np.ix_(B, np.arange(a, b))]
+            ok = np.isfinite(y)
+            sse[k] += float(np.sum((y[ok] - pred[ok]) ** 2))
+            cnt[k] += int(ok.sum())
+    return sse, cnt
+
+
+def _blank_latents(state: dict, lo: int, hi: int) -> dict:
+    lat = {}
+    for k, v in state.get("latents", {}).items():
+        v = np.array(v, dtype=float)
+        v[lo:hi] = 0.0
+        lat[k] = v
+    out = dict(state)
+    out["latents"] = lat
+    return out
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Residual structure
+# ----------------------------------------------------------------------------------------------------------
+
+def _ar1_inflation(R: np.ndarray) -> float:
+    """(1 + rho) / (1 - rho) for the pooled lag-1 autocorrelation rho >= 0 of the residuals."""
+    a, b = R[:, :-1], R[:, 1:]
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 3:
+        return 1.0
+    rho = float(np.sum(a[ok] * b[ok]) / max(np.sqrt(np.sum(a[ok] ** 2) * np.sum(b[ok] ** 2)), 1e-300))
+    rho = min(max(rho, 0.0), 0.98)
+    return (1 + rho) / (1 - rho)
+
+
+def _per_edge_regression(R, X):
+    """Per-edge LS slope of residual rows R on regressor rows X (NaN-aware): (coef (E,), se (E,))."""
+    ok = np.isfinite(R) & np.isfinite(X)
+    Xo, Ro = np.where(ok, X, 0.0), np.where(ok, R, 0.0)
+    sxx = np.sum(Xo * Xo, axis=1)
+    coef = np.sum(Xo * Ro, axis=1) / np.maximum(sxx, 1e-300)
+    res = Ro - coef[:, None] * Xo
+    n = ok.sum(axis=1)
+    s2 = np.sum(np.where(ok, res * res, 0.0), axis=1) / np.maximum(n - 1, 1)
+    return coef, np.sqrt(s2 / np.maximum(sxx, 1e-300))
+
+
+def _slope_vs(x, v, se):
+    """Weighted LS slope of v on x (weights 1/se^2), its t statistic and the Pearson correlation."""
+    w = 1.0 / np.maximum(se, 1e-12) ** 2
+    ok = np.isfinite(v) & np.isfinite(w)
+    x, v, w = x[ok], v[ok], w[ok]
+    if len(x) < 3 or np.ptp(x) <= 0:
+        return 0.0, 0.0, 0.0
+    xm, vm = np.sum(w * x) / w.sum(), np.sum(w * v) / w.sum()
+    sxx = np.sum(w * (x - xm) ** 2)
+    slope = np.sum(w * (x - xm) * (v - vm)) / sxx
+    res = v - vm - slope * (x - xm)
+    s2 = max(np.sum(w * res * res) / max(len(x) - 2, 1), 1.0)  # at least the nominal variance
+    t = slope / math.sqrt(s2 / sxx)
+    r = float(np.corrcoef(x, v)[0, 1]) if np.std(v) > 0 else 0.0
+    return float(slope), float(t), r
+
+
+def residual_statistics(fit: ModelFit) -> dict[str, dict]:
+    """Residual-structure statistics of a (baseline) fit, one dict per candidate effect."""
+    R = fit.residuals
+    E, T = R.shape
+    k, z, s = fit.kappa, fit.z, fit.root_distance
+    infl = _ar1_inflation(R)
+    out: dict[str, dict] = {}
+    # delay: r_e ~ -kappa_e tau_e dz/dt  => per-edge lag tau_e, and its trend with root distance
+    dz = np.gradient(z)
+    lag, lag_se = _per_edge_regression(R, -k[:, None] * dz[None, :])
+    lag_se = lag_se * math.sqrt(infl)
+    slope, t, r = _slope_vs(s, lag, lag_se)
+    xc = []
+    for L in range(-5, 6):  # pooled lagged cross-correlation of residuals with kappa_e z(t - L)
+        zz = np.roll(z, L)
+        if L > 0:
+            zz[:L] = np.nan
+        elif L < 0:
+            zz[L:] = np.nan
+        X = k[:, None] * zz[None, :]
+        ok = np.isfinite(R) & np.isfinite(X)
+        xc.append(float(np.corrcoef(R[ok], X[ok])[0, 1]) if ok.sum() > 3 else 0.0)
+    out["delay"] = {"lag_per_edge_frames": lag, "lag_slope_frames": slope, "lag_slope_t": t,
+                    "lag_vs_root_distance_r": r,
+                    "residual_xcorr_with_kappa_z_lag_m5_to_p5": xc}
+    # dynamics: r_e ~ kappa_e (a_e dz + b_e d2z): a second-order term with a tip-ward trend; spectrum
+    d2z = np.gradient(dz)
+    acc, acc_se = _per_edge_regression(R, k[:, None] * d2z[None, :])
+    acc_se = acc_se * math.sqrt(infl)
+    aslope, at, ar = _slope_vs(s, acc, acc_se)
+    Rf = np.where(np.isfinite(R), R, 0.0)
+    nper = int(min(256, T))
+    f, pr = signal.welch(Rf, nperseg=nper, axis=1)
+    _, pz = signal.welch(z, nperseg=nper)
+    ratio = pr.mean(axis=0) / np.maximum(pz * np.mean(k * k), 1e-300)
+    band = (f > 0) & (pz > 1e-3 * pz.max())  # where z has power, a resonance can be excited
+    if band.any():
+        j = np.flatnonzero(band)[np.argmax(ratio[band])]
+        peak_f, peak_ratio = float(f[j]), float(ratio[j] / max(np.median(ratio[band]), 1e-300))
+    else:
+        peak_f, peak_ratio = float("nan"), float("nan")
+    out["dynamics"] = {"accel_coef_per_edge_frames2": acc, "accel_slope_frames2": aslope, "accel_slope_t": at,
+                       "accel_vs_root_distance_r": ar, "residual_to_signal_spectrum_peak_cycles_per_frame": peak_f,
+                       "residual_to_signal_spectrum_peak_over_median": peak_ratio}
+    # second mode: singular values of the residual matrix vs the noise bulk
+    sv = np.linalg.svd(np.where(np.isfinite(R), R, 0.0), compute_uv=False)
+    if len(sv) >= 2:
+        sigma = float(np.median(sv)) / math.sqrt(T)  # bulk noise level (E << T)
+        mp_edge = sigma * (math.sqrt(T) + math.sqrt(E))  # largest singular value of pure noise (Marchenko-Pastur)
+        out["second_mode"] = {"s1_over_noise_edge": float(sv[0] / max(mp_edge, 1e-300)),
+                              "s1_over_s2": float(sv[0] / max(sv[1], 1e-300)),
+                              "s1_variance_fraction": float(sv[0] ** 2 / max(np.sum(sv ** 2), 1e-300))}
+    else:
+        out["second_mode"] = {}
+    # offset: per-edge residual mean and linear trend with AR(1)-inflated standard errors
+    tt = np.arange(T) / T
+    means, tmeans, trends, ttrend = [], [], [], []
+    for e in range(E):
+        ok = np.isfinite(R[e])
+        if ok.sum() < 3:
+            means.append(0.0), tmeans.append(0.0), trends.append(0.0), ttrend.append(0.0)
+            continue
+        X = np.stack([np.ones(ok.sum()), tt[ok] - tt[ok].mean()], axis=1)
+        beta, *_ = np.linalg.lstsq(X, R[e, ok], rcond=None)
+        res = R[e, ok] - X @ beta
+        s2 = float(np.sum(res ** 2) / max(ok.sum() - 2, 1)) * infl
+        cov = s2 * np.linalg.inv(X.T @ X)
+        means.append(beta[0]), tmeans.append(beta[0] / math.sqrt(cov[0, 0]))
+        trends.append(beta[1]), ttrend.append(beta[1] / math.sqrt(cov[1, 1]))
+    means, tmeans, trends, ttrend = map(np.array, (means, tmeans, trends, ttrend))
+    out["offset"] = {"mean_per_edge_deg": means, "trend_per_edge_deg": trends,
+                     "max_abs_mean_t": float(np.max(np.abs(tmeans))), "max_abs_trend_t": float(np.max(np.abs(ttrend))),
+                     "rms_mean_deg": float(np.sqrt(np.mean(means ** 2))),
+                     "rms_trend_deg": float(np.sqrt(np.mean(trends ** 2)))}
+    # nonlinear: curvature of the residual against the prediction (odd cubic term, per-edge scaled)
+    P = k[:, None] * z[None, :]
+    q = np.nanquantile(np.abs(P), 0.99) if np.isfinite(P).any() else 1.0
+    u = P / max(q, 1e-12)
+    X3 = u ** 3 - u * (np.nansum(u ** 4, axis=1, keepdims=True) / np.maximum(np.nansum(u ** 2, axis=1, keepdims=True), 1e-300))
+    ok = np.isfinite(R)
+    c3 = float(np.sum(X3[ok] * R[ok]) / max(np.sum(X3[ok] ** 2), 1e-300))
+    res = R[ok] - c3 * X3[ok]
+    se3 = math.sqrt(float(np.sum(res ** 2)) / max(ok.sum() - 1, 1) * infl / max(np.sum(X3[ok] ** 2), 1e-300))
+    X2 = u ** 2 - np.nanmean(u ** 2, axis=1, keepdims=True)
+    c2 = float(np.sum(X2[ok] * R[ok]) / max(np.sum(X2[ok] ** 2), 1e-300))
+    out["nonlinear"] = {"cubic_residual_at_q99_deg": c3, "cubic_t": c3 / max(se3, 1e-300),
+                        "quadratic_residual_at_q99_deg": c2, "q99_deflection_deg": float(q)}
+    return out
+
+
+def worst_edges_and_frames(fit: ModelFit, labels, block_length: int, frames=None, n: int = 3):
+    """The n edges and the n non-overlapping ``block_length``-frame windows with the largest residual RMS."""
+    R = fit.residuals
+    E, T = R.shape
+    with np.errstate(invalid="ignore"):
+        edge_rms = np.sqrt(np.nanmean(R * R, axis=1))
+        frame_ms = np.nanmean(R * R, axis=0)
+    overall = float(np.sqrt(np.nanmean(R * R)))
+    order = np.argsort(-np.nan_to_num(edge_rms, nan=-1))
+    worst_e = [{"edge": str(labels[i]), "row": int(i), "residual_rms_deg": float(edge_rms[i]),
+                "ratio_to_overall": float(edge_rms[i] / max(overall, 1e-300))} for i in order[:n]]
+    fm = np.nan_to_num(frame_ms, nan=0.0)
+    L = max(1, min(block_length, T))
+    win = np.convolve(fm, np.ones(L) / L, mode="valid")  # mean square over each L-frame window
+    taken = np.zeros(len(win), bool)
+    worst_f = []
+    fr = np.arange(T) if frames is None else np.asarray(frames)
+    for _ in range(n):
+        cand = np.where(taken, -1.0, win)
+        j = int(np.argmax(cand))
+        if cand[j] < 0:
+            break
+        worst_f.append({"first_frame": int(fr[j]), "last_frame": int(fr[j + L - 1]),
+                        "residual_rms_deg": float(math.sqrt(win[j])),
+                        "ratio_to_overall": float(math.sqrt(win[j]) / max(overall, 1e-300))})
+        taken[max(0, j - L + 1): j + L] = True
+    summary = {"overall_rms_deg": overall, "per_edge_rms_deg": edge_rms,
+               "per_frame_rms_deg": np.sqrt(frame_ms)}
+    return worst_e, worst_f, summary
+
+
+# ----------------------------------------------------------------------------------------------------------
+# The diagnosis
+# ----------------------------------------------------------------------------------------------------------
+
+def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8, seed: int = 0,
+             block_length: int = BLOCK_LENGTH, prior_strength: float = 12.0, response: str = "signed",
+             alpha: float = 0.05, edge_labels=None, frames=None) -> Diagnosis:
+    """Diagnose which physical effect the rank-1 model misses.
+
+    Y: (E, T) bend response in degrees (NaN = missing/outlier); weights: (E, T) >= 0 or None;
+    root_distance: (E,) normalised root distance of each row's child (default: row order);
+    effects: candidate names or :class:`~rce_gtsam.effects.Effect` instances (default: all five);
+    n_folds: cross-validation blocks (reduced so that blocks are >= block_length frames);
+    seed: RNG seed of the stratified edge split; block_length: frames, the bootstrap's block length,
+    used as the CV buffer and the smallest test block; prior_strength, response: the core model's
+    settings (ComplianceConfig); alpha: family-wise significance level of the verdict.
+    """
+    Y, W, s = validate_inputs(Y, weights, root_distance)
+    E, T = Y.shape
+    labels = list(edge_labels) if edge_labels is not None else [str(i) for i in range(E)]
+    cands = _resolve_effects(effects, E)
+    base_model = ResponseModel(prior_strength=prior_strength, response=response)
+    base = base_model._fit(Y, W, s)
+    blocks = fold_blocks(T, n_folds, block_length)
+    halves = edge_halves(s, seed)
+    gap = int(block_length)
+    b_sse, b_cnt = heldout_errors(base_model, base, Y, W, s, blocks, halves, gap)
+    used = b_cnt > 0
+    b_mse = b_sse[used] / b_cnt[used]
+    b_rmse = float(math.sqrt(b_sse[used].sum() / max(b_cnt[used].sum(), 1)))
+    stats_all = residual_statistics(base)
+    n_c = max(len(cands), 1)
+    t_crit = float(stats.t.ppf(1 - alpha / n_c, max(int(used.sum()) - 1, 1)))
+    results = []
+    for eff in cands:
+        model = base_model + eff
+        fast = any(e.kind == "operator" for e in model.effects)
+        full = model._fit(Y, W, s, start=(base.kappa.copy(), base.z.copy(), {}), max_iter=40 if fast else None)
+        sse, cnt = heldout_errors(model, full, Y, W, s, blocks, halves, gap, cv_iter=10 if fast else 60)
+        mse = sse[used] / np.maximum(cnt[used], 1)
+        rmse = float(math.sqrt(sse[used].sum() / max(cnt[used].sum(), 1)))
+        d = np.log(np.maximum(b_mse, 1e-300)) - np.log(np.maximum(mse, 1e-300))
+        if len(d) >= 2:
+            sd = float(np.std(d, ddof=1))
+            ev = float(np.mean(d) / (sd / math.sqrt(len(d)))) if sd > 0 else (math.inf if np.mean(d) > 0 else 0.0)
+        else:
+            ev = float("nan")
+        imp = 100.0 * (1 - rmse / b_rmse) if b_rmse > 0 else 0.0
+        daic, dbic = full.aic - base.aic, full.bic - base.bic
+        supported = bool(np.isfinite(ev) and ev > t_crit and rmse < b_rmse and daic < 0)
+        results.append(CandidateResult(effect=eff.name, fit=full, heldout_rmse=rmse, fold_mse=mse, evidence=ev,
+                                       improvement_pct=imp, delta_aic=daic, delta_bic=dbic, supported=supported,
+                                       statistics=stats_all.get(eff.name, {})))
+    results.sort(key=lambda c: c.heldout_rmse)
+    supported = [c for c in results if c.supported]
+    verdict = supported[0].effect if supported else None
+    worst_e, worst_f, summary = worst_edges_and_frames(base, labels, block_length, frames)
+    settings = {"n_folds": len(blocks), "fold_blocks": blocks, "buffer_frames": gap, "block_length": block_length,
+                "seed": seed, "alpha": alpha, "evidence_threshold_t": t_crit, "prior_strength": prior_strength,
+                "response": response, "edge_halves": [halves[0].tolist(), halves[1].tolist()],
+                "weighted": weights is not None}
+    diag = Diagnosis(baseline=base, baseline_heldout_rmse=b_rmse, baseline_fold_mse=b_mse, candidates=results,
+                     verdict=verdict, explanation="", worst_edges=worst_e, worst_frames=worst_f,
+                     residual_summary=summary, settings=settings, edge_labels=labels)
+    object.__setattr__(diag, "explanation", explain(diag))
+    return diag
+
+
+def _resolve_effects(effects, n_edges):
+    if effects is None:
+        names = list(effects_mod.EFFECT_NAMES)
+        effects = names
+    out = []
+    for e in effects:
+        out.append(effects_mod.make(e) if isinstance(e, str) else e)
+    if n_edges < 4:
+        out = [e for e in out if e.name != "second_mode"]  # needs >= 2 edges per half to separate two modes
+    return out
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Explanation and reports
+# ----------------------------------------------------------------------------------------------------------
+
+_PHYSICS = {
+    "delay": ("the bending reaches distal joints later than proximal ones: the load (a wind front or a "
+              "bending wave) travels along the branch, so a single instantaneous excitation z cannot describe "
+              "all joints at once. Fit the model with Delay() (lag grows with root distance); kappa from the "
+              "delayed model no longer mixes amplitude with phase. Check the camera/tracker timing only if "
+              "the lag is implausibly large."),
+    "dynamics": ("the segments do not follow the wind quasi-statically: they have inertia and resonate "
+                 "(distal segments at lower natural frequency), so they lag, amplify near resonance and ring "
+                 "after gusts. Fit with Dynamics(); interpret kappa as the static (low-frequency) gain, and "
+                 "report the natural frequencies — they are a mechanical property of the plant."),
+    "second_mode": ("the joints are driven by a second, independent excitation with its own spatial pattern "
+                    "(crosswind, out-of-plane swing, a touching leaf or side branch), so one shared z cannot "
+                    "explain every joint. Fit with SecondMode(); kappa is then the gain of the dominant mode. "
+                    "Check the footage for out-of-plane motion; a second camera view would separate it."),
+    "offset": ("the rest pose is wrong or drifts: the reference angle (first frame or median) was itself "
+               "deflected, or the plant sags/relaxes over the recording, leaving a constant and a trend in "
+               "each joint's residual. Fit with Offset(); consider a rest pose from a calm period, and note "
+               "that the paper's |delta| response turns offsets into spurious compliance."),
+    "nonlinear": ("the response is not proportional to the load at large deflections: compliant joints "
+                  "saturate (stiffen) during strong gusts, so one linear gain per joint over-predicts the "
+                  "peaks. Fit with Nonlinear(); kappa is then the small-deflection gain, and the saturation "
+                  "angle says where linear compliance stops being a good description."),
+}
+
+
+def explain(diag: Diagnosis) -> str:
+    """Plain-language explanation of the verdict with the numbers behind it."""
+    base = diag.baseline_heldout_rmse
+    if diag.verdict is None:
+        best = diag.candidates[0] if diag.candidates else None
+        txt = (f"No candidate effect improves the held-out error beyond fold-to-fold noise: the rank-1 model "
+               f"(held-out RMSE {base:.3f} deg) is adequate for these data at this noise level.")
+        if best is not None:
+            txt += (f" The closest candidate, {best.effect}, changes held-out RMSE to {best.heldout_rmse:.3f} deg "
+                    f"({best.improvement_pct:+.1f}%), evidence t = {best.evidence:.2f} against the threshold "
+                    f"{diag.settings['evidence_threshold_t']:.2f}.")
+        txt += " Remaining misfit looks like measurement noise; more frames or less tracking noise would be " \
+               "needed to resolve smaller effects."
+        return txt
+    c = diag.candidate(diag.verdict)
+    p = c.fit.effect_summary().get(c.effect, {})
+    lines = [f"Missing effect: {c.effect}. Adding it lowers the held-out RMSE from {base:.3f} to "
+             f"{c.heldout_rmse:.3f} deg ({c.improvement_pct:.1f}% lower; evidence t = {c.evidence:.1f} over "
+             f"{diag.settings['n_folds']} folds, threshold {diag.settings['evidence_threshold_t']:.2f}; "
+             f"delta AIC {c.delta_aic:.0f})."]
+    st = c.statistics
+    if c.effect == "delay":
+        tau = p.get("tau", {}).get("value")
+        lines.append(f"Fitted tip lag {tau:.2f} frames relative to the root; in the baseline residuals the "
+                     f"per-edge lag grows with root distance at {st.get('lag_slope_frames', 0):.2f} frames per "
+                     f"branch length (t = {st.get('lag_slope_t', 0):.1f}).")
+    elif c.effect == "dynamics":
+        d = c.fit.effect_summary()["dynamics"]
+        lines.append(f"Fitted natural periods {d.get('period_root_frames', float('nan')):.1f} frames at the root "
+                     f"and {d.get('period_tip_frames', float('nan')):.1f} frames at the tip, damping ratio "
+                     f"{(p.get('zeta', {}).get('value') or float('nan')):.2f}; residual spectrum peaks at "
+                     f"{st.get('residual_to_signal_spectrum_peak_cycles_per_frame', float('nan')):.3f} cycles/frame.")
+    elif c.effect == "second_mode":
+        lines.append(f"The baseline residual matrix has a leading singular value "
+                     f"{st.get('s1_over_noise_edge', float('nan')):.2f}x the noise edge and "
+                     f"{st.get('s1_over_s2', float('nan')):.2f}x the next one; the second mode's RMS amplitude is "
+                     f"{c.fit.effect_summary()['second_mode'].get('rms_amplitude_deg', float('nan')):.2f} deg.")
+    elif c.effect == "offset":
+        lines.append(f"Baseline residuals have per-edge means of RMS {st.get('rms_mean_deg', 0):.2f} deg "
+                     f"(max |t| {st.get('max_abs_mean_t', 0):.1f}) and trends of RMS {st.get('rms_trend_deg', 0):.2f} "
+                     f"deg over the record (max |t| {st.get('max_abs_trend_t', 0):.1f}).")
+    elif c.effect == "nonlinear":
+        sat = c.fit.effect_summary()["nonlinear"].get("saturation_deg")
+        lines.append(f"Saturation angle {sat:.2f} deg (99th percentile of the linear deflection "
+                     f"{st.get('q99_deflection_deg', float('nan')):.2f} deg); the baseline residual bends against "
+                     f"the prediction by {st.get('cubic_residual_at_q99_deg', 0):.3f} deg at that deflection "
+                     f"(t = {st.get('cubic_t', 0):.1f}).")
+    lines.append("What it means: " + _PHYSICS.get(c.effect, ""))
+    others = [o.effect for o in diag.candidates if o.supported and o.effect != c.effect]
+    if others:
+        lines.append("Also supported (partly mimicking the same misfit, or further effects): " + ", ".join(others)
+                     + "; refit with the verdict effect added and diagnose again to separate them.")
+    return " ".join(lines)
+
+
+def render_fit_report(fit: ModelFit, edge_labels=None, max_rows: int = 40) -> str:
+    """lmfit-style report of one fit: model, statistics, variables with standard errors."""
+    E = len(fit.kappa)
+    labels = list(edge_labels) if edge_labels is not None else [str(i) for i in range(E)]
+    out = ["[[Model]]", f"    {fit.model.name}"]
+    for eff in fit.model.effects:
+        out.append(f"    {eff.name}: {eff.equation}")
+    out += ["[[Fit Statistics]]",
+            f"    # iterations       = {fit.iterations} ({'converged' if fit.converged else 'NOT converged'})",
+            f"    # data points      = {fit.n_obs}",
+            f"    # variables        = {fit.n_params}",
+            f"    weighted SSE       = {fit.wsse:.6g}",
+            f"    RMSE               = {fit.rmse:.4f} deg",
+            f"    R-squared          = {fit.r_squared:.4f}",
+            f"    Akaike info crit   = {fit.aic:.2f}",
+            f"    Bayesian info crit = {fit.bic:.2f}",
+            f"    residual lag-1 autocorrelation = {fit.residual_autocorrelation():.3f}",
+            "[[Variables]]  (standard errors conditional on z, inflated for residual autocorrelation)"]
+    rows = []
+    for key, pv in fit.params.items():
+        name = key
+        if key.startswith("kappa["):
+            i = int(key[6:-1])
+            name = f"kappa[{labels[i]}]"
+        elif key.endswith("]"):
+            base, idx = key[:-1].split("[")
+            name = f"{base}[{labels[int(idx)]}]"
+        pct = f" ({100 * pv.stderr / abs(pv.value):.1f}%)" if pv.value and np.isfinite(pv.stderr) else ""
+        rows.append(f"    {name:<28} {pv.value: .5g} +/- {pv.stderr:.2g} {pv.unit}{pct}")
+    eff_rows = [r for r in rows if not r.strip().startswith("kappa")]
+    k_rows = [r for r in rows if r.strip().startswith("kappa")]
+    shown = eff_rows[:max_rows] + k_rows[:max_rows]
+    out += shown
+    if len(eff_rows) + len(k_rows) > len(shown):
+        out.append(f"    ... ({len(eff_rows) + len(k_rows) - len(shown)} more)")
+    for eff, st in zip(fit.model.effects, fit.states):
+        for k_, v in eff.describe(st).items():
+            out.append(f"    {eff.name}.{k_:<20} = {v:.4g}")
+    return "\n".join(out)
+
+
+def render_diagnosis_report(diag: Diagnosis) -> str:
+    """Readable text report of a diagnosis."""
+    b = diag.baseline
+    st = diag.settings
+    out = ["[[Diagnosis]]",
+           f"    baseline: rank-1 (kappa_e z_t), {b.Y.shape[0]} edges x {b.Y.shape[1]} frames, "
+           f"{b.n_obs} observations; response {st['response']}; weighted {st['weighted']}",
+           f"    held-out scheme: {st['n_folds']} contiguous test blocks, buffer {st['buffer_frames']} frames each side, "
+           f"z estimated on half the edges and scored on the other half; evidence threshold t > "
+           f"{st['evidence_threshold_t']:.2f} (alpha {st['alpha']} / {len(diag.candidates)} candidates) and AIC lower",
+           "[[Where the baseline fails]]",
+           f"    overall residual RMS {diag.residual_summary['overall_rms_deg']:.3f} deg; fit RMSE {b.rmse:.3f}, "
+           f"held-out RMSE {diag.baseline_heldout_rmse:.3f} deg"]
+    for w in diag.worst_edges:
+        out.append(f"    worst edge {w['edge']:<10} residual RMS {w['residual_rms_deg']:.3f} deg "
+                   f"({w['ratio_to_overall']:.2f}x overall)")
+    for w in diag.worst_frames:
+        out.append(f"    worst frames {w['first_frame']}-{w['last_frame']}: residual RMS {w['residual_rms_deg']:.3f} deg "
+                   f"({w['ratio_to_overall']:.2f}x overall)")
+    out.append("[[Candidates]]  (held-out RMSE before -> after, deg)")
+    out.append(f"    {'effect':<12} {'held-out RMSE':>22} {'change':>8} {'evidence t':>11} {'dAIC':>10} {'dBIC':>10}  supported")
+    for c in diag.candidates:
+        out.append(f"    {c.effect:<12} {diag.baseline_heldout_rmse:9.4f} -> {c.heldout_rmse:9.4f} "
+                   f"{-c.improvement_pct:+7.1f}% {c.evidence:11.2f} {c.delta_aic:10.1f} {c.delta_bic:10.1f}  "
+                   f"{'yes' if c.supported else 'no'}")
+    out.append("[[Verdict]]")
+    out.append(f"    {diag.verdict or 'none (the rank-1 model is adequate)'}")
+    out.append("    " + diag.explanation)
+    if diag.verdict is not None:
+        out.append("")
+        out.append(render_fit_report(diag.candidate(diag.verdict).fit, diag.edge_labels, max_rows=12))
+    return "\n".join(out)

@@ -1,0 +1,120 @@
+"""The protocol every effect term follows.
+
+The response model (:mod:`rce_gtsam.model`) predicts the bend response y[e, t] (degrees) as
+
+    x_e = L_e z                      operator effects (delay, dynamics): a linear map of the excitation z
+    u_e = kappa_e * x_e              the rank-1 core (kappa dimensionless, geometric mean 1)
+    y_e = g(u_e) + a_e(t)            an output effect g (nonlinear) and additive effects a (offset, second_mode)
+
+An effect is a small object with configuration in its constructor and no fitted state: the fitted
+values live in a ``dict`` (the effect's *state*) that the model passes in and gets back. A state holds
+``params`` (static numbers frozen when the model predicts unseen frames: a lag, a frequency, a per-edge
+offset) and ``latents`` (per-frame series re-estimated from the data of every new frame, like z itself).
+
+To write a new effect: subclass :class:`Effect`, give it a ``name``, an ``equation``, a ``fitting``
+sentence and :meth:`Effect.parameters`, implement :meth:`Effect.init` and :meth:`Effect.update`, and
+override exactly one of the contribution hooks (``apply``/``apply_T`` for an operator on z, ``output``
+for a pointwise map of kappa*x, ``additive`` for a term added to the prediction). The model composes
+effects by chaining operators, applying the (single) output map and summing additive terms.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, ClassVar
+
+import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover
+    from ..model import FitView
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """Description of one (possibly per-edge) static parameter.
+
+    name: key in the state's ``params``; unit: physical unit ("frames", "rad/frame", "deg", "1");
+    lower, upper: bounds used by the fit; per_edge: one value per edge (else one shared scalar);
+    description: one sentence for the report.
+    """
+
+    name: str
+    unit: str
+    lower: float = -np.inf
+    upper: float = np.inf
+    per_edge: bool = False
+    description: str = ""
+
+
+class Effect:
+    """Base class of a model term (see the module docstring for the protocol)."""
+
+    #: Effect name used in reports and JSON (``delay``, ``dynamics``, ...).
+    name: ClassVar[str] = "effect"
+    #: The physics as an equation (plain text).
+    equation: ClassVar[str] = ""
+    #: How the term's parameters are fitted (plain text).
+    fitting: ClassVar[str] = ""
+    #: Which hook the effect implements: "operator", "output" or "additive".
+    kind: ClassVar[str] = "additive"
+
+    # -- description ------------------------------------------------------------------------------
+    def parameters(self, n_edges: int) -> tuple[Parameter, ...]:
+        """Static parameters of this term."""
+        return ()
+
+    def latent_names(self) -> tuple[str, ...]:
+        """Names of per-frame latent series (length T) in the state's ``latents``."""
+        return ()
+
+    def n_free(self, state: dict, n_edges: int, n_frames_observed: int) -> int:
+        """Number of fitted degrees of freedom (for AIC/BIC): static parameters + latent frames."""
+        n = sum(n_edges if p.per_edge else 1 for p in self.parameters(n_edges))
+        return n + len(self.latent_names()) * n_frames_observed
+
+    # -- fitting ----------------------------------------------------------------------------------
+    def init(self, view: "FitView") -> dict:
+        """Initial state given the current core fit (``view.kappa``, ``view.z``)."""
+        raise NotImplementedError
+
+    def update(self, state: dict, view: "FitView", frozen: bool) -> dict:
+        """One block update of this term's state with everything else held fixed.
+
+        ``frozen=True``: only the latents may change (prediction of new frames with static params fixed),
+        and only on ``view.free`` frames.
+        """
+        return state
+
+    # -- contribution hooks -----------------------------------------------------------------------
+    def apply(self, X: np.ndarray, state: dict, view: "FitView") -> np.ndarray:
+        """Operator effects: per-edge linear map of X (E, T) (rows = edges)."""
+        return X
+
+    def apply_T(self, R: np.ndarray, state: dict, view: "FitView") -> np.ndarray:
+        """Operator effects: the transpose (adjoint) of :meth:`apply`, row by row."""
+        return R
+
+    def output(self, U: np.ndarray, state: dict) -> tuple[np.ndarray, np.ndarray]:
+        """Output effects: g(U) and g'(U) elementwise for U = kappa * x (degrees)."""
+        return U, np.ones_like(U)
+
+    def additive(self, state: dict, view: "FitView") -> np.ndarray | None:
+        """Additive effects: the (E, T) term added to the prediction (degrees)."""
+        return None
+
+    # -- reporting --------------------------------------------------------------------------------
+    def describe(self, state: dict) -> dict:
+        """Derived, human-meaningful numbers for the report (default: nothing extra)."""
+        return {}
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}()"
+
+    def __add__(self, other):
+        from ..model import ResponseModel
+        return ResponseModel() + self + other
+
+
+def scalar(x) -> float:
+    """A 0-d array or number as float."""
+    return float(np.asarray(x).reshape(-1)[0])

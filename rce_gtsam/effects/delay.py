@@ -1,0 +1,118 @@
+"""``delay``: the load reaches distal segments later.
+
+Physics: y_e(t) = kappa_e z(t - tau_e) with tau_e = tau * s_e, s_e the normalised root distance of the
+edge's child (0 at the root, 1 at the farthest tip). A bending wave or the wind front needs time to travel
+along the branch, so distal joints lag the proximal ones. Only *differences* in lag are identifiable
+(a lag common to all edges is absorbed by z), hence the lag is modelled relative to the root.
+Units: tau in frames (fractional; z is interpolated with a Catmull-Rom cubic, clamped at the ends).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from .base import Effect, Parameter, scalar
+from .offset import _index
+
+
+class Delay(Effect):
+    """Lag growing linearly with root distance: tau_e = tau * s_e.
+
+    max_lag: bound on |tau| in frames. The default 25 frames equals the bootstrap/CV block length: a lag
+    that long would make neighbouring blocks dependent and is far beyond a plausible travel time along a
+    branch (< 0.1 s at 30 fps for bending waves in a stem of a few tens of cm).
+    """
+
+    name = "delay"
+    kind = "operator"
+    equation = "y_e(t) = kappa_e z(t - tau s_e)   (s_e: root distance 0..1; tau in frames)"
+    fitting = ("tau by bounded scalar minimisation (scipy.optimize.minimize_scalar) of the error with z "
+               "re-solved for each tau (z profiled out), alternating with the kappa step; grid start")
+
+    def __init__(self, max_lag: float = 25.0):
+        self.max_lag = float(max_lag)
+
+    def __repr__(self) -> str:
+        return f"Delay(max_lag={self.max_lag})"
+
+    def parameters(self, n_edges: int):
+        return (Parameter("tau", "frames", -self.max_lag, self.max_lag,
+                          description="lag of the farthest tip behind the root"),)
+
+    # operator ---------------------------------------------------------------------------------------
+    def _taps(self, tau, view):
+        T = view.T
+        lag = scalar(tau) * view.s  # (E,)
+        src = np.arange(T)[None, :] - lag[:, None]
+        i0 = np.floor(src)
+        f = src - i0
+        i0 = i0.astype(int)
+        f2, f3 = f * f, f * f * f
+        w = np.stack([-0.5 * f3 + f2 - 0.5 * f, 1.5 * f3 - 2.5 * f2 + 1.0,
+                      -1.5 * f3 + 2.0 * f2 + 0.5 * f, 0.5 * f3 - 0.5 * f2], axis=-1)
+        idx = np.clip(i0[..., None] + np.arange(-1, 3), 0, T - 1)
+        return idx, w
+
+    def apply(self, X, state, view):
+        idx, w = self._taps(state["params"]["tau"], view)
+        E, T = X.shape
+        rows = np.arange(E)[:, None, None]
+        return np.sum(X[rows, idx] * w, axis=-1)
+
+    def apply_T(self, R, state, view):
+        idx, w = self._taps(state["params"]["tau"], view)
+        E, T = R.shape
+        flat = (np.arange(E)[:, None, None] * T + idx).ravel()
+        return np.bincount(flat, weights=(R[..., None] * w).ravel(), minlength=E * T).reshape(E, T)
+
+    # fitting ----------------------------------------------------------------------------------------
+    def init(self, view) -> dict:
+        i = len(view.states)
+        grid = np.array([0.0, -1.0, 1.0, -2.5, 2.5, -5.0, 5.0, -10.0, 10.0])
+        grid = grid[np.abs(grid) <= self.max_lag]
+        best, best_err = 0.0, np.inf
+        for tau in grid:
+            st = {"params": {"tau": np.array(tau)}, "latents": {}}
+            err = _sse_after_z(view, i, st)
+            if err < best_err:
+                best, best_err = tau, err
+        return {"params": {"tau": np.array(best)}, "latents": {}}
+
+    def update(self, state, view, frozen):
+        if frozen:
+            return state
+        i = _index(self, view)
+        t0 = scalar(state["params"]["tau"])
+        lo, hi = max(-self.max_lag, t0 - 3.0), min(self.max_lag, t0 + 3.0)
+
+        def prof(tau):  # error with z re-solved: tau and z are strongly coupled, so profile z out
+            return profiled_sse(view, i, {"params": {"tau": np.array(tau)}, "latents": {}})
+
+        res = minimize_scalar(prof, bounds=(lo, hi), method="bounded", options={"xatol": 0.02, "maxiter": 12})
+        tau = res.x if res.fun <= prof(t0) else t0
+        return {"params": {"tau": np.array(tau)}, "latents": {}}
+
+    def describe(self, state):
+        return {"tip_lag_frames": scalar(state["params"]["tau"])}
+
+
+def _sse_after_z(view, index, state) -> float:
+    """Weighted SSE of the model with effect ``index`` in ``state`` after one exact z step (grid search)."""
+    from ..model import FitView
+    states = list(view.states) + [state]
+    model = getattr(view, "full_model", view.model)
+    sub = model._replace(model.effects[: index + 1])
+    v = FitView(sub, view.Y0, view.W, view.s, view.free, view.kappa.copy(), view.z.copy(), states)
+    sub._z_step(v)
+    return v.wsse()
+
+
+def profiled_sse(view, index, state) -> float:
+    """Weighted SSE with effect ``index`` in ``state`` after an exact z step (kappa and others fixed)."""
+    from ..model import FitView
+    states = list(view.states)
+    states[index] = state
+    v = FitView(view.model, view.Y0, view.W, view.s, view.free, view.kappa.copy(), view.z.copy(), states)
+    view.model._z_step(v)
+    return v.wsse()

@@ -1,0 +1,92 @@
+"""``nonlinear``: the response is not proportional to the load at large deflections.
+
+Physics: each joint's deflection is a saturating (or, for ``form="cubic"``, possibly softening) odd
+function of its linear response u_e = kappa_e x_e:
+  saturation  y_e = y_s tanh(u_e / y_s)  — large-deflection stiffening: the joint "runs out" of bending,
+              parametrised by the curvature c = 1 / y_s^2 >= 0 (deg^-2; c = 0 is linear);
+  cubic       y_e = u_e - c u_e^3 / 3   — the first-order expansion of either stiffening (c > 0) or
+              softening (c < 0).
+The map acts on each joint's own deflection, so compliant joints saturate more (a shared saturation of z
+would be rank 1 and invisible). Units: c in deg^-2; y_s in degrees.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from .base import Effect, Parameter, scalar
+from .delay import _sse_after_z
+from .offset import _index
+
+
+class Nonlinear(Effect):
+    """Shared odd output nonlinearity g(kappa_e x_e); form ``"saturation"`` (tanh) or ``"cubic"``."""
+
+    name = "nonlinear"
+    kind = "output"
+    fitting = ("c by bounded least squares (scipy.optimize.least_squares) with kappa and z fixed, "
+               "alternating with Gauss-Newton core steps; started from the best of a grid")
+
+    def __init__(self, form: str = "saturation"):
+        if form not in ("saturation", "cubic"):
+            raise ValueError(f"form must be 'saturation' or 'cubic', got {form!r}")
+        self.form = form
+
+    @property
+    def equation(self):  # type: ignore[override]
+        return ("y_e = y_s tanh(kappa_e z / y_s),  c = 1/y_s^2" if self.form == "saturation"
+                else "y_e = u - c u^3 / 3,  u = kappa_e z")
+
+    def __repr__(self) -> str:
+        return f"Nonlinear(form={self.form!r})"
+
+    def parameters(self, n_edges: int):
+        lo = 0.0 if self.form == "saturation" else -np.inf
+        return (Parameter("c", "deg^-2", lo, np.inf, description="curvature 1/y_s^2 of the response"),)
+
+    def output(self, U, state):
+        c = scalar(state["params"]["c"])
+        if self.form == "cubic":
+            return U - c * U ** 3 / 3.0, 1.0 - c * U * U
+        if c <= 0:
+            return U, np.ones_like(U)
+        k = np.sqrt(c)
+        th = np.tanh(k * U)
+        return th / k, 1.0 - th * th
+
+    def init(self, view) -> dict:
+        i = len(view.states)
+        U = view.kappa[:, None] * view.transform(view.z)
+        q = float(np.quantile(np.abs(U[view.W > 0]), 0.99)) if (view.W > 0).any() else 1.0
+        q = max(q, 1e-6)
+        grid = [0.0] + [1.0 / (k * q) ** 2 for k in (4.0, 2.0, 1.0, 0.6)]
+        if self.form == "cubic":
+            grid += [-g for g in grid[1:3]]
+        best, best_err = 0.0, np.inf
+        for c in grid:
+            st = {"params": {"c": np.array(c)}, "latents": {}}
+            err = _sse_after_z(view, i, st)
+            if err < best_err:
+                best, best_err = c, err
+        return {"params": {"c": np.array(best)}, "latents": {}, "scale": q}
+
+    def update(self, state, view, frozen):
+        if frozen:
+            return state
+        i = _index(self, view)
+        q = state.get("scale", 1.0)
+        unit = 1.0 / q ** 2  # optimise c in units of 1/q^2 so the problem is well scaled
+        lo = 0.0 if self.form == "saturation" else -np.inf
+        x0 = scalar(state["params"]["c"]) / unit
+
+        def fun(p):
+            return view.residual_vector(i, {"params": {"c": np.array(p[0] * unit)}, "latents": {}})
+
+        res = least_squares(fun, [max(x0, lo)], bounds=([lo], [np.inf]), diff_step=1e-3, max_nfev=8,
+                            x_scale=[1.0])
+        return {"params": {"c": np.array(res.x[0] * unit)}, "latents": {}, "scale": q}
+
+    def describe(self, state):
+        c = scalar(state["params"]["c"])
+        return {"saturation_deg": float(1 / np.sqrt(c)) if c > 0 else float("inf")}

@@ -1,0 +1,25 @@
+"""Synthetic bend-response matrices with a hidden effect (the simulator's equations + noise), for tests."""
+
+import numpy as np
+from scipy import signal
+
+from rce_gtsam import simulate as sim
+
+
+def synth(effect=None, seed=0, E=12, T=600, noise=0.3, strength=None):
+    ss = np.random.SeedSequence(seed)
+    r1, r2, r3, r4 = (np.random.default_rng(s) for s in ss.spawn(4))
+    s = np.sort(r1.uniform(0.05, 1, E))
+    s[-1] = 1.0
+    logk = r1.normal(0, 0.5, E)
+    kappa = np.exp(logk - logk.mean())
+    z = sim.make_excitation(T, 30.0, r2, rms_deg=1.5)
+    st = dict(sim.EFFECT_DEFAULTS)
+    if strength is not None and effect is not None:
+        st[effect] = strength
+    y, _ = sim.bend_response(kappa, s, z, () if effect is None else (effect,), st, 30.0, r3)
+    b, a = signal.butter(2, 0.1)
+    n = noise * (r4.standard_normal((E, T)) + 2 * signal.filtfilt(b, a, r4.standard_normal((E, T)), axis=1))
+    Y = y + n
+    Y[r4.uniform(size=(E, T)) < 0.02] = np.nan
+    return Y, s, kappa, z, y
