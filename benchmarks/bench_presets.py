@@ -22,17 +22,20 @@ from rce_gtsam.simulate import SimulationConfig, simulate
 
 
 def variants():
+    """Paper, full default, and the default with one choice reverted or added at a time."""
     d = DEFAULT
     return {
         "paper": PAPER,
-        "+signed angles": PAPER.with_(bending={"signed": True}, compliance={"response": "signed"}),
-        "+median rest": PAPER.with_(bending={"rest": "median"}),
-        "+no moving average": PAPER.with_(smoother={"presmooth_window": 1}),
-        "+length prior": PAPER.with_(smoother={"edge_prior": "length"}),
-        "+anisotropic robust meas.": PAPER.with_(smoother={"along_across_ratio": d.smoother.along_across_ratio,
-                                                           "robust": d.smoother.robust}),
-        "+marginal weights": PAPER.with_(compliance={"weighted": True}),
-        "default": DEFAULT,
+        "default": d,
+        "default, offset prior (paper's)": d.with_(smoother={"edge_prior": "offset"}),
+        "default, no edge prior": d.with_(smoother={"edge_weight": 0.0}),
+        "default, paper temporal weights + MA5": d.with_(smoother={"presmooth_window": 5, "velocity_weight": 0.35,
+                                                                   "acceleration_weight": 0.2}),
+        "default, unsigned |delta| (paper)": d.with_(bending={"signed": False, "rest": "first"},
+                                                     compliance={"response": "abs"}),
+        "default + anisotropic 3:1": d.with_(smoother={"along_across_ratio": 3.0}),
+        "default + Huber": d.with_(smoother={"robust": "huber"}),
+        "default + marginal weights": d.with_(compliance={"weighted": True}),
     }
 
 
