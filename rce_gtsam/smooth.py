@@ -12,9 +12,9 @@ Factors (see :mod:`rce_gtsam.factors` for the residuals):
 
 With the paper's settings the problem is linear least squares (the same quadratic as the
 published LSQR solver, see :mod:`rce_gtsam.smooth_reference`); it is solved here with GTSAM's
-Levenberg-Marquardt in one exact step (non-linear options take several iterations). Marginal covariances come from the
-linearisation at the solution (robust weights included) through a block-banded selected inversion
-(:mod:`rce_gtsam.marginals`), not per-key ``gtsam.Marginals`` queries.
+Levenberg-Marquardt in one exact step (the non-linear options take several iterations).
+Marginal covariances come from the linearisation at the solution (robust weights included) through
+a block-banded selected inversion (:mod:`rce_gtsam.marginals`), not per-key ``gtsam.Marginals``.
 
 Variable keys are ``gtsam.symbol('p', t * N + i)`` for node row ``i`` (order of ``tracks.node_ids``)
 and frame ``t``: sorted key order is frame-major, which the marginal computation relies on.
@@ -48,7 +48,14 @@ def variable_key(node_row: int, frame: int, n_nodes: int) -> int:
 @dataclass(frozen=True)
 class SmootherReport:
     """What the smoother did. Times in seconds; errors are GTSAM's 0.5 * sum of squared whitened
-    residuals (robust losses applied)."""
+    residuals (robust losses applied).
+
+    converged: linear (paper) problems — the normal-equation residual at the solution is below
+    :data:`LINEAR_OPTIMALITY_TOL`; non-linear ones — LM stopped on its error tolerances, before the
+    iteration cap and without exhausting its damping range.
+    seconds_optimize includes GTSAM's linearisation at the solution (shared with the marginals);
+    seconds_marginals is the selected inversion.
+    """
 
     iterations: int
     initial_error: float
@@ -337,9 +344,10 @@ def optimize(problem: FactorGraphProblem, linear: bool) -> tuple[gtsam.Values, d
     initial_error = opt.error()  # the optimizer state evaluates it on construction
     result = opt.optimize()
     iters = int(opt.iterations())
+    # LM also gives up when lambda exceeds its upper bound (no step decreases the error): not converged.
+    converged = iters < params.getMaxIterations() and opt.lambda_() < params.getlambdaUpperBound()
     return result, {"iterations": iters, "initial_error": float(initial_error),
-                    "final_error": float(opt.error()),
-                    "converged": iters < params.getMaxIterations()}
+                    "final_error": float(opt.error()), "converged": bool(converged)}
 
 
 def smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) -> SmoothedTracks:

@@ -117,6 +117,22 @@ def test_plant2_paper_gtsam_equals_direct_solve(shared_data):
     assert np.abs(res.tracks.xy - lsqr.xy)[res.observed].max() < 5e-3
 
 
+def test_optimality_check_separates_solution_from_start(tree):
+    import gtsam
+
+    from rce_gtsam.marginals import whitened_jacobian
+    from rce_gtsam.smooth import LINEAR_OPTIMALITY_TOL, build_problem, normal_equation_residual, optimize
+
+    tracks, graph = tree
+    problem = build_problem(moving_average(tracks, 5), graph, PAPER.smoother)
+    result, _ = optimize(problem, linear=True)
+    for values, small in ((result, True), (problem.initial, False)):
+        A, b = whitened_jacobian(problem.graph.linearize(values), n_cols=int(values.dim()))
+        r = normal_equation_residual(A, b)
+        assert (r < LINEAR_OPTIMALITY_TOL) == small, r
+    assert isinstance(result, gtsam.Values)
+
+
 def test_zero_weights_drop_factor_families(tree):
     tracks, graph = tree
     cfg = SmootherConfig(presmooth_window=1, velocity_weight=0.0, acceleration_weight=0.0, marginals=True)
