@@ -499,7 +499,7 @@ def explain(diag: Diagnosis) -> str:
                f"(held-out RMSE {base:.3f} deg) is adequate for these data at this noise level.")
         if best is not None:
             txt += (f" The closest candidate, {best.effect}, changes held-out RMSE to {best.heldout_rmse:.3f} deg "
-                    f"({best.improvement_pct:+.1f}%), evidence t = {best.evidence:.2f} against the threshold "
+                    f"({-best.improvement_pct:+.1f}%), evidence t = {best.evidence:.2f} against the threshold "
                     f"{diag.settings['evidence_threshold_t']:.2f}.")
         txt += " Remaining misfit looks like measurement noise; more frames or less tracking noise would be " \
                "needed to resolve smaller effects."
