@@ -8,18 +8,21 @@ information matrix ``Λ = JᵀJ`` at the solution is block-banded with block ban
 We take the whitened Jacobian ``J`` of GTSAM's own linearisation at the solution
 (``NonlinearFactorGraph.linearize`` → ``GaussianFactorGraph.sparseJacobian_``; noise models and the
 robust M-estimator weights are baked in exactly as GTSAM applies them, so this is the same
-information matrix ``gtsam.Marginals`` factorises), then compute
+information matrix ``gtsam.Marginals`` factorises), group every ``b`` consecutive frames into one
+super-block (making Λ block-tridiagonal) and compute
 
-* a block Cholesky factor ``Λ = L Lᵀ`` (L block lower-banded, bandwidth b), frame by frame, and
-* the Takahashi / Erisman–Tinney backward recursion for the blocks of ``Σ = Λ⁻¹`` inside the band:
+* a block Cholesky factor ``Λ = L Lᵀ``, super-block by super-block, and
+* the Takahashi / Erisman–Tinney backward recursion for the diagonal blocks of ``Σ = Λ⁻¹``:
+  ``Σ_tt = G_tᵀ G_t + H_t Σ_{t+1,t+1} H_tᵀ`` with ``G_t = L_tt⁻¹`` and ``H_t = G_tᵀ L_{t+1,t}ᵀ``.
 
-      Σ_ij = G_iiᵀ ( δ_ij G_ii − Σ_{k=i+1}^{i+b} L_kiᵀ Σ_kj ),   j = i..i+b,   G_ii = L_ii⁻¹,
-
-  evaluated for j > i first, then j = i.
-
-Cost: O(F · b² · n³) with small dense n×n blocks, versus one sparse query per key for
+Cost: O(F · b² · n³) in ~F/b small dense products, versus a Bayes-tree query per key for
 ``gtsam.Marginals``. The within-frame blocks ``Σ_tt`` are the joint covariances of all nodes at
 frame t; their 2×2 diagonal blocks are the per-node marginals.
+
+Caveat for non-linear priors: like ``gtsam.Marginals``, this is the Gauss-Newton (JᵀJ) information,
+the Laplace approximation at the solution. For a compressed length prior (segment shorter than its
+rest length) the exact Hessian has less transverse curvature than JᵀJ, so there the covariance is
+optimistic.
 """
 
 from __future__ import annotations

@@ -175,6 +175,13 @@ def _check_inputs(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) ->
             raise InputError(tracks.source, "with velocity and acceleration weights both 0, this node position is "
                                             "not determined by any factor (unobserved, no temporal link)",
                              f"node {tracks.node_ids[r]}, frame {f}")
+    elif config.velocity_weight <= 0:
+        # Acceleration alone leaves a straight-line trend free per node unless two observations pin it.
+        few = np.flatnonzero(obs.sum(axis=1) < 2)
+        if few.size:
+            n = tracks.node_ids[few[0]]
+            raise InputError(tracks.source, f"node {n} is observed in fewer than 2 frames; with velocity weight 0 "
+                                            "its trajectory's slope is not determined", f"node {n}")
     if config.robust not in (None, "huber", "cauchy"):
         raise ValueError(f"SmootherConfig.robust must be None, 'huber' or 'cauchy', got {config.robust!r}")
     if config.edge_prior not in ("offset", "length"):

@@ -219,5 +219,11 @@ def test_input_errors(tree):
     with pytest.raises(InputError, match="not determined") as e:
         smooth_tracks(Tracks(node_ids=tracks.node_ids, xy=gap, source="t.csv"), graph, no_time)
     assert e.value.where == "node 4, frame 7" and e.value.source == "t.csv"
+    one = full.xy.copy()
+    one[full.index(4), 1:] = np.nan
+    accel_only = SmootherConfig(presmooth_window=1, velocity_weight=0.0, acceleration_weight=20.0)
+    with pytest.raises(InputError, match="fewer than 2 frames") as e:
+        smooth_tracks(Tracks(node_ids=full.node_ids, xy=one, source="t.csv"), graph, accel_only)
+    assert e.value.where == "node 4"
     with pytest.raises(ValueError, match="edge_prior"):
         smooth_tracks(tracks, graph, SmootherConfig(edge_prior="rigid"))
