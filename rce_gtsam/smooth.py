@@ -364,6 +364,13 @@ def smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) ->
     Raises :class:`~rce_gtsam.errors.InputError` if tracks and graph do not match, a node is never
     observed or an edge's nodes are never observed together.
     """
+    from .marginals import single_threaded_blas
+
+    with single_threaded_blas():  # see marginals.single_threaded_blas: small matrices, shared cores
+        return _smooth_tracks(tracks, graph, config)
+
+
+def _smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) -> SmoothedTracks:
     from .marginals import frame_marginals, whitened_jacobian  # local: marginals uses this key layout
 
     _check_inputs(tracks, graph, config)

@@ -28,6 +28,7 @@ import scipy.sparse.linalg as spla
 
 from .factors import MEASUREMENT_WEIGHT_FLOOR, EdgeOffsetFactor
 from .graph import BranchGraph
+from .marginals import single_threaded_blas
 from .presets import SmootherConfig
 from .presmooth import moving_average
 from .tracks import Tracks
@@ -116,10 +117,11 @@ def paper_system(pre: Tracks, graph: BranchGraph, config: SmootherConfig) -> Pap
 def solve_direct(system: PaperSystem) -> ReferenceSolution:
     """Exact least-squares solution via a sparse LU of the normal equations AᵀA p = Aᵀb (both axes)."""
     t0 = time.perf_counter()
-    At = system.A.T.tocsr()
-    solve = spla.factorized((At @ system.A).tocsc())
-    rhs = At @ system.b
-    p = np.stack([solve(rhs[:, 0]), solve(rhs[:, 1])], axis=1)
+    with single_threaded_blas():
+        At = system.A.T.tocsr()
+        solve = spla.factorized((At @ system.A).tocsc())
+        rhs = At @ system.b
+        p = np.stack([solve(rhs[:, 0]), solve(rhs[:, 1])], axis=1)
     return ReferenceSolution(xy=system.unpack(p), method="direct", seconds=time.perf_counter() - t0)
 
 
@@ -129,7 +131,8 @@ def solve_lsqr(system: PaperSystem, atol: float = 1e-6, btol: float = 1e-6,
     t0 = time.perf_counter()
     out, its, stops = [], [], []
     for axis in (0, 1):
-        res = spla.lsqr(system.A, system.b[:, axis], atol=atol, btol=btol, iter_lim=iter_lim)
+        with single_threaded_blas():
+            res = spla.lsqr(system.A, system.b[:, axis], atol=atol, btol=btol, iter_lim=iter_lim)
         out.append(res[0])
         stops.append(int(res[1]))
         its.append(int(res[2]))
