@@ -98,9 +98,12 @@ PAPER = Preset(name="paper")
 
 #: Our method. Each choice was measured against simulated ground truth (benchmarks/bench_presets.py;
 #: effect-free branches, 900 frames, 5 seeds, median kappa log-RMSE; paper preset 0.774):
-#: * no frame-0 offset prior: it pulls every frame toward the first frame's shape and scrambles kappa
-#:   (all other choices below with the offset prior: 0.870); a length-only prior (GTSAM RangeFactor2) is
-#:   neutral for kappa (0.271 vs 0.271 with no edge prior) and keeps segment lengths physical;
+#: * no edge prior: the paper's frame-0 offset prior pulls every frame toward the first frame's shape
+#:   and scrambles kappa (all other choices below with the offset prior: 0.870). A length-only prior
+#:   (GTSAM RangeFactor2) did not improve kappa (8 seeds: 0.343 vs 0.331 without) and makes the problem
+#:   non-convex: LM needs 7-25 iterations (12 s on plant 2) and can stop short at tracking glitches.
+#:   Without it the graph is linear and LM converges in one iteration. It stays available
+#:   (``edge_prior="length"``, ``edge_weight > 0``);
 #: * a stronger acceleration prior instead of the 5-frame moving average: tracker noise is white-ish
 #:   (lag-1 autocorrelation ~0.26) while wind sway is slow, so a low-pass helps. With w_a / w_m = 20 the
 #:   smoother's cut-off period is ~12 frames (~2.5 Hz at 30 fps), above the sway modes of a branch;
@@ -111,7 +114,7 @@ PAPER = Preset(name="paper")
 DEFAULT = Preset(
     name="default",
     smoother=SmootherConfig(presmooth_window=1, velocity_weight=0.0, acceleration_weight=20.0,
-                            edge_prior="length"),
+                            edge_weight=0.0),
     bending=BendingConfig(signed=True, rest="median"),
     compliance=ComplianceConfig(response="signed"),
 )
