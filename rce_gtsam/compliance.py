@@ -87,6 +87,16 @@ def _initial_z(Y: np.ndarray, W: np.ndarray) -> np.ndarray:
     return z
 
 
+def _matvec(M: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(B, E, T) @ (B, T) -> (B, E)."""
+    return np.matmul(M, v[:, :, None])[:, :, 0]
+
+
+def _matvec_t(M: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(B, E, T)^T @ (B, E) -> (B, T)."""
+    return np.matmul(v[:, None, :], M)[:, 0, :]
+
+
 def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray | None = None):
     """Fit (B, E, T) data (NaN = missing) as B independent rank-1 problems.
 
@@ -105,17 +115,18 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
     converged = np.zeros(B, dtype=bool)
     change = np.full(B, np.inf)
     n_used = np.zeros((B, E))
+    WY = Wf * Y0  # constant over iterations: every step below is a batched mat-vec (BLAS)
+    Wc = W.astype(float)
     for _ in range(config.n_iter):
         if not active.any():
             break
         a = np.flatnonzero(active)
-        Ya, Wa, Wfa, za, prev = Y0[a], W[a], Wf[a], z[a], kappa[a]
-        # kappa step
-        S = Wa & (np.abs(za)[:, None, :] > EPS)
-        n = S.sum(axis=2).astype(float)
-        Sw = np.where(S, Wfa, 0.0)
-        num = np.einsum("bet,bt,bet->be", Sw, za, Ya)
-        den = np.maximum(np.einsum("bet,bt->be", Sw, za * za), EPS)
+        WYa, Wfa, Wca, za, prev = WY[a], Wf[a], Wc[a], z[a], kappa[a]
+        # kappa step over frames with data and usable excitation (|z| > EPS)
+        m = (np.abs(za) > EPS).astype(float)
+        n = _matvec(Wca, m)
+        num = _matvec(WYa, za * m)
+        den = np.maximum(_matvec(Wfa, za * za * m), EPS)
         k_hat = num / den
         sign = np.where(k_hat < 0, -1.0, 1.0) if signed else np.ones_like(k_hat)
         mag = np.maximum(np.abs(k_hat) if signed else k_hat, EPS)
@@ -126,15 +137,14 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
         logs = np.where(big, np.log(np.maximum(np.abs(k_new), EPS)), 0.0)
         gm = np.exp(logs.sum(axis=1) / np.maximum(big.sum(axis=1), 1))
         k_new = np.where(big, k_new / gm[:, None], k_new)
-        # z step
-        K = Wa & (np.abs(k_new) > EPS)[:, :, None]
-        Kw = np.where(K, Wfa, 0.0)
-        znum = np.einsum("bet,be,bet->bt", Kw, k_new, Ya)
-        zden = np.maximum(np.einsum("bet,be->bt", Kw, k_new * k_new), EPS)
+        # z step over edges observed at t with |kappa| > EPS
+        mk = big.astype(float)
+        znum = _matvec_t(WYa, k_new * mk)
+        zden = np.maximum(_matvec_t(Wfa, k_new * k_new * mk), EPS)
         z_new = znum / zden
         if not signed:
             z_new = np.maximum(z_new, 0.0)
-        z_new = np.where(K.any(axis=1), z_new, 0.0)
+        z_new = np.where(_matvec_t(Wca, mk) > 0, z_new, 0.0)
         ch = np.max(np.abs(np.log(np.maximum(np.abs(k_new), EPS)) - np.log(np.maximum(np.abs(prev), EPS))), axis=1)
         kappa[a], z[a], n_used[a], change[a] = k_new, z_new, n, ch
         iterations[a] += 1
