@@ -188,15 +188,25 @@ def heldout_errors(model: ResponseModel, full: ModelFit, Y, W, s, blocks, halves
         tr = model._fit(Ytr, Wtr, s, start=(full.kappa.copy(), z0, st0), max_iter=cv_iter, refit_shared=False)
         free = np.zeros(T, bool)
         free[lo:hi] = True
+        # prior on the held-out z: zero mean, the training z's variance; precision in weighted-SSE units
+        # = (training residual variance) / (z variance) — the posterior mean of z given edges A. It only
+        # matters for frames few A observations determine (e.g. seen through a long lag only).
+        trained = np.ones(T, bool)
+        trained[lo:hi] = False
+        z_var = float(np.mean(tr.z[trained] ** 2)) if trained.any() else 0.0
+        z_ridge = (tr.wsse / max(tr.n_obs, 1)) / z_var if z_var > 0 else 0.0
         for A, B in (halves, halves[::-1]):
             if len(A) == 0 or len(B) == 0:
                 continue
+            # z on the left-out window is estimated from edges A over the whole window (test block and
+            # buffers: none of it was used in training, none of it is scored), so that operators with
+            # memory (delay, dynamics) see the excitation that drives the block's first frames
             Yte = np.full_like(Y, np.nan)
-            Yte[np.ix_(A, np.arange(a, b))] = Y[np.ix_(A, np.arange(a, b))]
+            Yte[np.ix_(A, np.arange(lo, hi))] = Y[np.ix_(A, np.arange(lo, hi))]
             Wte = np.where(np.isfinite(Yte), W, 0.0)
             st = {eff.name: s_ for eff, s_ in zip(model.effects, tr.states)}
             est = model._fit(Yte, Wte, s, start=(tr.kappa.copy(), tr.z.copy(), st), frozen=True, free=free,
-                             max_iter=cv_iter)
+                             max_iter=cv_iter, z_ridge=z_ridge)
             pred = est.predict()[np.ix_(B, np.arange(a, b))]
             y = Y[np.ix_(B, np.arange(a, b))]
             ok = np.isfinite(y)

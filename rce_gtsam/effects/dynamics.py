@@ -16,7 +16,6 @@ from functools import lru_cache
 
 import numpy as np
 from scipy import signal
-from scipy.linalg import expm
 from scipy.optimize import least_squares
 
 from .base import Effect, Parameter, scalar
@@ -27,25 +26,57 @@ OMEGA_MIN, OMEGA_MAX = 0.05, 2 * np.pi  # rad/frame: a period of ~125 frames .. 
 ZETA_MIN, ZETA_MAX = 0.03, 2.0
 
 
-@lru_cache(maxsize=4096)
-def _coeffs(omega: float, zeta: float, T: int):
-    """lfilter (b, a) of the oscillator discretised with a first-order hold, and its free response from a
-    unit steady state. Same equations as ``scipy.signal.cont2discrete(method="foh")`` (augmented matrix
-    exponential), written out for the 2-state case because the generic routine costs ~10 ms per call."""
-    A = np.array([[0.0, 1.0], [-omega * omega, -2.0 * zeta * omega]])
-    em = np.zeros((4, 4))
-    em[:2, :2] = A
-    em[:2, 2] = [0.0, omega * omega]
-    em[2, 3] = 1.0
-    ms = expm(em)
-    ad, m12, m13 = ms[:2, :2], ms[:2, 2], ms[:2, 3]
-    bd = m12 - m13 + ad @ m13
-    dd = m13[0]  # C = [1, 0], D = 0
-    a = np.array([1.0, -(ad[0, 0] + ad[1, 1]), ad[0, 0] * ad[1, 1] - ad[0, 1] * ad[1, 0]])
-    b = dd * a + np.array([0.0, bd[0], -ad[1, 1] * bd[0] + ad[0, 1] * bd[1]])
-    zi = signal.lfilter_zi(b, a)
-    free_resp = signal.lfilter(b, a, np.zeros(T), zi=zi)[0]  # response to a unit initial steady state
-    return b, a, free_resp
+def _foh_coeffs(omega: np.ndarray, zeta: float) -> tuple[np.ndarray, np.ndarray]:
+    """lfilter (b, a) rows (E, 3) of the oscillator discretised with a first-order hold, for every omega.
+
+    The same equations as ``scipy.signal.cont2discrete(method="foh")`` (augmented matrix exponential of
+    [[A, B, 0], [0, 0, 1], [0, 0, 0]]), written in closed form for the 2-state system so that all edges
+    are computed at once: Phi = e^A by the 2x2 formula e^(mu) [cosh(d) I + sinh(d)/d (A - mu I)],
+    mu = -zeta omega, d = sqrt(mu^2 - omega^2) (complex when under-damped), and the hold integrals
+    M12 = A^-1 (Phi - I) B, M13 = M12 - (A^-1 Phi - A^-2 (Phi - I)) B (A invertible: omega > 0)."""
+    w = np.asarray(omega, dtype=float)
+    E = w.size
+    A = np.zeros((E, 2, 2))
+    A[:, 0, 1] = 1.0
+    A[:, 1, 0] = -w * w
+    A[:, 1, 1] = -2.0 * zeta * w
+    mu = -zeta * w
+    d = np.sqrt((mu * mu - w * w).astype(complex))
+    small = np.abs(d) < 1e-8
+    sinhc = np.where(small, 1.0 + d * d / 6.0, np.sinh(d) / np.where(small, 1.0, d))
+    I2 = np.eye(2)[None]
+    Phi = np.real(np.exp(mu)[:, None, None] * (np.cosh(d)[:, None, None] * I2
+                                               + sinhc[:, None, None] * (A - mu[:, None, None] * I2)))
+    Ainv = np.zeros((E, 2, 2))
+    Ainv[:, 0, 0] = -2.0 * zeta / w
+    Ainv[:, 0, 1] = -1.0 / (w * w)
+    Ainv[:, 1, 0] = 1.0
+    B = np.stack([np.zeros(E), w * w], axis=1)[..., None]  # (E, 2, 1)
+    PmI = Phi - I2
+    M12 = Ainv @ PmI @ B
+    M13 = M12 - (Ainv @ Phi - Ainv @ Ainv @ PmI) @ B
+    bd = (M12 - M13 + Phi @ M13)[..., 0]
+    dd = M13[:, 0, 0]
+    a = np.stack([np.ones(E), -(Phi[:, 0, 0] + Phi[:, 1, 1]),
+                  Phi[:, 0, 0] * Phi[:, 1, 1] - Phi[:, 0, 1] * Phi[:, 1, 0]], axis=1)
+    b = dd[:, None] * a + np.stack([np.zeros(E), bd[:, 0], -Phi[:, 1, 1] * bd[:, 0] + Phi[:, 0, 1] * bd[:, 1]],
+                                   axis=1)
+    return b, a
+
+
+@lru_cache(maxsize=256)
+def _bank(omegas: tuple, zeta: float, T: int):
+    """Per-edge filters over a record of T frames: (free responses (E, T), frequency responses (E, T + 1)).
+
+    The impulse response h_e over the record is computed by lfilter; the filter is then applied as a linear
+    convolution with h_e through zero-padded FFTs of length 2T (exact, and one batched FFT for all edges).
+    The free response from a unit initial steady state is 1 - cumsum(h_e): static gain 1 means the steady
+    state minus the step response."""
+    b, a = _foh_coeffs(np.array(omegas), zeta)
+    imp = np.zeros(T)
+    imp[0] = 1.0
+    h = np.stack([signal.lfilter(b[e], a[e], imp) for e in range(len(omegas))])
+    return 1.0 - np.cumsum(h, axis=1), np.fft.rfft(h, 2 * T, axis=1)
 
 
 class Dynamics(Effect):
@@ -69,23 +100,31 @@ class Dynamics(Effect):
         lr, lt = np.log(scalar(p["omega_root"])), np.log(scalar(p["omega_tip"]))
         return np.exp((1 - s) * lr + s * lt)
 
-    def _filters(self, state, view):
+    def _stack(self, state, view):
+        """(free responses (E, T), frequency responses (E, T + 1)) of every edge's filter."""
         om = self.omegas(state, view.s)
         zeta = scalar(state["params"]["zeta"])
-        return [_coeffs(round(float(w), 10), round(zeta, 10), view.T) for w in om]
+        return _bank(tuple(round(float(w), 12) for w in om), round(zeta, 12), view.T)
 
     def apply(self, X, state, view):
-        out = np.empty_like(X)
-        for e, (b, a, fr) in enumerate(self._filters(state, view)):
-            out[e] = signal.lfilter(b, a, X[e]) + X[e, 0] * fr
-        return out
+        # the filter as a convolution with its impulse response, all edges in one FFT (exact: zero padding
+        # to 2T makes it linear), plus the free response of the initial steady state x[0]
+        T = X.shape[1]
+        fr, Hf = self._stack(state, view)
+        return np.fft.irfft(np.fft.rfft(X, 2 * T, axis=1) * Hf, 2 * T, axis=1)[:, :T] + X[:, :1] * fr
 
     def apply_T(self, R, state, view):
-        out = np.empty_like(R)
-        for e, (b, a, fr) in enumerate(self._filters(state, view)):
-            out[e] = signal.lfilter(b, a, R[e][::-1])[::-1]
-            out[e, 0] += float(np.dot(fr, R[e]))
+        T = R.shape[1]
+        fr, Hf = self._stack(state, view)
+        out = np.fft.irfft(np.fft.rfft(R, 2 * T, axis=1) * np.conj(Hf), 2 * T, axis=1)[:, :T]
+        out[:, 0] += np.sum(fr * R, axis=1)
         return out
+
+    def transfer(self, state, view, n_fft: int):
+        """Frequency response of each edge's filter on the rfft grid of length ``n_fft`` (E, n_fft//2 + 1)."""
+        if n_fft != 2 * view.T:
+            raise ValueError("transfer is tabulated for n_fft = 2 T")
+        return self._stack(state, view)[1]
 
     @staticmethod
     def _state(p):
