@@ -1,4 +1,5 @@
-"""The analysis pipeline: tracks -> smoothed tracks -> bends -> response matrix -> rank-1 compliance.
+"""The analysis pipeline: tracks -> smoothed tracks -> bends -> response matrix -> rank-1 compliance
+(optionally extended by physical effect terms, ``analyze(..., effects=("delay",))``).
 
 Every stage is a plain function of typed values; :func:`analyze` chains them and times each one.
 Which numbers and switches each stage uses comes from a :class:`~rce_gtsam.presets.Preset`.
@@ -14,6 +15,7 @@ import numpy as np
 
 from .bending import BendingResult, compute_bending
 from .compliance import BootstrapCI, Rank1Fit, bootstrap_kappa, fit_rank1
+from .extended_fit import ExtendedBootstrapInfo, ExtendedFit, bootstrap_extended, fit_extended
 from .geometry import Geometry, compute_geometry, edge_lengths
 from .graph import BranchGraph, load_graph
 from .presets import Preset, get_preset
@@ -152,11 +154,13 @@ class AnalysisResult:
     bending: BendingResult
     raw_bending: BendingResult
     response: Response
-    fit: Rank1Fit
+    fit: Rank1Fit | ExtendedFit
     ci: BootstrapCI | None
     smoothing: SmoothingMetrics
     timings_s: dict[str, float] = field(default_factory=dict)
     inputs: dict[str, str] = field(default_factory=dict)
+    effects: tuple[str, ...] = ()
+    effects_bootstrap: ExtendedBootstrapInfo | None = None
 
     @property
     def kappa(self) -> dict[tuple[int, int], float]:
@@ -175,18 +179,47 @@ class AnalysisResult:
         from .results import compliance_summary
         return compliance_summary(self)
 
-    def write(self, out_dir: str | Path, **kwargs) -> dict[str, Path]:
+    def effects_report(self) -> dict | None:
+        """The ``effects`` section of report.json (None without effects): the extended model, its effect
+        parameters (value, stderr, unit), fit statistics and how the bootstrap treated the effects."""
+        if not self.effects:
+            return None
+        out = self.fit.report_dict()
+        out["bootstrap"] = None if self.effects_bootstrap is None else self.effects_bootstrap.as_dict()
+        return out
+
+    def write(self, out_dir: str | Path, extra_writers=(), **kwargs) -> dict[str, Path]:
         from .results import write_outputs
-        return write_outputs(self, out_dir, **kwargs)
+        writers = list(extra_writers)
+        if self.effects:
+            writers.insert(0, _write_effects_report)
+        return write_outputs(self, out_dir, extra_writers=writers, **kwargs)
+
+
+def _write_effects_report(result: AnalysisResult, tmp: Path) -> dict:
+    """Add the ``effects`` section to the report.json that :func:`~rce_gtsam.results.write_outputs` wrote."""
+    import json
+
+    from .results import _jsonable
+    path = Path(tmp) / "report.json"
+    report = json.loads(path.read_text())
+    report["effects"] = _jsonable(result.effects_report())
+    path.write_text(json.dumps(report, indent=2) + "\n")
+    return {}
 
 
 def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset: str | Preset = "default",
-            seed: int | None = None, n_boot: int | None = None) -> AnalysisResult:
+            seed: int | None = None, n_boot: int | None = None, effects: tuple[str, ...] | str = ()) -> AnalysisResult:
     """Run the whole analysis on saved tracks.
 
     ``tracks`` and ``graph`` may be objects or file paths. ``seed`` and ``n_boot`` override the preset's
-    bootstrap seed and resample count.
+    bootstrap seed and resample count. ``effects``: names of physical effect terms (``delay``,
+    ``dynamics``, ``second_mode``, ``offset``, ``nonlinear``; a tuple or ``"a,b"``) to add to the rank-1
+    model; kappa and its bootstrap CIs then come from the extended model
+    (:mod:`rce_gtsam.extended_fit`). An unknown name is an :class:`~rce_gtsam.errors.InputError`.
     """
+    from .diagnosis_io import parse_effect_names
+    effects = parse_effect_names(effects, source="effects") or ()
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     inputs = {}
@@ -224,12 +257,20 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
 
     t = time.perf_counter()
     weights = response.weights if preset.compliance.weighted else None
-    fit = fit_rank1(response.Y, preset.compliance, weights)
+    boot_info = None
+    if effects:
+        fit = fit_extended(response.Y, effects, preset.compliance, weights, response.root_distance)
+    else:
+        fit = fit_rank1(response.Y, preset.compliance, weights)
     timings["fit"] = time.perf_counter() - t
     t = time.perf_counter()
-    ci = bootstrap_kappa(response.Y, preset.compliance, weights)
+    if effects:
+        ci, boot_info = bootstrap_extended(fit, preset.compliance)
+    else:
+        ci = bootstrap_kappa(response.Y, preset.compliance, weights)
     timings["bootstrap"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     return AnalysisResult(graph=graph, tracks=tracks, preset=preset, smoothed=smoothed, geometry=geometry,
                           bending=bending, raw_bending=raw_bending, response=response, fit=fit, ci=ci,
-                          smoothing=smoothing, timings_s=timings, inputs=inputs)
+                          smoothing=smoothing, timings_s=timings, inputs=inputs, effects=tuple(effects),
+                          effects_bootstrap=boot_info)

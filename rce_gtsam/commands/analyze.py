@@ -1,4 +1,4 @@
-"""``rce analyze TRACKS GRAPH --out DIR``: the whole analysis on saved tracks."""
+"""``rce analyze TRACKS GRAPH --out DIR [--effects a,b]``: the whole analysis on saved tracks."""
 
 from __future__ import annotations
 
@@ -20,26 +20,27 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=None, help="bootstrap RNG seed (default: the preset's, 0)")
     p.add_argument("--bootstrap", type=int, default=None, metavar="N",
                    help="bootstrap resamples (default: the preset's, 250; 0 disables CIs)")
+    p.add_argument("--effects", default="", metavar="A,B",
+                   help="add physical effect terms to the rank-1 model and report kappa (with bootstrap CIs) "
+                        "from the extended model: comma-separated from delay, dynamics, second_mode, offset, "
+                        "nonlinear (see `rce diagnose` for which one your data need)")
     p.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd", help="also save a Rerun recording")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.set_defaults(func=run)
 
 
 def extra_writers(args: argparse.Namespace, video=None, diagnosis=None) -> list:
-    """Figure, overlay and Rerun writers for ``AnalysisResult.write`` (each skipped if unavailable)."""
+    """Figure and overlay writers for ``AnalysisResult.write`` (none with ``--no-figures``)."""
     writers = []
     if not getattr(args, "no_figures", False):
-        try:
-            from ..viz.figures import write_figures
-            from ..viz.overlays import write_overlays
-        except ImportError:
-            pass
-        else:
-            def figures(result, tmp):
-                out = dict(write_figures(result, tmp / "figures", diagnosis=diagnosis))
-                out.update(write_overlays(result, tmp / "figures", first_frame=_first_frame(video)))
-                return out
-            writers.append(figures)
+        from ..viz.figures import write_figures  # a broken install must fail here, not silently skip figures
+        from ..viz.overlays import write_overlays
+
+        def figures(result, tmp):
+            out = dict(write_figures(result, tmp / "figures", diagnosis=diagnosis))
+            out.update(write_overlays(result, tmp / "figures", first_frame=_first_frame(video)))
+            return out
+        writers.append(figures)
     return writers
 
 
@@ -64,7 +65,11 @@ def save_recording(args, result, video=None, diagnosis=None) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..pipeline import analyze
 
-    result = analyze(args.tracks, args.graph, preset=args.preset, seed=args.seed, n_boot=args.bootstrap)
+    from ..diagnosis_io import parse_effect_names
+
+    effects = parse_effect_names(args.effects) or ()  # fail on a bad name before the (slow) analysis
+    result = analyze(args.tracks, args.graph, preset=args.preset, seed=args.seed, n_boot=args.bootstrap,
+                     effects=effects)
     files = result.write(args.out, extra_writers=extra_writers(args))
     save_recording(args, result)
     print(format_summary(result))
@@ -83,7 +88,8 @@ def format_summary(result) -> str:
         f"{result.smoothed.report.final_error:.4g}; bending RMS {sm['mean_bend_rms_raw_deg']:.2f} -> "
         f"{sm['mean_bend_rms_smoothed_deg']:.2f} deg ({sm['bend_rms_reduction_pct']:.1f}% lower), edge-length CV "
         f"{sm['mean_edge_length_cv_raw']:.3f} -> {sm['mean_edge_length_cv_smoothed']:.3f}",
-        f"rank-1 fit: {fit.iterations} ALS iterations, {'converged' if fit.converged else 'NOT converged'}",
+        _fit_line(result),
+        *_effects_lines(result),
         "",
         f"{'edge':>10} {'zone':>8} {'kappa':>7} {'95% CI':>17} {'U_e':>6}",
     ]
@@ -97,3 +103,37 @@ def format_summary(result) -> str:
     lines.append(f"\ntotal {tot:.2f} s (" + ", ".join(f"{k} {v:.2f}" for k, v in result.timings_s.items()
                                                      if k != "total") + ")")
     return "\n".join(lines)
+
+
+def _fit_line(result) -> str:
+    fit = result.fit
+    state = "converged" if fit.converged else "NOT converged"
+    if not getattr(result, "effects", ()):
+        return f"rank-1 fit: {fit.iterations} ALS iterations, {state}"
+    mf = fit.model_fit
+    return (f"model {mf.model.name}: {fit.iterations} iterations, {state}; fit RMSE "
+            f"{fit.baseline_rmse_deg:.3f} deg (rank-1) -> {mf.rmse:.3f} deg")
+
+
+def _effects_lines(result) -> list[str]:
+    """One line per shared effect parameter (value +/- standard error, unit); per-edge terms are summarised."""
+    if not getattr(result, "effects", ()):
+        return []
+    lines = []
+    for name, summary in result.fit.model_fit.effect_summary().items():
+        parts = []
+        for key, v in summary.items():
+            if "[" in key:
+                continue  # per-edge values: in report.json
+            if isinstance(v, dict) and v.get("value") is not None:
+                se = v.get("stderr")
+                parts.append(f"{key} = {v['value']:.4g}" + (f" +/- {se:.2g}" if se is not None else "")
+                             + (f" {v['unit']}" if v.get("unit") not in (None, "1") else ""))
+            elif isinstance(v, (int, float)):
+                parts.append(f"{key} = {v:.4g}")
+        lines.append(f"  {name}: " + ("; ".join(parts) if parts else "(per-edge terms only)")
+                     + " (all parameters with standard errors in report.json)")
+    boot = result.effects_bootstrap
+    if boot is not None:
+        lines.append(f"  bootstrap: {boot.n_boot} resamples, effect shared parameters {boot.shared_parameters}")
+    return lines

@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import argparse
-import json
-import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -20,49 +19,58 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("graph", type=Path, help='branch graph JSON: {"root": id, "edges": [[parent, child], ...]}')
     p.add_argument("--json", type=Path, required=True, dest="json_path", help="write the diagnosis JSON here")
     p.add_argument("--preset", choices=sorted(PRESETS), default="default", help="method preset")
-    p.add_argument("--effects", default=None,
+    p.add_argument("--effects", default=None, metavar="A,B",
                    help="comma-separated candidates (default: delay,dynamics,second_mode,offset,nonlinear)")
     p.add_argument("--seed", type=int, default=0, help="seed of the stratified edge split (default 0)")
     p.add_argument("--folds", type=int, default=8, help="cross-validation blocks (default 8)")
+    p.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd",
+                   help="also save a Rerun recording of the analysis with the diagnosis report")
+    p.add_argument("--figures", type=Path, default=None, metavar="DIR",
+                   help="also write the analysis and diagnosis figures (PNG) into DIR")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..diagnose import diagnose
-    from ..effects import EFFECT_NAMES
+    from ..diagnosis_io import diagnose_result, diagnosis_for_viz, diagnosis_json, parse_effect_names, \
+        write_json_atomic
     from ..errors import InputError
     from ..pipeline import analyze
 
-    names = None
-    if args.effects:
-        names = [n.strip() for n in args.effects.split(",") if n.strip()]
-        bad = [n for n in names if n not in EFFECT_NAMES]
-        if bad:
-            raise InputError("--effects", f"unknown effect(s) {bad}; known: {', '.join(EFFECT_NAMES)}")
+    names = parse_effect_names(args.effects)  # fail on a bad name before the (slow) analysis
+    if args.folds < 2:
+        raise InputError("--folds", f"need at least 2 cross-validation blocks, got {args.folds}")
     result = analyze(args.tracks, args.graph, preset=args.preset, n_boot=0)
-    resp, cfg = result.response, result.preset.compliance
-    weights = resp.weights if cfg.weighted else None
-    diag = diagnose(resp.Y, weights=weights, root_distance=resp.root_distance, effects=names,
-                    n_folds=args.folds, seed=args.seed, block_length=cfg.block_length,
-                    prior_strength=cfg.prior_strength, response=cfg.response,
-                    edge_labels=[f"{j}->{c}" for j, c in resp.edges], frames=resp.frames)
-    data = diag.as_dict()
-    data["inputs"] = {"tracks": str(args.tracks), "graph": str(args.graph), "preset": args.preset}
+    diag = diagnose_result(result, effects=names, seed=args.seed, n_folds=args.folds)
+    data = diagnosis_json(diag, result)
+    view = diagnosis_for_viz(diag, result) if (args.figures or args.rerun) else None
+    # write every optional output first, the JSON last: a failure leaves no partial set of new files
+    if args.figures is not None:
+        _write_figures_atomic(result, view, args.figures)
+    if args.rerun is not None:
+        from ..viz.rerun_log import save_recording
+        save_recording(result, args.rerun, diagnosis=view)
     write_json_atomic(data, args.json_path)
     print(diag.report())
     print(f"\nwrote {args.json_path}")
+    if args.figures is not None:
+        print(f"wrote figures to {args.figures}/")
+    if args.rerun is not None:
+        print(f"wrote Rerun recording {args.rerun} (open it with: rerun {args.rerun})")
     return 0
 
 
-def write_json_atomic(data: dict, path: Path) -> None:
-    """Write JSON to a temporary file in the same folder, then rename (never a half-written file)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+def _write_figures_atomic(result, view, out_dir: Path) -> None:
+    """Analysis + diagnosis figures into ``out_dir`` through a temporary sibling folder."""
+    from ..viz.figures import write_figures
+
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
     try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=1)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        written = write_figures(result, tmp, diagnosis=view)
+        out_dir.mkdir(exist_ok=True)
+        for name in written:
+            (tmp / name).replace(out_dir / name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+

@@ -26,17 +26,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--preset", choices=sorted(PRESETS), default="default", help="method preset")
     p.add_argument("--seed", type=int, default=None, help="bootstrap / cross-validation seed")
     p.add_argument("--bootstrap", type=int, default=None, metavar="N", help="bootstrap resamples")
+    p.add_argument("--effects", default=None, metavar="A,B",
+                   help="diagnosis candidates, comma-separated (default: delay,dynamics,second_mode,offset,"
+                        "nonlinear)")
     p.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd", help="also save a Rerun recording")
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..diagnosis_io import parse_effect_names
     from ..graph import load_graph
     from ..pipeline import analyze
     from ..track import load_annotations, make_tracker, open_video
     from ..tracks import read_tracks_table, tracks_from_table
 
+    args.effects = parse_effect_names(args.effects)  # fail on a bad name before tracking
     t0 = time.perf_counter()
     graph = load_graph(args.graph)
     tracker = make_tracker(args.model)
@@ -61,22 +67,22 @@ def run(args: argparse.Namespace) -> int:
     result.timings_s["track"] = t_track
     result.inputs.update(video=str(args.video), annotations=str(args.annotations), graph=str(args.graph))
 
-    diagnosis = _diagnose(result, args)
+    from ..diagnosis_io import diagnose_result, diagnosis_for_viz, diagnosis_json
+    diagnosis = diagnose_result(result, effects=args.effects, seed=args.seed if args.seed is not None else 0)
+    view = diagnosis_for_viz(diagnosis, result)
 
     def write_tracks(_result, tmp: Path) -> dict:
         table.to_csv(tmp / "tracks.csv", index=False)
-        if diagnosis is not None:
-            (tmp / "diagnosis.json").write_text(json.dumps(diagnosis.to_dict(), indent=2) + "\n")
+        (tmp / "diagnosis.json").write_text(json.dumps(diagnosis_json(diagnosis, result), indent=1) + "\n")
         return {}
 
     from .analyze import extra_writers, format_summary, save_recording
     files = result.write(args.out, extra_writers=[write_tracks, *extra_writers(args, video=args.video,
-                                                                                diagnosis=diagnosis)])
-    save_recording(args, result, video=args.video, diagnosis=diagnosis)
+                                                                                diagnosis=view)])
+    save_recording(args, result, video=args.video, diagnosis=view)
     print(format_summary(result))
-    if diagnosis is not None:
-        print()
-        print(diagnosis.report())
+    print()
+    print(diagnosis.report())
     print(f"\nwrote {len(files)} files to {args.out}/")
     return 0
 
@@ -88,10 +94,3 @@ def _check_graph_matches_points(graph, points, args) -> None:
         raise InputError(args.graph, f"graph node {bad[0]} has no annotated point: {args.annotations} lists "
                                      f"{len(points)} points (ids 0..{len(points) - 1})", f"node {bad[0]}")
 
-
-def _diagnose(result, args):
-    try:
-        from ..diagnose import diagnose_result
-    except ImportError:  # diagnosis module not available in this build
-        return None
-    return diagnose_result(result, seed=args.seed if args.seed is not None else 0)

@@ -1,0 +1,123 @@
+"""Glue between an analysis and the model diagnosis: run it, write it, draw it.
+
+* :func:`parse_effect_names` — ``"delay,offset"`` (CLI) or a sequence -> validated effect names;
+  an unknown name is an :class:`~rce_gtsam.errors.InputError` listing the five valid ones.
+* :func:`diagnose_result` — :func:`rce_gtsam.diagnose.diagnose` on an
+  :class:`~rce_gtsam.pipeline.AnalysisResult`'s bend-response matrix, with the preset's settings.
+* :func:`diagnosis_json` — the JSON object ``rce diagnose`` / ``rce run`` write (``Diagnosis.as_dict()``
+  plus the inputs).
+* :func:`diagnosis_for_viz` — the mapping the figure and Rerun writers (:mod:`rce_gtsam.viz`) read:
+  the JSON object plus the (edges x frames) baseline residual matrix in degrees, the frame and edge of
+  each row/column, the verdict model's prediction (for before/after curves) and the text report.
+* :func:`write_json_atomic` — write JSON through a temporary file and a rename.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from .errors import InputError
+
+
+def effect_names() -> tuple[str, ...]:
+    """The candidate effect names, in the order the diagnosis tries them."""
+    from .effects import EFFECT_NAMES
+    return tuple(EFFECT_NAMES)
+
+
+def parse_effect_names(effects: str | Sequence[str] | None, source: str = "--effects") -> tuple[str, ...] | None:
+    """Validated effect names from ``"a,b"`` or a sequence; None/empty string -> None (all candidates).
+
+    Duplicates are dropped (first occurrence kept). Unknown names raise :class:`InputError` naming the
+    valid ones.
+    """
+    if effects is None:
+        return None
+    if isinstance(effects, str):
+        names = [n.strip() for n in effects.split(",") if n.strip()]
+        if not names:
+            return None
+    else:
+        names = [str(n).strip() for n in effects]
+    valid = effect_names()
+    bad = [n for n in names if n not in valid]
+    if bad:
+        raise InputError(source, f"unknown effect name(s) {', '.join(repr(b) for b in bad)}; "
+                                 f"valid names: {', '.join(valid)}")
+    return tuple(dict.fromkeys(names))
+
+
+def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = None):
+    """Diagnose the rank-1 model of an analysis: which physical effect does it miss?
+
+    Runs :func:`rce_gtsam.diagnose.diagnose` on ``result.response`` (Y in degrees, inverse-variance
+    weights when the preset's compliance fit is weighted, normalised root distance, edge labels
+    ``"joint->child"``, video frame of each column) with the preset's block length, shrinkage and response
+    convention. ``effects``: candidate names (``"a,b"`` or a sequence; default all five); ``seed``: seed of
+    the stratified edge split; ``n_folds``: cross-validation blocks (default: diagnose's 8).
+    Returns a :class:`~rce_gtsam.diagnose.Diagnosis`.
+    """
+    from .diagnose import diagnose
+
+    names = parse_effect_names(effects, source="effects")
+    resp, cfg = result.response, result.preset.compliance
+    kw = {} if n_folds is None else {"n_folds": int(n_folds)}
+    return diagnose(resp.Y, weights=resp.weights if cfg.weighted else None, root_distance=resp.root_distance,
+                    effects=list(names) if names is not None else None, seed=int(seed),
+                    block_length=cfg.block_length, prior_strength=cfg.prior_strength, response=cfg.response,
+                    edge_labels=[f"{j}->{c}" for j, c in resp.edges], frames=resp.frames, **kw)
+
+
+def diagnosis_json(diagnosis, result=None) -> dict:
+    """The diagnosis JSON object: ``Diagnosis.as_dict()`` plus ``inputs`` and ``frames`` when ``result`` is
+    given (the analysis inputs and preset; the video frame of each response column)."""
+    data = diagnosis.as_dict()
+    if result is not None:
+        data["inputs"] = {**{k: str(v) for k, v in result.inputs.items()}, "preset": result.preset.name}
+        data["frames"] = [int(f) for f in result.response.frames]
+    return data
+
+
+def diagnosis_for_viz(diagnosis, result=None) -> dict:
+    """What :func:`rce_gtsam.viz.write_figures` / ``save_recording`` draw of a diagnosis.
+
+    The JSON object, with ``residuals`` replaced by the (E, T) baseline residual matrix (degrees, NaN =
+    missing), ``frames`` (T,) and ``edges`` [(joint, child)] of the rows when ``result`` is given, and
+    ``after_prediction`` (E, T): the prediction of the model extended by the verdict effect (None when
+    there is no verdict), and ``report``: the text report.
+    """
+    data = diagnosis_json(diagnosis, result)
+    data["residual_summary"] = data.pop("residuals", None)
+    data["residuals"] = np.asarray(diagnosis.baseline.residuals, dtype=float)
+    if result is not None:
+        data["frames"] = np.asarray(result.response.frames)
+        data["edges"] = list(result.response.edges)
+    else:
+        data.pop("edges", None)
+        data.pop("frames", None)
+    data["after_prediction"] = (np.asarray(diagnosis.candidate(diagnosis.verdict).fit.predict(), dtype=float)
+                                if diagnosis.verdict is not None else None)
+    data["report"] = diagnosis.report()
+    return data
+
+
+def write_json_atomic(data: dict, path: str | Path) -> Path:
+    """Write ``data`` as JSON to a temporary file in the same folder, then rename it onto ``path``."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(data, f, indent=1)
+            f.write("\n")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
