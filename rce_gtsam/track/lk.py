@@ -96,6 +96,7 @@ class LKConfig:
     rotate_templates: bool = True
     mask_to_branch: bool = True
     band_margin_px: float = 1.5
+    refine_pass: bool = True
 
 
 _LK_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01)
@@ -154,6 +155,12 @@ def _weighted_lk(tmpl, wts, img, start, iters: int = 20, eps: float = 0.01):
     return pos, s_lk
 
 
+def _turn(a, b, a0, b0) -> float:
+    """Rotation (radians, wrapped to (-pi, pi]) of the vector a->b relative to a0->b0."""
+    d = math.atan2(b[1] - a[1], b[0] - a[0]) - math.atan2(b0[1] - a0[1], b0[0] - a0[0])
+    return (d + math.pi) % (2 * math.pi) - math.pi
+
+
 class LKTracker:
     """Drift-free Lucas-Kanade tracker (see module docstring). ``LKTracker(LKConfig()).track(src, pts, graph)``."""
 
@@ -167,6 +174,7 @@ class LKTracker:
         self.order = list(range(n))
         self.parent = [-1] * n
         self.rest_len = np.zeros(n)
+        self.children = {i: [] for i in range(n)}
         if graph is not None:
             missing = [v for v in graph.nodes if not 0 <= v < n]
             if missing:
@@ -175,6 +183,7 @@ class LKTracker:
             self.order = list(graph.nodes) + [i for i in range(n) if i not in set(graph.nodes)]
             for c, p in graph.parent.items():
                 self.parent[c] = p
+                self.children[p].append(c)
                 self.rest_len[c] = float(np.hypot(*(q[c] - q[p])))
         lengths = self.rest_len[self.rest_len > 0]
         if cfg.patch_radius_px is not None:
@@ -237,11 +246,76 @@ class LKTracker:
             widths.append(float(np.mean(sides)))
         hw = float(np.clip(np.median(widths) if widths else h, 1.5, h)) + self.config.band_margin_px
         self.branch_halfwidth_px = hw
-        band = np.zeros(img.shape[:2], np.uint8)
+        # one band per segment, cropped around each of its two end nodes (only those crops are used)
+        self._seg_band = {}
+        size = 2 * (h + 2 * h) + 1
         for p, c in graph.edges:
-            a, b = (np.round(q[p] * 16).astype(int), np.round(q[c] * 16).astype(int))
-            cv2.line(band, tuple(map(int, a)), tuple(map(int, b)), 255, int(round(2 * hw)) + 1, cv2.LINE_AA, shift=4)
-        return band.astype(np.float32) / 255.0
+            for node in (p, c):
+                off = q[node] - (size - 1) / 2.0  # crop origin so that q[node] maps to the crop centre
+                band = np.zeros((size, size), np.uint8)
+                a, b = (np.round((q[p] - off) * 16).astype(int), np.round((q[c] - off) * 16).astype(int))
+                cv2.line(band, tuple(map(int, a)), tuple(map(int, b)), 255, int(round(2 * hw)) + 1, cv2.LINE_AA, shift=4)
+                self._seg_band[(p, c, node)] = band.astype(np.float32) / 255.0
+        # frame-0 strip of every segment in its own frame (u along p->c, 1-px steps; v across the band)
+        g0 = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY).astype(np.float32)
+        self._strip = {}
+        vv = np.arange(-math.floor(hw), math.floor(hw) + 1, dtype=np.float32)
+        for p, c in graph.edges:
+            d = q[c] - q[p]
+            ln = float(np.hypot(*d))
+            if ln < 2.0:
+                continue
+            uu = np.arange(0.0, ln + 0.5, 1.0, dtype=np.float32)
+            ex = d / ln
+            ey = np.array([-ex[1], ex[0]])
+            mx = (q[p][0] + uu[None, :] * ex[0] + vv[:, None] * ey[0]).astype(np.float32)
+            my = (q[p][1] + uu[None, :] * ex[1] + vv[:, None] * ey[1]).astype(np.float32)
+            st = cv2.remap(g0, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            st = st - st.mean()
+            nrm = float(np.sqrt((st * st).sum()))
+            if nrm > 1e-3:
+                self._strip[(p, c)] = (uu, vv, st / nrm, ln)
+        return True
+
+    def _segment_search(self, gray, xp, p, c, q0, phi_prev):
+        """Rotation of segment (p, c) found by matching its frame-0 strip around the parent at ``xp``.
+
+        The segment is a rigid body hinged at its parent: the child can only be on a circle of radius L0
+        around the parent, so a 1-D search over the segment's rotation (within atan(2h / L0) of its previous
+        rotation: the child moves at most ~2 patch radii relative to the parent per frame, the same bound as
+        the re-acquisition window; steps of half a pixel at the child) finds it with the whole segment's
+        texture, and cannot slide along a self-similar stem the way a 2-D search around the node can.
+        Returns (predicted child position, rotation, zero-mean NCC) or None.
+        """
+        item = self._strip.get((p, c))
+        if item is None:
+            return None
+        uu, vv, st0, ln = item
+        span = math.atan2(2 * self.h, ln)
+        step = 0.5 / ln
+        phis = phi_prev + np.arange(-span, span + step / 2, step)
+        a0 = math.atan2(q0[c][1] - q0[p][1], q0[c][0] - q0[p][0])
+        ang = a0 + phis
+        ex, ey = np.cos(ang), np.sin(ang)  # (A,)
+        # sample positions (A, V, U)
+        mx = xp[0] + uu[None, None, :] * ex[:, None, None] - vv[None, :, None] * ey[:, None, None]
+        my = xp[1] + uu[None, None, :] * ey[:, None, None] + vv[None, :, None] * ex[:, None, None]
+        A, V, U = len(phis), len(vv), len(uu)
+        smp = cv2.remap(gray, mx.reshape(A * V, U).astype(np.float32), my.reshape(A * V, U).astype(np.float32),
+                        cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(A, V * U).astype(np.float32)
+        smp -= smp.mean(axis=1, keepdims=True)
+        nrm = np.sqrt((smp * smp).sum(axis=1)) + 1e-6
+        ncc = (smp @ st0.ravel()) / nrm
+        k = int(np.argmax(ncc))
+        dk = 0.0
+        if 0 < k < A - 1:
+            a_, b_, c_ = ncc[k - 1], ncc[k], ncc[k + 1]
+            den = a_ - 2 * b_ + c_
+            dk = 0.0 if den >= 0 else float(np.clip(0.5 * (a_ - c_) / den, -0.5, 0.5))
+        phi = float(phis[k] + dk * step)
+        ct, sn = math.cos(phi), math.sin(phi)
+        v0 = q0[c] - q0[p]
+        return xp + np.array([ct * v0[0] - sn * v0[1], sn * v0[0] + ct * v0[1]]), phi, float(ncc[k])
 
     def _rotation(self, i: int, est: np.ndarray, vis: np.ndarray, q0: np.ndarray, last: np.ndarray,
                   now: np.ndarray, done: np.ndarray) -> float:
@@ -264,22 +338,48 @@ class LKTracker:
         return float(last[i])
 
     # -- measurement against frame 0 ------------------------------------------------------------
-    def _anchor(self, gray0, gray, p0, q, theta, r):
-        """Locate node (frame-0 position p0) near q in ``gray``; returns (xy, ncc, fb, sigma) or None."""
+    def _anchor(self, gray0, gray, i, p0, q, theta, r, seg_theta=None):
+        """Locate node i (frame-0 position p0) near q in ``gray``; returns (xy, ncc, fb, sigma) or None.
+
+        ``seg_theta`` maps each segment (p, c) incident to node i to its rotation (radians) since frame 0.
+        With branch bands, the template is *articulated*: each incident segment's band of the frame-0 image is
+        rotated about the node by that segment's own rotation (a node is a joint: the parent segment and the
+        child segments turn by different angles, and one rotation for the whole patch biases the match in
+        proportion to the bend). Otherwise the whole frame-0 patch is rotated by ``theta``.
+        """
         h = self.h
         k = 2 * (h + r) + 1
         c = float(h + r)
-        m = cv2.getRotationMatrix2D((float(p0[0]), float(p0[1])), -math.degrees(theta), 1.0)
-        m[:, 2] += (c - p0[0], c - p0[1])
-        prev = cv2.warpAffine(gray0, m, (k, k), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1])))
-        tmpl = prev[r:r + 2 * h + 1, r:r + 2 * h + 1]
         wts = None
-        if self._band is not None:
-            band = cv2.warpAffine(self._band, m, (k, k), flags=cv2.INTER_LINEAR, borderValue=0)
-            wts = band[r:r + 2 * h + 1, r:r + 2 * h + 1]
+        if self._band is not None and seg_theta:
+            cs = float(3 * h)
+            acc = np.zeros((k, k), np.float32)
+            wacc = np.zeros((k, k), np.float32)
+            prev = None
+            for (sp, sc), th in seg_theta.items():
+                m = cv2.getRotationMatrix2D((float(p0[0]), float(p0[1])), -math.degrees(th), 1.0)
+                m[:, 2] += (c - p0[0], c - p0[1])
+                img_k = cv2.warpAffine(gray0, m, (k, k), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+                mb = cv2.getRotationMatrix2D((cs, cs), -math.degrees(th), 1.0)
+                mb[:, 2] += (c - cs, c - cs)
+                w_k = cv2.warpAffine(self._seg_band[(sp, sc, i)], mb, (k, k), flags=cv2.INTER_LINEAR, borderValue=0)
+                acc += w_k * img_k
+                wacc += w_k
+                if prev is None or sc == i:  # outside every band: the parent-side warp (background)
+                    prev = img_k
+            inside = wacc > 1e-3
+            prev = np.where(inside, acc / np.maximum(wacc, 1e-3), prev).astype(np.float32)
+            wts = np.minimum(wacc, 1.0)[r:r + 2 * h + 1, r:r + 2 * h + 1]
             if float(wts.sum()) < 4 * (2 * h + 1):  # fewer pixels than a 2-px-wide strip: use the full patch
                 wts = None
+        else:
+            m = cv2.getRotationMatrix2D((float(p0[0]), float(p0[1])), -math.degrees(theta), 1.0)
+            m[:, 2] += (c - p0[0], c - p0[1])
+            prev = cv2.warpAffine(gray0, m, (k, k), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+            prev = prev.astype(np.float32)
+        tmpl = np.ascontiguousarray(prev[r:r + 2 * h + 1, r:r + 2 * h + 1])
+        cur = cur.astype(np.float32)
         if wts is None:
             wts = np.ones_like(tmpl)
         wsum = float(wts.sum())
@@ -301,6 +401,34 @@ class LKTracker:
         fb = math.inf if bwd is None else float(np.hypot(*(bwd[0] - c)))
         xy = np.asarray(q, float) + (loc - c)
         return xy, float(score), fb, s_lk
+
+    def _refine(self, gray0, gray, q0, est, vis, sig, fb_max):
+        """Second pass: re-match every visible node with segment rotations from this frame's matches.
+
+        In the first pass a node's articulated template is rotated with angles measured partly from
+        frame-to-frame predictions, which lag the true motion (the pyramidal LK window contains static
+        background). Matches are far more accurate, so the rotations are recomputed from them and each node
+        is matched again within a small radius (max(2, h // 4) px: the first pass is already within a pixel).
+        """
+        cfg = self.config
+        rr = max(2, self.h // 4)
+        for i in self.order:
+            if not vis[i]:
+                continue
+            p = self.parent[i]
+            seg_theta = {}
+            if p >= 0:
+                seg_theta[(p, i)] = _turn(est[p], est[i], q0[p], q0[i])
+            for ch in self.children[i]:
+                seg_theta[(i, ch)] = (_turn(est[i], est[ch], q0[i], q0[ch]) if vis[ch]
+                                      else seg_theta.get((p, i), 0.0))
+            m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, rr, seg_theta)
+            if m is None:
+                continue
+            xy, score, fb, s_lk = m
+            if score >= cfg.min_ncc and fb <= fb_max:
+                est[i] = xy
+                sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
 
     # -- main loop ------------------------------------------------------------------------------
     def track(self, source: FrameSource, query_points, graph: BranchGraph | None = None,
@@ -324,8 +452,10 @@ class LKTracker:
         est = q0.copy()
         vis = np.ones(n, bool)
         theta_last = np.zeros(n)
+        seg_rot = np.zeros(n)  # rotation (rad) of segment (parent, i) since frame 0, last measured
         counts = {"anchored": 0, "invisible": 0, "rejected_ncc": 0, "rejected_fb": 0, "rejected_length": 0,
-                  "lost_match": 0, "predicted_from_graph": 0}
+                  "lost_match": 0, "predicted_from_graph": 0,
+                  "predicted_from_segment": 0}
         t0 = time.perf_counter()
         n_done = 0
         for frame in source:
@@ -365,7 +495,13 @@ class LKTracker:
                     theta = self._rotation(i, cur_est, cur_vis, q0, theta_last, theta_now, done)
                     theta_now[i] = theta
                     p = self.parent[i]
-                    if f2f_ok[i] and prev_vis[i]:
+                    seg = None
+                    if p >= 0 and new_vis[p] and self._band is not None:
+                        seg = self._segment_search(gray, new_est[p], p, i, q0, seg_rot[i])
+                    if seg is not None and seg[2] >= cfg.min_ncc:
+                        pred, r = seg[0], h
+                        counts["predicted_from_segment"] += 1
+                    elif f2f_ok[i] and prev_vis[i]:
                         pred, r = f2f[i], h
                     elif p >= 0:
                         ct, sn = math.cos(theta), math.sin(theta)
@@ -375,7 +511,18 @@ class LKTracker:
                         counts["predicted_from_graph"] += 1
                     else:
                         pred, r = (f2f[i] if f2f_ok[i] else prev_est[i]), 2 * h
-                    m = self._anchor(gray0, gray, q0[i], pred, theta, r)
+                    seg_theta = None
+                    if self._band is not None:
+                        xi = pred
+                        seg_theta = {}
+                        if p >= 0:
+                            seg_theta[(p, i)] = _turn(new_est[p], xi, q0[p], q0[i])
+                        for ch in self.children[i]:
+                            if f2f_ok[ch] and prev_vis[ch]:
+                                seg_theta[(i, ch)] = _turn(xi, f2f[ch], q0[i], q0[ch])
+                            else:  # child not followed: assume the branch continues straight
+                                seg_theta[(i, ch)] = seg_theta.get((p, i), theta)
+                    m = self._anchor(gray0, gray, i, q0[i], pred, theta, r, seg_theta)
                     ok = m is not None
                     if not ok:
                         counts["lost_match"] += 1
@@ -395,12 +542,16 @@ class LKTracker:
                                 counts["rejected_length"] += 1
                     if ok:
                         new_est[i], new_vis[i] = xy, True
+                        if p >= 0:
+                            seg_rot[i] = _turn(new_est[p], xy, q0[p], q0[i])
                         sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
                         counts["anchored"] += 1
                     else:
                         new_est[i], new_vis[i], sig[i] = pred, False, float(r)
                         counts["invisible"] += 1
                     done[i] = True
+                if self._band is not None and cfg.refine_pass:
+                    self._refine(gray0, gray, q0, new_est, new_vis, sig, fb_max)
                 hh, ww = gray.shape
                 new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
                 new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)
