@@ -40,6 +40,8 @@ from . import effects as effects_mod
 from .model import ModelFit, ResponseModel, validate_inputs
 
 BLOCK_LENGTH = 25  # frames: the moving-block bootstrap's block length (reference §2.9)
+FULL_ITER = 25  # block-coordinate sweeps of a candidate's fit on all frames (from the baseline fit)
+CV_ITER = 10  # sweeps of each fold's refit and held-out z estimate (from the full fit)
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -174,6 +176,8 @@ def heldout_errors(model: ResponseModel, full: ModelFit, Y, W, s, blocks, halves
     E, T = Y.shape
     sse = np.zeros(len(blocks))
     cnt = np.zeros(len(blocks))
+    z_var_full = float(np.mean(full.z ** 2))
+    full_ridge = (full.wsse / max(full.n_obs, 1)) / z_var_full if z_var_full > 0 else 0.0
     for k, (a, b) in enumerate(blocks):
         lo, hi = max(0, a - gap), min(T, b + gap)
         Ytr = Y.copy()
@@ -185,7 +189,10 @@ def heldout_errors(model: ResponseModel, full: ModelFit, Y, W, s, blocks, halves
         z0 = full.z.copy()
         z0[lo:hi] = 0.0
         st0 = {eff.name: _blank_latents(st, lo, hi) for eff, st in zip(full.model.effects, full.states)}
-        tr = model._fit(Ytr, Wtr, s, start=(full.kappa.copy(), z0, st0), max_iter=cv_iter, refit_shared=False)
+        # the same zero-mean prior on z as for the held-out estimate below, from the full fit: frames of the
+        # left-out window that training data still touch weakly (through a lag) must not blow up
+        tr = model._fit(Ytr, Wtr, s, start=(full.kappa.copy(), z0, st0), max_iter=cv_iter, refit_shared=False,
+                        z_ridge=full_ridge)
         free = np.zeros(T, bool)
         free[lo:hi] = True
         # prior on the held-out z: zero mean, the training z's variance; precision in weighted-SSE units
@@ -427,9 +434,10 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8
     results = []
     for eff in cands:
         model = base_model + eff
-        fast = any(e.kind == "operator" for e in model.effects)
-        full = model._fit(Y, W, s, start=(base.kappa.copy(), base.z.copy(), {}), max_iter=40 if fast else None)
-        sse, cnt = heldout_errors(model, full, Y, W, s, blocks, halves, gap, cv_iter=10 if fast else 60)
+        # iteration caps: the full fit (the only place shared parameters are fitted) starts from the
+        # converged baseline; fold refits start from the full fit, so a few block sweeps suffice there
+        full = model._fit(Y, W, s, start=(base.kappa.copy(), base.z.copy(), {}), max_iter=FULL_ITER)
+        sse, cnt = heldout_errors(model, full, Y, W, s, blocks, halves, gap, cv_iter=CV_ITER)
         mse = sse[used] / np.maximum(cnt[used], 1)
         rmse = float(math.sqrt(sse[used].sum() / max(cnt[used].sum(), 1)))
         d = np.log(np.maximum(b_mse, 1e-300)) - np.log(np.maximum(mse, 1e-300))

@@ -17,8 +17,9 @@ With no effect it is the published rank-1 model y[e, t] = kappa_e z_t, fitted ex
 (docs/reference-pipeline.md §2.8): alternating kappa / z least-squares steps, log-space shrinkage
 kappa = kappa_hat ** (n / (n + lambda)) toward 1 and geometric-mean normalisation (prod |kappa| = 1).
 With effects the same loop runs as block-coordinate descent: a Gauss-Newton kappa step and z step
-through the effects (exact least-squares steps when the model is linear in that block; z is solved by
-conjugate gradients when an operator couples frames), then one block update per effect. Each block step
+through the effects (exact least-squares steps when the model is linear in that block; when an operator
+couples frames, z is solved directly from the banded sparse normal matrix for delay, or by conjugate
+gradients preconditioned with the operators' frequency responses), then one block update per effect. Each block step
 does not increase the weighted squared error, apart from the (small) shrinkage, so the loop converges.
 """
 
