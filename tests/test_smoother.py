@@ -153,9 +153,10 @@ def test_sigma_px_sets_the_measurement_weight(tree):
     np.testing.assert_allclose(res.tracks.xy, reference_smooth(t2, graph, cfg, "direct").xy, atol=1e-6)
 
 
-def test_default_config_runs_and_length_prior_keeps_lengths(tree):
+def test_length_prior_config_runs_and_keeps_lengths(tree):
     tracks, graph = tree
-    res = smooth_tracks(tracks, graph, DEFAULT.smoother)
+    cfg = dataclasses.replace(DEFAULT.smoother, edge_prior="length", edge_weight=0.45)
+    res = smooth_tracks(tracks, graph, cfg)
     assert res.report.converged and res.report.iterations >= 2
     assert np.isfinite(res.cov).all()
     for a, b in graph.edges:
@@ -227,3 +228,10 @@ def test_input_errors(tree):
     assert e.value.where == "node 4"
     with pytest.raises(ValueError, match="edge_prior"):
         smooth_tracks(tracks, graph, SmootherConfig(edge_prior="rigid"))
+
+
+def test_default_config_is_linear_and_solved_in_one_step(tree):
+    tracks, graph = tree
+    res = smooth_tracks(tracks, graph, DEFAULT.smoother)
+    assert res.report.converged and res.report.iterations == 1
+    assert np.isfinite(res.cov).all()
