@@ -140,6 +140,7 @@ def report_dict(result) -> dict:
         "smoothing_metrics": result.smoothing.as_dict(),
         "excitation_rms_deg": float(np.sqrt(np.mean(fit.z**2))),
         "timings_s": result.timings_s,
+        **({"effects": result.effects_report()} if getattr(result, "effects", None) else {}),
     })
 
 
