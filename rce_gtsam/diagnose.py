@@ -34,6 +34,8 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .jsonutil import jsonable as _jsonable
 from scipy import signal, stats
 
 from . import effects as effects_mod
@@ -126,22 +128,6 @@ def _num(x):
     except (TypeError, ValueError):
         return None
     return x if math.isfinite(x) else None
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return [_jsonable(v) for v in x.tolist()]
-    if isinstance(x, (bool, np.bool_)):
-        return bool(x)
-    if isinstance(x, (int, np.integer)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        return _num(x)
-    return x
 
 
 # ----------------------------------------------------------------------------------------------------------

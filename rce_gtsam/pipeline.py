@@ -190,22 +190,7 @@ class AnalysisResult:
 
     def write(self, out_dir: str | Path, extra_writers=(), **kwargs) -> dict[str, Path]:
         from .results import write_outputs
-        writers = list(extra_writers)
-        if self.effects:
-            writers.insert(0, _write_effects_report)
-        return write_outputs(self, out_dir, extra_writers=writers, **kwargs)
-
-
-def _write_effects_report(result: AnalysisResult, tmp: Path) -> dict:
-    """Add the ``effects`` section to the report.json that :func:`~rce_gtsam.results.write_outputs` wrote."""
-    import json
-
-    from .results import _jsonable
-    path = Path(tmp) / "report.json"
-    report = json.loads(path.read_text())
-    report["effects"] = _jsonable(result.effects_report())
-    path.write_text(json.dumps(report, indent=2) + "\n")
-    return {}
+        return write_outputs(self, out_dir, extra_writers=extra_writers, **kwargs)
 
 
 def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset: str | Preset = "default",

@@ -29,6 +29,7 @@ import numpy as np
 import pandas as pd
 
 from . import __version__
+from .jsonutil import jsonable as _jsonable
 
 
 def compliance_summary(result) -> pd.DataFrame:
@@ -100,22 +101,6 @@ def smoothed_table(result) -> pd.DataFrame:
                          "x": s.tracks.xy[n, f, 0], "y": s.tracks.xy[n, f, 1],
                          "observed": s.observed[n, f].astype(int),
                          "cov_xx": cov[n, f, 0, 0], "cov_xy": cov[n, f, 0, 1], "cov_yy": cov[n, f, 1, 1]})
-
-
-def _jsonable(obj):
-    if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_jsonable(v) for v in obj]
-    if isinstance(obj, (np.floating, float)):
-        return None if not np.isfinite(obj) else float(obj)
-    if isinstance(obj, (np.integer,)):
-        return int(obj)
-    if isinstance(obj, np.bool_):
-        return bool(obj)
-    if isinstance(obj, np.ndarray):
-        return _jsonable(obj.tolist())
-    return obj
 
 
 def report_dict(result) -> dict:

@@ -41,6 +41,7 @@ from scipy.interpolate import make_interp_spline
 
 from .errors import InputError
 from .graph import BranchGraph
+from .jsonutil import jsonable as _jsonable
 from .tracks import Tracks, write_table_atomic
 
 #: Names of the physical effects the simulator can switch on (and the diagnosis looks for).
@@ -578,21 +579,6 @@ class Simulation:
 
 #: Files :meth:`Simulation.write` may write.
 WRITTEN_FILES = ("tracks.csv", "true_tracks.csv", "graph.json", "truth.json", "annotations.json", "video.mp4")
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        v = float(x)
-        return v if math.isfinite(v) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    return x
 
 
 def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:

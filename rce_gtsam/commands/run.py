@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -40,7 +39,8 @@ def run(args: argparse.Namespace) -> int:
     from ..graph import load_graph
     from ..pipeline import analyze
     from ..track import load_annotations, make_tracker, open_video
-    from ..tracks import read_tracks_table, tracks_from_table
+    from ..tracks import tracks_from_table
+    from .track import track_with_progress
 
     args.effects = parse_effect_names(args.effects)  # fail on a bad name before tracking
     t0 = time.perf_counter()
@@ -49,17 +49,7 @@ def run(args: argparse.Namespace) -> int:
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
         _check_graph_matches_points(graph, points, args)
-        bar = None
-        if not args.no_progress:
-            from tqdm import tqdm
-            total = src.n_frames if args.max_frames is None else args.max_frames
-            bar = tqdm(total=total, unit="frame", desc="tracking", file=sys.stderr, leave=False)
-        try:
-            tracked = tracker.track(src, points, graph=graph, max_frames=args.max_frames,
-                                    progress=bar.update if bar else None)
-        finally:
-            if bar:
-                bar.close()
+        tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress)
     t_track = time.perf_counter() - t0
     table = tracked.to_frame()
     tracks = tracks_from_table(table, graph, source=f"tracks of {args.video}")

@@ -49,17 +49,7 @@ def run_track(args: argparse.Namespace) -> int:
     tracker = make_tracker(args.model)
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
-        total = src.n_frames if args.max_frames is None else min(args.max_frames, src.n_frames or args.max_frames)
-        bar = None
-        if not args.no_progress:
-            from tqdm import tqdm
-            bar = tqdm(total=total, unit="frame", desc="tracking", file=sys.stderr, leave=False)
-        try:
-            result = tracker.track(src, points, graph=graph, max_frames=args.max_frames,
-                                   progress=bar.update if bar else None)
-        finally:
-            if bar:
-                bar.close()
+        result = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress)
     result.write_csv(args.out)
     vis = result.visible
     print(f"tracked {result.n_points} points over {result.n_frames} frames with {result.info.get('tracker')}; "
@@ -67,6 +57,21 @@ def run_track(args: argparse.Namespace) -> int:
           f"{float(_median(result.sigma_px[vis])):.2f} px")
     print(f"wrote {args.out}")
     return 0
+
+
+def track_with_progress(tracker, src, points, graph, max_frames: int | None, show: bool = True):
+    """Run ``tracker`` over the frame source ``src`` with a tqdm progress bar on stderr (frames)."""
+    bar = None
+    if show:
+        from tqdm import tqdm
+        total = src.n_frames if max_frames is None else min(max_frames, src.n_frames or max_frames)
+        bar = tqdm(total=total, unit="frame", desc="tracking", file=sys.stderr, leave=False)
+    try:
+        return tracker.track(src, points, graph=graph, max_frames=max_frames,
+                             progress=bar.update if bar else None)
+    finally:
+        if bar:
+            bar.close()
 
 
 def _median(x):
