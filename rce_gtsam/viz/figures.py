@@ -309,7 +309,8 @@ def fig_heldout(diagnosis):
     b = _get(base, "heldout_rmse")
     cands = list(_get(diagnosis, "candidates", []) or [])
     verdict = _get(diagnosis, "verdict")
-    names = ["rank-1\nbaseline"] + [f"+ {_get(c, 'effect')}" for c in cands]
+    # two-line labels ("+\nsecond mode") so long effect names never run into each other
+    names = ["rank-1\nbaseline"] + [f"+\n{str(_get(c, 'effect')).replace('_', ' ')}" for c in cands]
     vals = np.array([b] + [_get(c, "heldout_rmse") for c in cands], dtype=float)
     colors = ["0.55"] + ["#d95f02" if _get(c, "effect") == verdict else "#7fa7c9" for c in cands]
     with _style() as plt:
