@@ -97,6 +97,25 @@ def _matvec_t(M: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.matmul(v[:, None, :], M)[:, 0, :]
 
 
+def _precision_shrinkage(Y0, Wf, zm, k_hat, den, n, tau):
+    """(B, E) shrinkage factors tau^2 / (tau^2 + se^2(log kappa_hat)) of a log-normal prior on kappa.
+
+    se^2(kappa_hat) = sigma^2 / sum(w z^2) * (1 + rho) / (1 - rho): the residual variance of the
+    per-edge regression y ~ kappa_hat z over the frames used, inflated by the lag-1 autocorrelation rho
+    of those residuals (an AR(1) effective sample size: neighbouring frames are not independent); the
+    delta method gives se(log kappa_hat) = se(kappa_hat) / |kappa_hat|. Y0, Wf: (B, E, T) data (0 where
+    missing) and weights; zm: (B, T) excitation, 0 on frames not used.
+    """
+    used = (Wf > 0) & (zm != 0)[:, None, :]
+    r = np.where(used, Y0 - k_hat[:, :, None] * zm[:, None, :], 0.0)
+    sigma2 = np.sum(Wf * r * r, axis=2) / np.maximum(n - 1, 1)
+    lag = np.sum(r[:, :, 1:] * r[:, :, :-1], axis=2)
+    rho = np.clip(lag / np.maximum(np.sum(r * r, axis=2), 1e-300), 0.0, 0.99)
+    var_k = sigma2 / np.maximum(den, EPS) * (1 + rho) / (1 - rho)
+    se2_log = var_k / np.maximum(k_hat * k_hat, 1e-300)
+    return tau * tau / (tau * tau + se2_log)
+
+
 def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray | None = None):
     """Fit (B, E, T) data (NaN = missing) as B independent rank-1 problems.
 
@@ -117,6 +136,7 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
     n_used = np.zeros((B, E))
     WY = Wf * Y0  # constant over iterations: every step below is a batched mat-vec (BLAS)
     Wc = W.astype(float)
+    precision = config.shrinkage == "precision"
     for _ in range(config.n_iter):
         if not active.any():
             break
@@ -130,7 +150,10 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
         k_hat = num / den
         sign = np.where(k_hat < 0, -1.0, 1.0) if signed else np.ones_like(k_hat)
         mag = np.maximum(np.abs(k_hat) if signed else k_hat, EPS)
-        shrink = n / (n + lam)
+        if precision:
+            shrink = _precision_shrinkage(Y0[a], Wfa, za * m, k_hat, den, n, float(config.prior_sd_log))
+        else:
+            shrink = n / (n + lam)
         k_new = np.where(n > 0, sign * np.exp(shrink * np.log(mag)), 1.0)
         # geometric-mean normalisation over edges with |kappa| > EPS
         big = np.abs(k_new) > EPS

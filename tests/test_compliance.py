@@ -97,3 +97,25 @@ def test_bootstrap_is_deterministic_and_covers_truth():
     c = bootstrap_kappa(Y, ComplianceConfig(n_boot=100, seed=1))
     assert not np.array_equal(a.samples, c.samples)
     assert bootstrap_kappa(Y, ComplianceConfig(n_boot=0)) is None
+
+
+def test_precision_shrinkage_keeps_a_noise_only_edge_from_dragging_the_others():
+    rng = np.random.default_rng(4)
+    k, z, Y = rank1(4, E=10, T=800, signed=True)
+    Y[0] = 0.0  # a stiff segment: no bending signal at all ...
+    Y = Y + rng.normal(0, 1.0, Y.shape)  # ... only noise
+    count = fit_rank1(Y, ComplianceConfig(response="signed"))
+    prec = fit_rank1(Y, ComplianceConfig(response="signed", shrinkage="precision"))
+    # the noise-only edge is pulled toward 1 instead of toward 0
+    assert abs(np.log(prec.kappa[0])) < abs(np.log(count.kappa[0]))
+    # and the well-determined edges keep their ratios to each other
+    ratio = lambda f: np.log(f.kappa[1:]) - np.log(f.kappa[1:]).mean()
+    truth = np.log(k[1:]) - np.log(k[1:]).mean()
+    assert np.sqrt(np.mean((ratio(prec) - truth) ** 2)) < 0.1
+
+
+def test_precision_shrinkage_leaves_clean_edges_alone():
+    k, z, Y = rank1(2, signed=True)
+    Y = Y + np.random.default_rng(0).normal(0, 0.05, Y.shape)
+    f = fit_rank1(Y, ComplianceConfig(response="signed", shrinkage="precision", n_iter=300, tol=1e-10))
+    np.testing.assert_allclose(f.kappa, k, rtol=0.02)
