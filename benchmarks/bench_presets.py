@@ -33,6 +33,7 @@ def variants():
                                                                    "acceleration_weight": 0.2}),
         "default, unsigned |delta| (paper)": d.with_(bending={"signed": False, "rest": "first"},
                                                      compliance={"response": "abs"}),
+        "default, count shrinkage (paper's)": d.with_(compliance={"shrinkage": "count"}),
         "default + anisotropic 3:1": d.with_(smoother={"along_across_ratio": 3.0}),
         "default + Huber": d.with_(smoother={"robust": "huber"}),
         "default + marginal weights": d.with_(compliance={"weighted": True}),
