@@ -27,7 +27,7 @@ def variants():
     return {
         "paper": PAPER,
         "default": d,
-        "default + offset prior (paper's, w_e 0.45)": d.with_(smoother={"edge_prior": "offset", "edge_weight": 0.45}),
+        "default + offset prior (paper's; w_e 0.45)": d.with_(smoother={"edge_prior": "offset", "edge_weight": 0.45}),
         "default + length prior (w_e 0.45)": d.with_(smoother={"edge_prior": "length", "edge_weight": 0.45}),
         "default, paper temporal weights + MA5": d.with_(smoother={"presmooth_window": 5, "velocity_weight": 0.35,
                                                                    "acceleration_weight": 0.2}),
