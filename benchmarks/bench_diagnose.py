@@ -13,6 +13,7 @@ klog = kappa log-RMSE against the truth, baseline -> verdict model (baseline whe
 s = median diagnose seconds (pipeline excluded; it is timed separately).
 
 Usage: python benchmarks/bench_diagnose.py [--seeds 10] [--frames 900] [--effects none,delay,...]
+       [--strength-mult 2.5]  (hidden effect 2.5x the simulator's default strength)
        [--matrices]  (fast: simulator equations + noise instead of the pipeline, for development)
 """
 
@@ -28,15 +29,18 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 
-def case(effect, seed, frames, matrices):
-    """(Y, weights, root_distance, kappa_true, truth (E, T) or None, pipeline seconds)."""
+def case(effect, seed, frames, matrices, mult=1.0):
+    """(Y, weights, root_distance, kappa_true, truth (E, T) or None, pipeline seconds, edge labels)."""
+    from rce_gtsam.simulate import EFFECT_DEFAULTS
+    strength = None if effect is None or mult == 1.0 else EFFECT_DEFAULTS[effect] * mult
     if matrices:
         from _effect_data import synth
-        Y, s, k, _, y = synth(effect, seed=seed, E=18, T=frames)
-        return Y, None, s, k, y, 0.0
+        Y, s, k, _, y = synth(effect, seed=seed, E=18, T=frames, strength=strength)
+        return Y, None, s, k, y, 0.0, None
     from rce_gtsam.pipeline import analyze
     from rce_gtsam.simulate import SimulationConfig, simulate
-    sim = simulate(SimulationConfig(effects=() if effect is None else (effect,), seed=seed, n_frames=frames))
+    kw = {} if strength is None else {"effect_strength": {effect: strength}}
+    sim = simulate(SimulationConfig(effects=() if effect is None else (effect,), seed=seed, n_frames=frames, **kw))
     t = time.perf_counter()
     res = analyze(sim.tracks, sim.graph, preset="default", n_boot=0)
     tp = time.perf_counter() - t
@@ -45,7 +49,7 @@ def case(effect, seed, frames, matrices):
     row = {b.edge: i for i, b in enumerate(sim.graph.bends)}
     y = sim.response_true[[row[tuple(e)] for e in r.edges]]
     W = r.weights if res.preset.compliance.weighted else None
-    return r.Y, W, r.root_distance, k, y, tp
+    return r.Y, W, r.root_distance, k, y, tp, [f"{j}->{c}" for j, c in r.edges]
 
 
 def ceiling(Y, y):
@@ -65,19 +69,21 @@ def main() -> int:
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--frames", type=int, default=900)
     ap.add_argument("--matrices", action="store_true")
+    ap.add_argument("--strength-mult", type=float, default=1.0,
+                    help="hidden effect strength = this x rce_gtsam.simulate.EFFECT_DEFAULTS (default 1)")
     ap.add_argument("--effects", default="none,delay,dynamics,second_mode,offset,nonlinear")
     a = ap.parse_args()
     from rce_gtsam.diagnose import diagnose
     print(f"input: {'matrices (simulator equations + noise)' if a.matrices else 'full pipeline (simulate -> analyze default preset)'}; "
-          f"{a.seeds} seeds, {a.frames} frames", flush=True)
+          f"{a.seeds} seeds, {a.frames} frames, effect strength {a.strength_mult:g} x default", flush=True)
     rows = []
     for eff in a.effects.split(","):
         hidden = None if eff == "none" else eff
         ok, imp_v, imp_h, ceil, kb, ka, ts, tps = 0, [], [], [], [], [], [], []
         for sd in range(a.seeds):
-            Y, W, s, k, y, tp = case(hidden, sd, a.frames, a.matrices)
+            Y, W, s, k, y, tp, labels = case(hidden, sd, a.frames, a.matrices, a.strength_mult)
             t = time.perf_counter()
-            d = diagnose(Y, weights=W, root_distance=s, seed=0)
+            d = diagnose(Y, weights=W, root_distance=s, seed=0, edge_labels=labels)
             ts.append(time.perf_counter() - t)
             tps.append(tp)
             ok += d.verdict == hidden
@@ -90,7 +96,8 @@ def main() -> int:
                 ceil.append(ceiling(Y, y))
             print(f"  {eff} seed {sd}: verdict {d.verdict}, " + ", ".join(
                 f"{c.effect} {c.improvement_pct:+.1f}% t={c.evidence:.1f}{'*' if c.supported else ''}" for c in d.candidates)
-                + f" (diagnose {ts[-1]:.1f} s, pipeline {tp:.1f} s)", flush=True)
+                + f" (n_eff {d.settings['n_eff']:.0f}/{d.settings['n_obs']:.0f}; diagnose {ts[-1]:.1f} s, "
+                  f"pipeline {tp:.1f} s)", flush=True)
         med = lambda v: float(np.median(v)) if v else float("nan")  # noqa: E731
         rows.append(f"{eff:<12} {ok:>5}/{a.seeds} {med(imp_v):14.1f} {med(imp_h):13.1f} {med(ceil):9.1f} "
                     f"{med(kb):8.3f} -> {med(ka):.3f} {med(ts):7.1f} {med(tps):6.1f}")
