@@ -71,7 +71,8 @@ def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = N
     return diagnose(resp.Y, weights=resp.weights if cfg.weighted else None, root_distance=resp.root_distance,
                     effects=list(names) if names is not None else None, seed=int(seed),
                     block_length=cfg.block_length, prior_strength=cfg.prior_strength, response=cfg.response,
-                    edge_labels=[f"{j}->{c}" for j, c in resp.edges], frames=resp.frames, **kw)
+                    edge_labels=[f"{j}->{c}" for j, c in resp.edges], frames=resp.frames,
+                    edge_nodes=[result.bending.bends[k].nodes for k in resp.bend_rows], **kw)
 
 
 def diagnosis_json(diagnosis, result=None) -> dict:
