@@ -97,22 +97,46 @@ def _matvec_t(M: np.ndarray, v: np.ndarray) -> np.ndarray:
     return np.matmul(v[:, None, :], M)[:, 0, :]
 
 
-def _precision_shrinkage(Y0, Wf, zm, k_hat, den, n, tau):
+class _PrecisionTerms:
+    """Products of the data that the precision shrinkage needs, computed once per batch (B, E, T)."""
+
+    def __init__(self, Y0: np.ndarray, W: np.ndarray, Wf: np.ndarray):
+        Wc = W.astype(float)
+        pair = Wc[:, :, 1:] * Wc[:, :, :-1]  # both neighbouring frames observed
+        self.WfYY = Wf * Y0 * Y0  # weighted, for the residual variance
+        self.WYY, self.WY, self.Wc = Wc * Y0 * Y0, Wc * Y0, Wc  # unweighted, for the autocorrelation
+        self.YY1 = Y0[:, :, 1:] * Y0[:, :, :-1] * pair
+        self.Ylead, self.Ylag = Y0[:, :, 1:] * pair, Y0[:, :, :-1] * pair
+        self.pair = pair
+
+    def take(self, a: np.ndarray) -> "_PrecisionTerms":
+        out = object.__new__(_PrecisionTerms)
+        for k, v in vars(self).items():
+            setattr(out, k, v[a])
+        return out
+
+
+def _precision_shrinkage(terms: _PrecisionTerms, zm, k_hat, num, den, n, tau):
     """(B, E) shrinkage factors tau^2 / (tau^2 + se^2(log kappa_hat)) of a log-normal prior on kappa.
 
     se^2(kappa_hat) = sigma^2 / sum(w z^2) * (1 + rho) / (1 - rho): the residual variance of the
     per-edge regression y ~ kappa_hat z over the frames used, inflated by the lag-1 autocorrelation rho
     of those residuals (an AR(1) effective sample size: neighbouring frames are not independent); the
-    delta method gives se(log kappa_hat) = se(kappa_hat) / |kappa_hat|. Y0, Wf: (B, E, T) data (0 where
-    missing) and weights; zm: (B, T) excitation, 0 on frames not used.
+    delta method gives se(log kappa_hat) = se(kappa_hat) / |kappa_hat|. ``zm``: (B, T) excitation, 0 on
+    frames not used. Every sum of residual products is expanded into mat-vecs of precomputed data
+    products, r = y - k z: sum r^2 = sum y^2 - 2k sum yz + k^2 sum z^2, likewise for lag-1 products.
     """
-    used = (Wf > 0) & (zm != 0)[:, None, :]
-    r = np.where(used, Y0 - k_hat[:, :, None] * zm[:, None, :], 0.0)
-    sigma2 = np.sum(Wf * r * r, axis=2) / np.maximum(n - 1, 1)
-    lag = np.sum(r[:, :, 1:] * r[:, :, :-1], axis=2)
-    rho = np.clip(lag / np.maximum(np.sum(r * r, axis=2), 1e-300), 0.0, 0.99)
+    m = (zm != 0).astype(float)
+    k, k2 = k_hat, k_hat * k_hat
+    rss_w = _matvec(terms.WfYY, m) - 2 * k * num + k2 * den
+    sigma2 = np.maximum(rss_w, 0.0) / np.maximum(n - 1, 1)
+    sumsq = _matvec(terms.WYY, m) - 2 * k * _matvec(terms.WY, zm) + k2 * _matvec(terms.Wc, zm * zm)
+    mm = m[:, 1:] * m[:, :-1]
+    lag = (_matvec(terms.YY1, mm) - k * (_matvec(terms.Ylead, zm[:, :-1] * mm) + _matvec(terms.Ylag, zm[:, 1:] * mm))
+           + k2 * _matvec(terms.pair, zm[:, 1:] * zm[:, :-1] * mm))
+    rho = np.clip(lag / np.maximum(sumsq, 1e-300), 0.0, 0.99)
     var_k = sigma2 / np.maximum(den, EPS) * (1 + rho) / (1 - rho)
-    se2_log = var_k / np.maximum(k_hat * k_hat, 1e-300)
+    se2_log = var_k / np.maximum(k2, 1e-300)
     return tau * tau / (tau * tau + se2_log)
 
 
@@ -137,11 +161,16 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
     WY = Wf * Y0  # constant over iterations: every step below is a batched mat-vec (BLAS)
     Wc = W.astype(float)
     precision = config.shrinkage == "precision"
+    terms = _PrecisionTerms(Y0, W, Wf) if precision else None
     for _ in range(config.n_iter):
         if not active.any():
             break
         a = np.flatnonzero(active)
-        WYa, Wfa, Wca, za, prev = WY[a], Wf[a], Wc[a], z[a], kappa[a]
+        # While most resamples are still iterating, compute on the whole batch (no copies) and keep
+        # only the active rows' results; subset once most have converged.
+        full = a.size > B // 2
+        sel = slice(None) if full else a
+        WYa, Wfa, Wca, za, prev = WY[sel], Wf[sel], Wc[sel], z[sel], kappa[sel]
         # kappa step over frames with data and usable excitation (|z| > EPS)
         m = (np.abs(za) > EPS).astype(float)
         n = _matvec(Wca, m)
@@ -151,7 +180,8 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
         sign = np.where(k_hat < 0, -1.0, 1.0) if signed else np.ones_like(k_hat)
         mag = np.maximum(np.abs(k_hat) if signed else k_hat, EPS)
         if precision:
-            shrink = _precision_shrinkage(Y0[a], Wfa, za * m, k_hat, den, n, float(config.prior_sd_log))
+            shrink = _precision_shrinkage(terms if full else terms.take(a), za * m, k_hat, num, den, n,
+                                          float(config.prior_sd_log))
         else:
             shrink = n / (n + lam)
         k_new = np.where(n > 0, sign * np.exp(shrink * np.log(mag)), 1.0)
@@ -169,6 +199,8 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
             z_new = np.maximum(z_new, 0.0)
         z_new = np.where(_matvec_t(Wca, mk) > 0, z_new, 0.0)
         ch = np.max(np.abs(np.log(np.maximum(np.abs(k_new), EPS)) - np.log(np.maximum(np.abs(prev), EPS))), axis=1)
+        if full:  # results of rows that had already converged are discarded
+            k_new, z_new, n, ch = k_new[a], z_new[a], n[a], ch[a]
         kappa[a], z[a], n_used[a], change[a] = k_new, z_new, n, ch
         iterations[a] += 1
         done = ch < config.tol
