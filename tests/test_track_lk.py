@@ -106,3 +106,31 @@ def test_default_tracker_on_simulator_render(tmp_path):
     assert np.median(err[res.visible]) < 1.0
     assert res.visible.mean() > 0.8
     assert np.median(err[:, -1][res.visible[:, -1]]) < 1.0
+
+
+def test_distinct_reacquire_keeps_a_lost_node_off_its_twin():
+    """A self-similar stem repeats its knots: a lost node must not lock onto a neighbouring knot.
+
+    A periodic stem of identical 14-px knots; the tracked knot A is covered in frame 1 (lost), then
+    reappears slightly degraded, so its neighbours 14 px away (inside the re-acquisition window)
+    correlate about as well as A itself. With ``distinct_reacquire`` the tracker must mark A invisible while the match is ambiguous,
+    never visible on a neighbouring knot.
+    """
+    rng = np.random.default_rng(3)
+    knot = rng.uniform(40, 215, (15, 14))
+    base = np.full((120, 160), 128.0)
+    base[53:68, 22:92] = np.tile(knot, (1, 5))  # knots centred at x = 29, 43, 57, 71, 85; A = (57, 60)
+    frames = []
+    for f in range(20):
+        img = base.copy()
+        if f == 1:
+            img[50:71, 47:68] = 128.0  # A covered
+        elif f >= 2:
+            img[53:68, 50:64] = knot + rng.normal(0, 10, knot.shape)  # A back, degraded
+        img += rng.normal(0, 2, img.shape)
+        frames.append(np.repeat(np.clip(img, 0, 255).astype(np.uint8)[..., None], 3, axis=2))
+    res = LKTracker(LKConfig(distinct_reacquire=True)).track(ArraySource(np.stack(frames)), [[57.0, 60.0]])
+    err = np.hypot(res.xy[0, :, 0] - 57.0, res.xy[0, :, 1] - 60.0)
+    assert not res.visible[0, 1]                        # covered: invisible
+    assert (err[res.visible[0]] < 2.0).all()            # never visible on a neighbouring knot
+    assert res.info["rejected_ambiguous"] > 0
