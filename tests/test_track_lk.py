@@ -134,3 +134,21 @@ def test_distinct_reacquire_keeps_a_lost_node_off_its_twin():
     assert not res.visible[0, 1]                        # covered: invisible
     assert (err[res.visible[0]] < 2.0).all()            # never visible on a neighbouring knot
     assert res.info["rejected_ambiguous"] > 0
+
+
+def test_colour_mask_keeps_bark_and_drops_a_leaf():
+    """The branch-colour mask keeps the stem (dark knots included) and drops a green leaf and the background."""
+    rng = np.random.default_rng(0)
+    img = np.empty((80, 120, 3))
+    img[:] = (110, 125, 105)                                    # grey-green background
+    img[36:45, 10:110] = (150, 95, 60)                          # brown stem along y = 40
+    img[36:45, 50:54] = (75, 48, 30)                            # a dark knot: same hue, half the brightness
+    img[30:44, 80:92] = (60, 170, 50)                           # a green leaf over the stem
+    img = np.clip(img + rng.normal(0, 2, img.shape), 0, 255).astype(np.uint8)
+    q = np.array([[15.0, 40.0], [60.0, 40.0], [105.0, 40.0]])
+    graph = BranchGraph.from_edges(0, [[0, 1], [1, 2]])
+    fg = LKTracker._branch_colour_mask(img, q, graph)
+    assert fg[38:43, 15:45].mean() > 0.95      # bark
+    assert fg[38:43, 50:54].mean() > 0.9       # dark knot (noisier chromaticity: fewer photons)
+    assert fg[38:43, 82:90].mean() < 0.05      # leaf in front of the stem
+    assert fg[5:25, :].mean() < 0.05           # background
