@@ -1,9 +1,11 @@
 """End to end on the simulator's rendered video: `rce run` with the default (OpenCV) tracker recovers kappa_true.
 
-Issue 4 asks for Spearman(kappa, kappa_true) >= 0.8 on the simulator video. Measured with the current tracker
-on 600-frame clips (seeds 0, 1, 2) the figure is 0.71-0.79 (see the helper report), so the issue's target is kept
-as an expected failure (non-strict, so it reports XPASS the day it is met) and the regression guard asserts what
-the tracker reliably achieves: far better than the 0.38 of the tracker before the articulated templates.
+Issue 4 asks for Spearman(kappa, kappa_true) >= 0.8 on the simulator video. With the branch-colour mask and the
+re-acquisition distinctness check the tracker reaches it on 600-frame clips through `rce run` (seeds 0, 1, 2:
+0.81, 0.86, 0.86; it was 0.80, 0.71, 0.71), but not on this test's 400-frame clip: 0.68 (0.72 before; one
+distal bend, 16->17, whose nodes are visible in only ~30 % of frames, gets a kappa 10x too high). So the issue's
+target stays an expected failure here (non-strict: it reports XPASS the day it is met) and the regression guard
+asserts what is reliably achieved: far better than the 0.38 of the tracker before the articulated templates.
 """
 
 from __future__ import annotations
@@ -51,9 +53,10 @@ def test_tracks_are_accurate(run_outputs):
     vis = tracks["visible"].to_numpy() == 1
     err = np.hypot(tracks["x"].to_numpy() - true_tracks["x"].to_numpy(),
                    tracks["y"].to_numpy() - true_tracks["y"].to_numpy())
-    assert np.median(err[vis]) < 1.0          # issue 4's bound (measured ~0.13 px)
-    assert np.percentile(err[vis], 90) < 1.0  # measured ~0.55 px
-    assert vis.mean() > 0.85
+    assert np.median(err[vis]) < 1.0          # issue 4's bound (measured 0.07 px)
+    assert np.percentile(err[vis], 90) < 1.0  # measured 0.37 px
+    assert np.percentile(err[vis], 99) < 5.0  # measured 2.2 px: a lost node must not lock onto a neighbouring knot
+    assert vis.mean() > 0.8                   # measured 0.85: ambiguous re-acquisitions are left invisible
 
 
 def test_kappa_recovered_regression_guard(run_outputs):
@@ -62,7 +65,8 @@ def test_kappa_recovered_regression_guard(run_outputs):
     assert spearmanr(est, tru)[0] >= 0.5  # the old single-rotation tracker gave 0.38 on this seed
 
 
-@pytest.mark.xfail(reason="issue 4 target not yet met on every seed (measured 0.71-0.79 on seeds 0-2)", strict=False)
+@pytest.mark.xfail(reason="issue 4 target met on 600-frame clips (0.81-0.86, seeds 0-2), not yet on this "
+                          "400-frame clip (measured 0.68)", strict=False)
 def test_kappa_recovered_issue_target(run_outputs):
     summary, truth, _, _ = run_outputs
     est, tru = _kappa_pairs(summary, truth)
