@@ -484,7 +484,18 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8
     split = node_disjoint_split(s, shared, seed)
     node_disjoint = split is not None
     halves = split if node_disjoint else edge_halves(s, seed)
-    gap = int(block_length)
+    # full fits first: the CV buffer must cover the longest memory any fitted term has (a tip lag longer
+    # than the buffer would make test frames depend on the training frames' data, and the held-out z of
+    # the window's end would be seen by too few rows); the same buffer then applies to every model alike
+    fulls = []
+    for eff in cands:
+        model = base_model + eff
+        # iteration caps: the full fit (the only place shared parameters are fitted) starts from the
+        # converged baseline; fold refits start from the full fit, so a few block sweeps suffice there
+        fulls.append((eff, model, model._fit(Y, W, s, start=(base.kappa.copy(), base.z.copy(), {}),
+                                             max_iter=FULL_ITER)))
+    memory = max([0.0] + [e.memory_frames(st) for _, _, f in fulls for e, st in zip(f.model.effects, f.states)])
+    gap = max(int(block_length), int(math.ceil(memory)))
     b_sse, b_cnt = heldout_errors(base_model, base, Y, W, s, blocks, halves, gap)
     used = b_cnt > 0
     b_mse = b_sse[used] / b_cnt[used]
@@ -495,11 +506,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8
     ess = effective_sample(base)
     base_ic = effective_ic(base, ess)
     results = []
-    for eff in cands:
-        model = base_model + eff
-        # iteration caps: the full fit (the only place shared parameters are fitted) starts from the
-        # converged baseline; fold refits start from the full fit, so a few block sweeps suffice there
-        full = model._fit(Y, W, s, start=(base.kappa.copy(), base.z.copy(), {}), max_iter=FULL_ITER)
+    for eff, model, full in fulls:
         sse, cnt = heldout_errors(model, full, Y, W, s, blocks, halves, gap, cv_iter=CV_ITER)
         mse = sse[used] / np.maximum(cnt[used], 1)
         rmse = float(math.sqrt(sse[used].sum() / max(cnt[used].sum(), 1)))

@@ -111,3 +111,10 @@ def test_dynamics_closed_form_discretisation_in_every_damping_regime():
         fr, H = _bank((w,), zeta, 150)
         y = np.fft.irfft(np.fft.rfft(u, 300) * H[0], 300)[:150]
         assert np.allclose(y, oscillator_response(u, w, zeta), atol=1e-9)
+
+
+def test_memory_frames_reach_back_of_fitted_terms():
+    """diagnose widens its CV buffer to the longest fitted memory: a delay reaches back |tau| frames, an
+    instantaneous term not at all (a tip lag beyond the buffer once blew a held-out fold up ~5x)."""
+    assert effects.Delay().memory_frames({"params": {"tau": np.array(-37.5)}, "latents": {}}) == 37.5
+    assert effects.Offset().memory_frames({"params": {}, "latents": {}}) == 0.0

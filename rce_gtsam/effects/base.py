@@ -102,6 +102,11 @@ class Effect:
         """Additive effects: the (E, T) term added to the prediction (degrees)."""
         return None
 
+    def memory_frames(self, state: dict) -> float:
+        """How far back in time (frames) the fitted term reaches: a prediction at frame t depends on z up to
+        this many frames earlier (0: instantaneous). Cross-validation widens its buffer to cover it."""
+        return 0.0
+
     # -- reporting --------------------------------------------------------------------------------
     def describe(self, state: dict) -> dict:
         """Derived, human-meaningful numbers for the report (default: nothing extra)."""

@@ -22,7 +22,9 @@ class Delay(Effect):
 
     max_lag: bound on |tau| in frames. The default 25 frames equals the bootstrap/CV block length: a lag
     that long would make neighbouring blocks dependent and is far beyond a plausible travel time along a
-    branch (< 0.1 s at 30 fps for bending waves in a stem of a few tens of cm).
+    branch (< 0.1 s at 30 fps for bending waves in a stem of a few tens of cm). A larger bound may be
+    passed (slow travelling loads, high frame rates): :func:`rce_gtsam.diagnose.diagnose` widens its CV
+    buffer to the fitted lag (:meth:`memory_frames`), so held-out frames stay independent of training.
     """
 
     name = "delay"
@@ -103,6 +105,9 @@ class Delay(Effect):
         res = minimize_scalar(prof, bounds=(lo, hi), method="bounded", options={"xatol": 0.02, "maxiter": 12})
         tau = res.x if res.fun <= prof(t0) else t0
         return {"params": {"tau": np.array(tau)}, "latents": {}}
+
+    def memory_frames(self, state):
+        return abs(scalar(state["params"]["tau"]))
 
     def describe(self, state):
         return {"tip_lag_frames": scalar(state["params"]["tau"])}
