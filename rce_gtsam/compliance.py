@@ -16,6 +16,7 @@ Two response conventions:
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,15 +73,13 @@ class BootstrapCI:
 def _initial_z(Y: np.ndarray, W: np.ndarray) -> np.ndarray:
     """Per-frame median over observed edges (mean as fallback), batched: Y, W (B, E, T) -> (B, T)."""
     masked = np.where(W, Y, np.nan)
-    with np.errstate(all="ignore"):
-        import warnings
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            z = np.nanmedian(masked, axis=1)
-            for b in range(z.shape[0]):
-                zb = z[b]
-                if not np.isfinite(zb).any() or np.nanmax(zb) <= 1e-9:
-                    z[b] = np.nanmean(masked[b], axis=0)
+    with warnings.catch_warnings():  # frames with no observed edge give NaN ("all-NaN slice"), set to 0 below
+        warnings.simplefilter("ignore", RuntimeWarning)
+        z = np.nanmedian(masked, axis=1)
+        for b in range(z.shape[0]):
+            zb = z[b]
+            if not np.isfinite(zb).any() or np.nanmax(zb) <= 1e-9:
+                z[b] = np.nanmean(masked[b], axis=0)
     z = np.nan_to_num(z, nan=0.0)
     flat = np.abs(z).max(axis=1) <= 1e-9
     z[flat] = 1.0

@@ -8,6 +8,7 @@ Which numbers and switches each stage uses comes from a :class:`~rce_gtsam.prese
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -104,11 +105,9 @@ def observed_positions(smoothed: SmoothedTracks) -> np.ndarray:
 def filtered_rms(bending: BendingResult) -> np.ndarray:
     """(B,) sqrt(mean delta^2) over each bend's inlier frames, degrees."""
     d2 = np.where(bending.inlier, bending.delta_deg**2, np.nan)
-    with np.errstate(invalid="ignore"):
-        import warnings
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            return np.sqrt(np.nanmean(d2, axis=1))
+    with warnings.catch_warnings():  # a bend with no inlier frame gives NaN ("mean of empty slice")
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.sqrt(np.nanmean(d2, axis=1))
 
 
 def length_cv(xy: np.ndarray, node_ids, graph: BranchGraph) -> np.ndarray:

@@ -37,7 +37,7 @@ def compliance_summary(result) -> pd.DataFrame:
     g, geo, resp, fit = result.graph, result.geometry, result.response, result.fit
     row_of = {e: i for i, e in enumerate(resp.edges)}
     pred = fit.predict()
-    bend_rms = dict(zip([b.edge for b in result.bending.bends], _filtered_rms(result.bending)))
+    bend_rms = dict(zip([b.edge for b in result.bending.bends], result.smoothing.bend_rms_smoothed_deg))
     U = result.uncertainty
     records = []
     for e in sorted(g.edges, key=lambda e: (geo.root_distance_px[e[1]], e[0], e[1])):
@@ -69,11 +69,6 @@ def compliance_summary(result) -> pd.DataFrame:
             )
         records.append(rec)
     return pd.DataFrame.from_records(records)
-
-
-def _filtered_rms(bending):
-    from .pipeline import filtered_rms
-    return filtered_rms(bending)
 
 
 def excitation_table(result) -> pd.DataFrame:
