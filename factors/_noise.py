@@ -32,20 +32,6 @@ def isotropic(dim: int, sigma: float) -> gtsam.noiseModel.Base:
     return gtsam.noiseModel.Isotropic.Sigma(int(dim), float(sigma))
 
 
-def robustify(base: gtsam.noiseModel.Base, robust: str | None, k: float) -> gtsam.noiseModel.Base:
-    """Wrap ``base`` in a robust M-estimator (``"huber"``/``"cauchy"``, threshold ``k`` in sigmas) or
-    return it unchanged for ``robust=None``."""
-    if robust is None:
-        return base
-    if robust == "huber":
-        est = gtsam.noiseModel.mEstimator.Huber.Create(float(k))
-    elif robust == "cauchy":
-        est = gtsam.noiseModel.mEstimator.Cauchy.Create(float(k))
-    else:
-        raise ValueError(f"robust loss must be None or one of {ROBUST_LOSSES}, got {robust!r}")
-    return gtsam.noiseModel.Robust.Create(est, base)
-
-
 def oriented_covariance(sigma_along: float, sigma_across: float, tangent) -> np.ndarray:
     """2x2 covariance ``R diag(sigma_along^2, sigma_across^2) R^T`` with R's first column = unit ``tangent``."""
     t = np.asarray(tangent, dtype=float)

@@ -8,28 +8,27 @@ Residual (pixels per frame^2)::
 Jacobians: (+I_2, -2 I_2, +I_2) with respect to (p(t-1), p(t), p(t+1)).
 
 GTSAM has no built-in three-point difference factor, and a Python ``CustomFactor`` makes LM
-O(N^2) slow (see docs/ecosystem-notes §2). Because Point2 is a vector space the residual is exactly
-linear, so it is stored as a whitened ``JacobianFactor`` (A_k = c_k sqrt(w_a) I_2, b = 0, unit noise)
-inside a ``LinearContainerFactor`` linearised at zero: at any values the container evaluates
+O(N^2) slow (see docs/ecosystem-notes §2). The residual is exactly linear, so one factor per frame
+triple covers every node: a whitened ``JacobianFactor`` (blocks c_k sqrt(w_a) I_2N, b = 0, unit
+noise) inside a ``LinearContainerFactor`` linearised at zero: at any values the container evaluates
 ``A (x - 0) - b``, which is the exact residual, entirely in C++.
 """
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import gtsam
 import numpy as np
 
+from ._frame import linear_container, scaled_identity
 from ._noise import sigma_from_weight
 
 _COEFFS = (1.0, -2.0, 1.0)
 
 
 class AccelerationFactor:
-    """``p(t-1) - 2 p(t) + p(t+1) = 0`` with isotropic weight ``w_a``."""
+    """``p(t-1) - 2 p(t) + p(t+1) = 0`` for every node, isotropic weight ``w_a``."""
 
-    dim = 2
+    dim = 2  # rows per node
 
     @staticmethod
     def residual(p_prev, p, p_next) -> np.ndarray:
@@ -42,29 +41,9 @@ class AccelerationFactor:
         return tuple(c * np.eye(2) for c in _COEFFS)
 
     @staticmethod
-    def zero_values(keys) -> gtsam.Values:
-        """A Values holding Point2(0, 0) at every key: the linearisation point the containers need.
-        Build it once for all keys and pass it to :meth:`create` (the container copies only its own
-        three entries)."""
-        v = gtsam.Values()
-        z = np.zeros(2)
-        for k in keys:
-            v.insert(int(k), z)
-        return v
-
-    @staticmethod
-    def create(key_prev: int, key: int, key_next: int, weight: float,
+    def create(key_prev: int, key: int, key_next: int, n_nodes: int, weight: float,
                zeros: gtsam.Values) -> gtsam.LinearContainerFactor:
-        """Exact linear factor on the three Point2 variables, weight ``w_a`` baked into A."""
-        a0, a1, a2, b, unit = _blocks(float(weight))
-        return gtsam.LinearContainerFactor(gtsam.JacobianFactor(key_prev, a0, key, a1, key_next, a2, b, unit),
-                                           zeros)
-
-
-@lru_cache(maxsize=8)
-def _blocks(weight: float):
-    """Whitened Jacobian blocks sqrt(w) * (I, -2I, I), zero rhs and the unit noise model, built once
-    per weight (building ~20k factors is measurably faster without re-creating them each time)."""
-    s = 1.0 / sigma_from_weight(weight)  # sqrt(w)
-    eye = np.eye(2)
-    return (*(c * s * eye for c in _COEFFS), np.zeros(2), gtsam.noiseModel.Unit.Create(2))
+        """Exact linear factor on three consecutive frame states, weight ``w_a`` baked into A."""
+        s = 1.0 / sigma_from_weight(weight)
+        blocks = [scaled_identity(n_nodes, c * s) for c in _COEFFS]
+        return linear_container([key_prev, key, key_next], blocks, np.zeros(2 * int(n_nodes)), zeros)

@@ -13,8 +13,8 @@ length. The median, not the first frame as in the paper, so one deflected or mis
 cannot set the rest length for the whole video; a branch segment's projected length varies only
 through foreshortening and tracking noise, whose median is the best single-number summary.
 
-GTSAM: ``RangeFactor2`` — ``RangeFactor<Point2, Point2>`` in C++ (error = distance(p_a, p_b) - L),
-so LM never calls into Python.
+GTSAM: one ``CustomFactor`` per frame state with a row per edge (E x 2N Jacobian), so LM makes one
+Python callback per frame and linearisation; isotropic noise sigma = 1/sqrt(w_e).
 """
 
 from __future__ import annotations
@@ -22,11 +22,12 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
+from ._frame import check_jacobian_shape
 from ._noise import isotropic, sigma_from_weight
 
 
 class EdgeLengthFactor:
-    """``|p_b - p_a| - L_ab = 0`` with weight ``w_e``."""
+    """``|p_b - p_a| - L_ab = 0`` for every edge (a, b), weight ``w_e``."""
 
     dim = 1
 
@@ -54,9 +55,24 @@ class EdgeLengthFactor:
         return float(np.median(np.linalg.norm(xy_b[common] - xy_a[common], axis=1)))
 
     @staticmethod
-    def noise_model(weight: float) -> gtsam.noiseModel.Base:
-        return isotropic(1, sigma_from_weight(weight))
+    def create(key: int, n_nodes: int, edges, lengths, weight: float) -> gtsam.CustomFactor:
+        """Factor on one frame state. edges: (E, 2) node rows (parent a, child b); lengths: (E,) px."""
+        N = int(n_nodes)
+        ab = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+        L = np.asarray(lengths, dtype=float).reshape(-1)
+        ia, ib = ab[:, 0], ab[:, 1]
+        rows = np.arange(len(ab))
 
-    @staticmethod
-    def create(key_a: int, key_b: int, length: float, noise: gtsam.noiseModel.Base) -> gtsam.RangeFactor2:
-        return gtsam.RangeFactor2(key_a, key_b, float(length), noise)
+        def error(this: gtsam.CustomFactor, values: gtsam.Values, H):
+            p = values.atVector(key).reshape(N, 2)
+            d = p[ib] - p[ia]
+            dist = np.linalg.norm(d, axis=1)
+            if H is not None:
+                u = d / dist[:, None]
+                J = np.zeros((len(ab), N, 2))
+                np.add.at(J, (rows, ia), -u)
+                np.add.at(J, (rows, ib), u)
+                H[0] = check_jacobian_shape(J.reshape(len(ab), 2 * N), len(ab), N)
+            return dist - L
+
+        return gtsam.CustomFactor(isotropic(len(ab), sigma_from_weight(weight)), [key], error)

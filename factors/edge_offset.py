@@ -11,19 +11,23 @@ Residual (pixels), for an edge a -> b (parent -> child) at every frame t = 0 .. 
 
 Jacobians: dr/dp_a = -I_2, dr/dp_b = +I_2.
 
-GTSAM: ``BetweenFactorPoint2(k_a, k_b, d_ab)`` (exactly linear for Point2, C++).
+GTSAM: one factor per frame state holds every edge's rows: an exact
+``LinearContainerFactor(JacobianFactor)`` (2E x 2N, whitened by sqrt(w_e)), in C++.
 """
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import gtsam
 import numpy as np
 
-from ._noise import isotropic, sigma_from_weight
+from ._frame import linear_container
+from ._noise import sigma_from_weight
 
 
 class EdgeOffsetFactor:
-    """``(p_b - p_a) - d_ab = 0`` with isotropic weight ``w_e``."""
+    """``(p_b - p_a) - d_ab = 0`` for every edge (a, b), isotropic weight ``w_e``."""
 
     dim = 2
 
@@ -49,9 +53,26 @@ class EdgeOffsetFactor:
         return xy_b[t0] - xy_a[t0]
 
     @staticmethod
-    def noise_model(weight: float) -> gtsam.noiseModel.Base:
-        return isotropic(2, sigma_from_weight(weight))
+    def create(key: int, n_nodes: int, edges, offsets, weight: float,
+               zeros: gtsam.Values) -> gtsam.LinearContainerFactor:
+        """Factor on one frame state. edges: (E, 2) node rows (parent a, child b); offsets: (E, 2) d_ab, px."""
+        s = 1.0 / sigma_from_weight(weight)
+        edges = np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2)
+        offsets = np.ascontiguousarray(offsets, dtype=float).reshape(-1, 2)
+        A, b = _edge_system(int(n_nodes), edges.tobytes(), offsets.tobytes(), s)
+        return linear_container([key], [A], b, zeros)
 
-    @staticmethod
-    def create(key_a: int, key_b: int, offset, noise: gtsam.noiseModel.Base) -> gtsam.BetweenFactorPoint2:
-        return gtsam.BetweenFactorPoint2(key_a, key_b, np.asarray(offset, dtype=float), noise)
+
+@lru_cache(maxsize=8)
+def _edge_system(n_nodes: int, edge_bytes: bytes, offset_bytes: bytes, s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Whitened (A, b) of all edge offsets at one frame: rows 2j, 2j+1 = s (p_b - p_a) - s d_j.
+    The same for every frame, so it is built once per (graph, rest offsets, weight)."""
+    edges = np.frombuffer(edge_bytes, dtype=np.int64).reshape(-1, 2)
+    offsets = np.frombuffer(offset_bytes, dtype=float).reshape(-1, 2)
+    E = len(edges)
+    A = np.zeros((2 * E, 2 * n_nodes))
+    eye = s * np.eye(2)
+    for j, (a, b) in enumerate(edges.tolist()):
+        A[2 * j:2 * j + 2, 2 * a:2 * a + 2] -= eye
+        A[2 * j:2 * j + 2, 2 * b:2 * b + 2] += eye
+    return A, s * offsets.ravel()

@@ -7,8 +7,8 @@ Residual (pixels per frame)::
 
 Jacobians: dr/dp(t) = -I_2, dr/dp(t+1) = +I_2.
 
-GTSAM: ``BetweenFactorPoint2(k_t, k_t+1, Point2(0, 0))`` — its error is ``(p1 - p0) - 0`` because
-Point2 is a vector space, so the factor is exactly linear and runs in C++.
+GTSAM: one factor per pair of consecutive frame states covers every node: an exact
+``LinearContainerFactor(JacobianFactor)`` with blocks ``sqrt(w_v) (-I, +I)`` (2N x 2N), in C++.
 """
 
 from __future__ import annotations
@@ -16,15 +16,14 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from ._noise import isotropic, sigma_from_weight
-
-_ZERO = np.zeros(2)
+from ._frame import linear_container, scaled_identity
+from ._noise import sigma_from_weight
 
 
 class VelocityFactor:
-    """``p(t+1) - p(t) = 0`` with isotropic weight ``w_v``."""
+    """``p(t+1) - p(t) = 0`` for every node, isotropic weight ``w_v``."""
 
-    dim = 2
+    dim = 2  # rows per node
 
     @staticmethod
     def residual(p0, p1) -> np.ndarray:
@@ -36,10 +35,9 @@ class VelocityFactor:
         return (-np.eye(2), np.eye(2))
 
     @staticmethod
-    def noise_model(weight: float) -> gtsam.noiseModel.Base:
-        return isotropic(2, sigma_from_weight(weight))
-
-    @staticmethod
-    def create(key0: int, key1: int, noise: gtsam.noiseModel.Base) -> gtsam.BetweenFactorPoint2:
-        """Factor between the positions at frame t (``key0``) and t+1 (``key1``)."""
-        return gtsam.BetweenFactorPoint2(key0, key1, _ZERO, noise)
+    def create(key0: int, key1: int, n_nodes: int, weight: float,
+               zeros: gtsam.Values) -> gtsam.LinearContainerFactor:
+        """Factor between the frame states at t (``key0``) and t+1 (``key1``), weight baked in."""
+        s = 1.0 / sigma_from_weight(weight)
+        return linear_container([key0, key1], [scaled_identity(n_nodes, -s), scaled_identity(n_nodes, s)],
+                                np.zeros(2 * int(n_nodes)), zeros)

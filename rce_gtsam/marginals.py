@@ -197,8 +197,8 @@ def frame_marginals(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, n_n
                     n_frames: int, jacobian: sp.spmatrix | None = None) -> np.ndarray:
     """(F, 2N, 2N) joint covariance of all nodes at each frame (px²), from GTSAM's linearisation of
     ``graph`` at ``values``. Pass ``jacobian`` (the whitened sparse Jacobian of that linearisation,
-    from :func:`whitened_jacobian`) if you already have it. Keys must sort frame-major with N Point2
-    variables per frame (as :func:`rce_gtsam.smooth.variable_key` makes them)."""
+    from :func:`whitened_jacobian`) if you already have it. Keys must sort frame-major with 2N
+    scalars per frame (frame states, as :func:`rce_gtsam.factors.frame_key` keys them)."""
     n = 2 * int(n_nodes)
     if int(values.dim()) != n * int(n_frames):
         raise ValueError(f"values hold {values.dim()} scalars, expected 2·{n_nodes}·{n_frames}")

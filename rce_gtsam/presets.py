@@ -23,7 +23,7 @@ class SmootherConfig:
     edge_weight: w_e of the edge prior.
     edge_prior: ``"offset"`` pulls each child-minus-parent vector toward its first-frame value (the
         paper's rigid shape prior); ``"length"`` only keeps the segment length near its rest length
-        (GTSAM ``RangeFactor2``), leaving bending free.
+        (one GTSAM ``CustomFactor`` per frame), leaving bending free.
     along_across_ratio: measurement sigma along the branch divided by sigma across it (1 = isotropic).
     robust: optional robust loss on the measurement factor (``"huber"`` or ``"cauchy"``), threshold
         ``robust_k`` in whitened units (sigmas).
@@ -109,7 +109,7 @@ PAPER = Preset(name="paper")
 #: effect-free branches, 900 frames, 5 seeds, median kappa log-RMSE; paper preset 0.774):
 #: * no edge prior: the paper's frame-0 offset prior pulls every frame toward the first frame's shape
 #:   and scrambles kappa (all other choices below with the offset prior: 0.870). A length-only prior
-#:   (GTSAM RangeFactor2) did not improve kappa (8 seeds: 0.343 vs 0.331 without) and makes the problem
+#:   did not improve kappa (8 seeds: 0.343 vs 0.331 without) and makes the problem
 #:   non-convex: LM needs 7-25 iterations (12 s on plant 2) and can stop short at tracking glitches.
 #:   Without it the graph is linear and LM converges in one iteration. It stays available
 #:   (``edge_prior="length"``, ``edge_weight > 0``);

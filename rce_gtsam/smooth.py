@@ -1,14 +1,15 @@
 """GTSAM factor-graph smoother of branch-node tracks, with marginal covariances.
 
-One ``Point2`` variable (pixels) per graph node and per frame 0..F-1, unobserved frames included.
+One GTSAM variable per frame 0..F-1 (unobserved frames included): the frame state ``X_t``, the 2N
+pixel coordinates of every node at that frame (layout: :mod:`rce_gtsam.factors._frame`).
 Factors (see :mod:`rce_gtsam.factors` for the residuals):
 
-* measurement prior at every observed (node, frame) — isotropic or branch-aligned anisotropic,
-  optionally robust (Huber / Cauchy);
+* measurement of every node observed at the frame — isotropic or branch-aligned anisotropic 2x2
+  noise per observation, optionally a robust loss (Huber / Cauchy) per observation;
 * first differences ``p(t+1) - p(t)`` (weight w_v) and second differences
   ``p(t-1) - 2 p(t) + p(t+1)`` (weight w_a) along every node's trajectory;
 * an edge prior on every parent -> child edge at every frame: the paper's rest *offset* vector
-  (``edge_prior="offset"``) or a rest *length* (``edge_prior="length"``, GTSAM ``RangeFactor2``).
+  (``edge_prior="offset"``) or a rest *length* (``edge_prior="length"``).
 
 With the paper's settings the problem is linear least squares (the same quadratic as the
 published LSQR solver, see :mod:`rce_gtsam.smooth_reference`); it is solved here with GTSAM's
@@ -16,8 +17,9 @@ Levenberg-Marquardt in one exact step (the non-linear options take several itera
 Marginal covariances come from the linearisation at the solution (robust weights included) through
 a block-banded selected inversion (:mod:`rce_gtsam.marginals`), not per-key ``gtsam.Marginals``.
 
-Variable keys are ``gtsam.symbol('p', t * N + i)`` for node row ``i`` (order of ``tracks.node_ids``)
-and frame ``t``: sorted key order is frame-major, which the marginal computation relies on.
+Variable keys are ``gtsam.symbol('x', t)`` (:func:`rce_gtsam.factors.frame_key`); node row ``i``
+(order of ``tracks.node_ids``) occupies entries 2i, 2i+1 of each state. Sorted key order is frame
+order, which the marginal computation relies on.
 """
 
 from __future__ import annotations
@@ -31,19 +33,11 @@ import numpy as np
 
 from .errors import InputError
 from .factors import (MEASUREMENT_WEIGHT_FLOOR, AccelerationFactor, EdgeLengthFactor,
-                      EdgeOffsetFactor, MeasurementFactor, VelocityFactor)
+                      EdgeOffsetFactor, MeasurementFactor, VelocityFactor, frame_key, zero_values)
 from .graph import BranchGraph
 from .presets import SmootherConfig
 from .presmooth import moving_average
 from .tracks import Tracks
-
-KEY_CHAR = "p"
-
-
-def variable_key(node_row: int, frame: int, n_nodes: int) -> int:
-    """GTSAM key of node row ``node_row`` at ``frame`` (frame-major: sorted keys = frame by frame)."""
-    return gtsam.symbol(KEY_CHAR, int(frame) * int(n_nodes) + int(node_row))
-
 
 @dataclass(frozen=True)
 class SmootherReport:
@@ -209,20 +203,21 @@ class FactorGraphProblem:
     n_nodes: int
     n_frames: int
 
-    def key(self, node_row: int, frame: int) -> int:
-        return variable_key(node_row, frame, self.n_nodes)
+    def key(self, frame: int) -> int:
+        """Key of the frame state at ``frame``."""
+        return frame_key(frame)
 
-    def keys(self) -> np.ndarray:
-        """(F, N) keys, frame-major."""
-        return np.array([[variable_key(i, t, self.n_nodes) for i in range(self.n_nodes)]
-                         for t in range(self.n_frames)], dtype=np.int64)
+    def keys(self) -> list[int]:
+        """Frame-state keys in frame order."""
+        return [frame_key(t) for t in range(self.n_frames)]
 
     def positions(self, values: gtsam.Values) -> np.ndarray:
-        """(N, F, 2) positions from a Values holding every variable (pixels)."""
-        pts = gtsam.utilities.extractPoint2(values)  # rows in sorted key order = frame-major
-        if pts.shape != (self.n_frames * self.n_nodes, 2):
-            raise RuntimeError(f"expected {self.n_frames * self.n_nodes} Point2 values, got {pts.shape[0]}")
-        return pts.reshape(self.n_frames, self.n_nodes, 2).transpose(1, 0, 2).copy()
+        """(N, F, 2) positions from a Values holding every frame state (pixels)."""
+        if int(values.size()) != self.n_frames or int(values.dim()) != 2 * self.n_nodes * self.n_frames:
+            raise RuntimeError(f"expected {self.n_frames} frame states of size {2 * self.n_nodes}, got "
+                               f"{values.size()} variables of total size {values.dim()}")
+        X = np.stack([values.atVector(k) for k in self.keys()])   # (F, 2N)
+        return X.reshape(self.n_frames, self.n_nodes, 2).transpose(1, 0, 2).copy()
 
 
 def build_problem(pre: Tracks, graph: BranchGraph, config: SmootherConfig) -> FactorGraphProblem:
@@ -233,69 +228,53 @@ def build_problem(pre: Tracks, graph: BranchGraph, config: SmootherConfig) -> Fa
     """
     _check_inputs(pre, graph, config)
     N, F = pre.n_nodes, pre.n_frames
-    # Python ints (not numpy scalars) and bound methods: the loops below create ~4 N F factors, and
-    # per-item numpy indexing would cost as much as building the factors themselves.
-    K = [[variable_key(i, t, N) for t in range(F)] for i in range(N)]
+    K = [frame_key(t) for t in range(F)]
+    zeros = zero_values(K, N)
     fg = gtsam.NonlinearFactorGraph()
     add = fg.add
     obs = pre.observed
 
-    # Measurement priors.
-    use_aniso = config.along_across_ratio != 1.0
-    tangents = node_tangents(pre, graph) if use_aniso else None
+    # Measurements: one factor per frame covering its observed nodes, each with its own 2x2 noise.
+    tangents = node_tangents(pre, graph) if config.along_across_ratio != 1.0 else [None] * N
     sigma_default = 1.0 / np.sqrt(max(float(config.measurement_weight), MEASUREMENT_WEIGHT_FLOOR))
-    make = MeasurementFactor.create
-    for i in range(N):
-        frames = np.flatnonzero(obs[i])
-        Ki, xy = K[i], pre.xy[i, frames]
-        tangent = None if tangents is None else tangents[i]
-        if pre.sigma_px is None:
-            nm = MeasurementFactor.noise_model(sigma_default, tangent, config.along_across_ratio,
-                                               config.robust, config.robust_k)
-            for t, m in zip(frames.tolist(), xy):
-                add(make(Ki[t], m, nm))
-        else:
-            for t, m, sigma in zip(frames.tolist(), xy, pre.sigma_px[i, frames].tolist()):
-                nm = MeasurementFactor.noise_model(sigma, tangent, config.along_across_ratio,
-                                                   config.robust, config.robust_k)
-                add(make(Ki[t], m, nm))
+    sqrt_info = MeasurementFactor.sqrt_information
+    if pre.sigma_px is None:
+        W = np.stack([sqrt_info(sigma_default, tangents[i], config.along_across_ratio) for i in range(N)])
+        W_of = lambda rows, t: W[rows]  # noqa: E731
+    else:
+        W_unit = np.stack([sqrt_info(1.0, tangents[i], config.along_across_ratio) for i in range(N)])
+        W_of = lambda rows, t: W_unit[rows] / pre.sigma_px[rows, t][:, None, None]  # noqa: E731
+    for t in range(F):
+        rows = np.flatnonzero(obs[:, t])
+        if rows.size:
+            add(MeasurementFactor.create(K[t], N, rows, pre.xy[rows, t], W_of(rows, t), zeros,
+                                         config.robust, config.robust_k))
 
     # Temporal smoothness along every trajectory.
     if config.velocity_weight > 0:
-        nm = VelocityFactor.noise_model(config.velocity_weight)
-        make = VelocityFactor.create
-        for Ki in K:
-            for k0, k1 in zip(Ki[:-1], Ki[1:]):
-                add(make(k0, k1, nm))
+        for t in range(F - 1):
+            add(VelocityFactor.create(K[t], K[t + 1], N, config.velocity_weight, zeros))
     if config.acceleration_weight > 0 and F >= 3:
-        zeros = AccelerationFactor.zero_values([k for Ki in K for k in Ki])
-        w = float(config.acceleration_weight)
-        make = AccelerationFactor.create
-        for Ki in K:
-            for k0, k1, k2 in zip(Ki[:-2], Ki[1:-1], Ki[2:]):
-                add(make(k0, k1, k2, w, zeros))
+        for t in range(1, F - 1):
+            add(AccelerationFactor.create(K[t - 1], K[t], K[t + 1], N, config.acceleration_weight, zeros))
 
     # Edge shape prior at every frame.
     if config.edge_weight > 0:
-        for ia, ib, _ in _edge_rows(pre, graph):
-            if config.edge_prior == "offset":
-                d = EdgeOffsetFactor.rest_offset(pre.xy[ia], pre.xy[ib])
-                nm = EdgeOffsetFactor.noise_model(config.edge_weight)
-                make = EdgeOffsetFactor.create
-                for ka, kb in zip(K[ia], K[ib]):
-                    add(make(ka, kb, d, nm))
-            else:
-                L = EdgeLengthFactor.rest_length(pre.xy[ia], pre.xy[ib])
-                nm = EdgeLengthFactor.noise_model(config.edge_weight)
-                make = EdgeLengthFactor.create
-                for ka, kb in zip(K[ia], K[ib]):
-                    add(make(ka, kb, L, nm))
+        rows = _edge_rows(pre, graph)
+        pairs = np.array([(ia, ib) for ia, ib, _ in rows], dtype=np.int64).reshape(-1, 2)
+        if config.edge_prior == "offset":
+            d = np.array([EdgeOffsetFactor.rest_offset(pre.xy[ia], pre.xy[ib]) for ia, ib, _ in rows])
+            for t in range(F):
+                add(EdgeOffsetFactor.create(K[t], N, pairs, d, config.edge_weight, zeros))
+        else:
+            L = np.array([EdgeLengthFactor.rest_length(pre.xy[ia], pre.xy[ib]) for ia, ib, _ in rows])
+            for t in range(F):
+                add(EdgeLengthFactor.create(K[t], N, pairs, L, config.edge_weight))
 
     init = gtsam.Values()
-    x0 = initial_positions(pre)
-    for Ki, xi in zip(K, x0):
-        for k, p in zip(Ki, xi):
-            init.insert(k, p)
+    x0 = initial_positions(pre).transpose(1, 0, 2).reshape(F, 2 * N)
+    for k, x in zip(K, x0):
+        init.insert(k, x)
     return FactorGraphProblem(graph=fg, initial=init, n_nodes=N, n_frames=F)
 
 

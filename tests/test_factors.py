@@ -1,6 +1,6 @@
-"""Each smoother factor: the GTSAM factor's residual equals the documented numpy residual, and the
-Jacobian GTSAM linearises to equals central differences of that residual (whitened, robust-weighted
-exactly as GTSAM documents it)."""
+"""Each smoother factor: the GTSAM factor's error equals the documented residual (whitened, summed
+over the nodes / edges / observations of its frame state), and the Jacobian GTSAM linearises to equals
+central differences of that whitened residual with respect to the frame states."""
 
 from __future__ import annotations
 
@@ -9,47 +9,52 @@ import numpy as np
 import pytest
 
 from rce_gtsam.factors import (AccelerationFactor, EdgeLengthFactor, EdgeOffsetFactor,
-                               MeasurementFactor, VelocityFactor, oriented_covariance,
-                               sigma_from_weight)
+                               MeasurementFactor, RobustLoss, VelocityFactor, frame_key,
+                               oriented_covariance, sigma_from_weight, zero_values)
 
 RNG = np.random.default_rng(7)
-KEYS = [gtsam.symbol("p", i) for i in range(3)]
+N = 3                                     # nodes per frame state
+KEYS = [frame_key(t) for t in range(3)]
+ZEROS = zero_values(KEYS, N)
 
 
-def values_of(points) -> gtsam.Values:
+def states(n: int = 3, scale: float = 10.0) -> list[np.ndarray]:
+    """``n`` random frame states (2N pixels each)."""
+    return [RNG.normal(size=2 * N) * scale for _ in range(n)]
+
+
+def values_of(xs) -> gtsam.Values:
     v = gtsam.Values()
-    for k, p in zip(KEYS, points):
-        v.insert(k, np.asarray(p, dtype=float))
+    for k, x in zip(KEYS, xs):
+        v.insert(k, np.asarray(x, dtype=float))
     return v
 
 
-def numeric_jacobians(error_fn, points, h=1e-6):
-    """Central differences of error_fn(list of (2,) points) w.r.t. each point: list of (m, 2)."""
-    out = []
-    for j in range(len(points)):
-        cols = []
-        for axis in range(2):
-            plus = [np.array(p, dtype=float) for p in points]
-            minus = [np.array(p, dtype=float) for p in points]
-            plus[j][axis] += h
-            minus[j][axis] -= h
-            cols.append((error_fn(plus) - error_fn(minus)) / (2 * h))
-        out.append(np.stack(cols, axis=1))
-    return out
+def numeric_jacobian(fn, xs, h=1e-6) -> np.ndarray:
+    """Central differences of fn(list of frame states) -> (m,), stacked over all states: (m, 2N len(xs))."""
+    cols = []
+    for j in range(len(xs)):
+        for c in range(2 * N):
+            plus = [np.array(x, dtype=float) for x in xs]
+            minus = [np.array(x, dtype=float) for x in xs]
+            plus[j][c] += h
+            minus[j][c] -= h
+            cols.append((fn(plus) - fn(minus)) / (2 * h))
+    return np.stack(cols, axis=1)
 
 
-def check_linearisation(factor, points, residual_fn, sqrt_info, robust=None):
-    """GTSAM's linearised (A, b) == (sqrt(w) R H, -sqrt(w) R e) with H from central differences of
-    the documented residual and w the robust weight at the whitened error norm (1 if not robust)."""
-    vals = values_of(points)
-    e = residual_fn(points)
-    H = numeric_jacobians(residual_fn, points)
-    white = sqrt_info @ e
-    w = 1.0 if robust is None else robust.weight(float(np.linalg.norm(white)))
+def check_factor(factor, xs, whitened_fn, cost=None):
+    """error == cost (default 0.5 |e|^2) and GTSAM's linearisation (A, b) == (de/dX numerically, -e)."""
+    vals = values_of(xs)
+    e = whitened_fn(xs)
+    assert factor.error(vals) == pytest.approx(0.5 * e @ e if cost is None else cost, rel=1e-9, abs=1e-12)
     A, b = factor.linearize(vals).jacobian()
-    expected_A = np.sqrt(w) * np.hstack([sqrt_info @ Hj for Hj in H])
-    np.testing.assert_allclose(A, expected_A, atol=1e-7, rtol=1e-6)
-    np.testing.assert_allclose(b, -np.sqrt(w) * white, atol=1e-9, rtol=1e-9)
+    np.testing.assert_allclose(A, numeric_jacobian(whitened_fn, xs), atol=1e-6, rtol=1e-6)
+    np.testing.assert_allclose(b, -e, atol=1e-9, rtol=1e-9)
+
+
+def node(x, i):
+    return x[2 * i:2 * i + 2]
 
 
 def test_sigma_from_weight_rejects_non_positive():
@@ -61,77 +66,107 @@ def test_sigma_from_weight_rejects_non_positive():
 
 @pytest.mark.parametrize("sigma", [1.0, 0.4])
 def test_measurement_isotropic(sigma):
-    p, m = RNG.normal(size=2) * 10, RNG.normal(size=2) * 10
-    nm = MeasurementFactor.noise_model(sigma)
-    f = MeasurementFactor.create(KEYS[0], m, nm)
-    np.testing.assert_allclose(f.unwhitenedError(values_of([p])), MeasurementFactor.residual(p, m))
-    check_linearisation(f, [p], lambda P: MeasurementFactor.residual(P[0], m), np.eye(2) / sigma)
+    x = states(1)
+    rows = np.array([0, 2])                       # node 1 unobserved at this frame
+    m = RNG.normal(size=(2, 2)) * 10
+    W = MeasurementFactor.sqrt_information(sigma)
+    np.testing.assert_allclose(W, np.eye(2) / sigma)
+    f = MeasurementFactor.create(KEYS[0], N, rows, m, W, ZEROS)
+    white = lambda X: np.concatenate([W @ MeasurementFactor.residual(node(X[0], i), mj) for i, mj in zip(rows, m)])  # noqa: E731
+    check_factor(f, x, white)
     # cost = 0.5 |r|^2 / sigma^2 (paper: w r^2 with w = 1/sigma^2, up to GTSAM's common factor 1/2)
-    assert f.error(values_of([p])) == pytest.approx(0.5 * np.sum((p - m) ** 2) / sigma ** 2)
+    r = np.concatenate([node(x[0], i) - mj for i, mj in zip(rows, m)])
+    assert f.error(values_of(x)) == pytest.approx(0.5 * r @ r / sigma ** 2)
+    A, _ = f.linearize(values_of(x)).jacobian()
+    assert not A[:, 2:4].any()                    # the unobserved node is untouched
 
 
-@pytest.mark.parametrize("robust,k", [(None, 1.0), ("huber", 1.345), ("cauchy", 0.8)])
-def test_measurement_anisotropic_and_robust(robust, k):
+def test_measurement_anisotropic_per_observation_sigma():
     sigma, ratio = 0.7, 3.0
     tangent = np.array([np.cos(0.4), np.sin(0.4)])
-    m = np.array([100.0, 50.0])
-    p = m + np.array([2.0, -3.0])  # a large error so the robust weight is well below 1
-    nm = MeasurementFactor.noise_model(sigma, tangent, ratio, robust, k)
-    base = nm if robust is None else nm.noise()
-    cov = base.covariance()
+    W1 = MeasurementFactor.sqrt_information(sigma, tangent, ratio)
+    cov = np.linalg.inv(W1.T @ W1)
     np.testing.assert_allclose(cov, oriented_covariance(ratio * sigma, sigma, tangent))
     assert tangent @ cov @ tangent == pytest.approx((ratio * sigma) ** 2)  # along the branch
     normal = np.array([-tangent[1], tangent[0]])
     assert normal @ cov @ normal == pytest.approx(sigma ** 2)  # across
-    f = MeasurementFactor.create(KEYS[0], m, nm)
-    np.testing.assert_allclose(f.unwhitenedError(values_of([p])), MeasurementFactor.residual(p, m))
-    est = None if robust is None else nm.robust()
-    if est is not None:
-        assert est.weight(float(np.linalg.norm(base.R() @ (p - m)))) < 0.9
-    check_linearisation(f, [p], lambda P: MeasurementFactor.residual(P[0], m), base.R(), est)
+    W = np.stack([W1, MeasurementFactor.sqrt_information(2.0), W1 / 4])
+    rows, m = np.arange(3), RNG.normal(size=(3, 2)) * 10
+    f = MeasurementFactor.create(KEYS[0], N, rows, m, W, ZEROS)
+    white = lambda X: np.concatenate([W[i] @ (node(X[0], i) - m[i]) for i in rows])  # noqa: E731
+    check_factor(f, states(1), white)
 
 
-def test_measurement_rejects_unknown_robust_loss():
+@pytest.mark.parametrize("robust,k", [("huber", 1.345), ("cauchy", 0.8)])
+def test_measurement_robust_loss_per_observation(robust, k):
+    """error = sum_j rho(|W r_j|) with GTSAM's own mEstimator rho; the Jacobian is that of the
+    corrected residual; an inlier (|e| << k) contributes as without a robust loss."""
+    sigma = 0.5
+    W = MeasurementFactor.sqrt_information(sigma)
+    m = np.array([[10.0, 20.0], [30.0, 40.0], [50.0, 60.0]])
+    x = [m.ravel() + np.array([0.05, -0.02, 3.0, -4.0, 0.8, 0.6])]   # inlier, outlier, near threshold
+    f = MeasurementFactor.create(KEYS[0], N, np.arange(3), m, W, ZEROS, robust, k)
+    est = (gtsam.noiseModel.mEstimator.Huber if robust == "huber" else gtsam.noiseModel.mEstimator.Cauchy).Create(k)
+    loss = RobustLoss(robust, k)
+    u = np.linalg.norm((x[0].reshape(3, 2) - m) / sigma, axis=1)
+    np.testing.assert_allclose(loss.rho(u), [est.loss(float(v)) for v in u], rtol=1e-12)
+    np.testing.assert_allclose(loss.rho_prime(u), [est.weight(float(v)) * v for v in u], rtol=1e-12)
+    assert est.weight(float(u[1])) < 0.5                                 # the outlier is down-weighted
+
+    def corrected(X):
+        e = (X[0].reshape(3, 2) - m) / sigma
+        return loss.correct(e)[0].ravel()
+
+    check_factor(f, x, corrected, cost=float(loss.rho(u).sum()))
+    A, _ = f.linearize(values_of(x)).jacobian()
+    # inlier row: plain whitening (Huber is exactly quadratic below k; Cauchy nearly so at u << k)
+    np.testing.assert_allclose(A[:2, :2], W, rtol=1e-9 if robust == "huber" else 0.03, atol=0.01)
+
+
+def test_robust_loss_rejects_unknown_names_and_thresholds():
     with pytest.raises(ValueError, match="robust"):
-        MeasurementFactor.noise_model(1.0, robust="tukey-ish")
+        RobustLoss("tukey-ish", 1.0)
+    with pytest.raises(ValueError, match="threshold"):
+        RobustLoss("huber", 0.0)
+    with pytest.raises(ValueError, match="sigma"):
+        MeasurementFactor.sqrt_information(0.0)
 
 
 def test_velocity():
-    pts = [RNG.normal(size=2) * 5 for _ in range(2)]
+    xs = states(2)
     w = 0.35
-    f = VelocityFactor.create(KEYS[0], KEYS[1], VelocityFactor.noise_model(w))
-    np.testing.assert_allclose(f.unwhitenedError(values_of(pts)), VelocityFactor.residual(*pts), atol=1e-12)
-    check_linearisation(f, pts, lambda P: VelocityFactor.residual(*P), np.sqrt(w) * np.eye(2))
-    np.testing.assert_allclose(np.hstack(VelocityFactor.jacobians(*pts)),
-                               np.hstack(numeric_jacobians(lambda P: VelocityFactor.residual(*P), pts)), atol=1e-8)
+    f = VelocityFactor.create(KEYS[0], KEYS[1], N, w, ZEROS)
+    white = lambda X: np.sqrt(w) * np.concatenate([VelocityFactor.residual(node(X[0], i), node(X[1], i))  # noqa: E731
+                                                   for i in range(N)])
+    check_factor(f, xs, white)
+    p0, p1 = node(xs[0], 0), node(xs[1], 0)
+    H = numeric_jacobian(lambda X: VelocityFactor.residual(node(X[0], 0), node(X[1], 0)), xs)
+    np.testing.assert_allclose(np.hstack(VelocityFactor.jacobians(p0, p1)), H[:, [0, 1, 6, 7]], atol=1e-8)
 
 
 def test_acceleration_linear_container_is_exact():
-    pts = [RNG.normal(size=2) * 5 for _ in range(3)]
+    xs = states(3)
     w = 0.2
-    f = AccelerationFactor.create(*KEYS, w, AccelerationFactor.zero_values(KEYS))
-    vals = values_of(pts)
-    r = AccelerationFactor.residual(*pts)
-    assert f.error(vals) == pytest.approx(0.5 * w * np.sum(r ** 2))
-    A, b = f.linearize(vals).jacobian()
-    np.testing.assert_allclose(-b / np.sqrt(w), r, atol=1e-12)
-    H = numeric_jacobians(lambda P: AccelerationFactor.residual(*P), pts)
-    np.testing.assert_allclose(A, np.sqrt(w) * np.hstack(H), atol=1e-8)
-    np.testing.assert_allclose(np.hstack(AccelerationFactor.jacobians(*pts)), np.hstack(H), atol=1e-8)
-    # far from the zero linearisation point it is still exact (Point2 is a vector space)
-    far = [p + 1e4 for p in pts]
-    A2, b2 = f.linearize(values_of(far)).jacobian()
-    np.testing.assert_allclose(-b2 / np.sqrt(w), AccelerationFactor.residual(*far), atol=1e-8)
-    np.testing.assert_allclose(A2, A)
+    f = AccelerationFactor.create(*KEYS, N, w, ZEROS)
+    white = lambda X: np.sqrt(w) * np.concatenate([AccelerationFactor.residual(*(node(x, i) for x in X))  # noqa: E731
+                                                   for i in range(N)])
+    check_factor(f, xs, white)
+    H = numeric_jacobian(lambda X: AccelerationFactor.residual(*(node(x, 1) for x in X)), xs)
+    np.testing.assert_allclose(np.hstack(AccelerationFactor.jacobians(*(node(x, 1) for x in xs))),
+                               H[:, [2, 3, 8, 9, 14, 15]], atol=1e-8)
+    # far from the zero linearisation point it is still exact (the states form a vector space)
+    check_factor(f, [x + 1e4 for x in xs], white)
 
 
 def test_edge_offset():
-    pts = [RNG.normal(size=2) * 5 for _ in range(2)]
-    d = np.array([3.0, -20.0])
+    x = states(1)
+    edges = np.array([[0, 1], [1, 2]])
+    d = np.array([[3.0, -20.0], [1.0, 2.0]])
     w = 0.45
-    f = EdgeOffsetFactor.create(KEYS[0], KEYS[1], d, EdgeOffsetFactor.noise_model(w))
-    np.testing.assert_allclose(f.unwhitenedError(values_of(pts)), EdgeOffsetFactor.residual(*pts, d), atol=1e-12)
-    check_linearisation(f, pts, lambda P: EdgeOffsetFactor.residual(*P, d), np.sqrt(w) * np.eye(2))
+    f = EdgeOffsetFactor.create(KEYS[0], N, edges, d, w, ZEROS)
+    white = lambda X: np.sqrt(w) * np.concatenate([EdgeOffsetFactor.residual(node(X[0], a), node(X[0], b), dj)  # noqa: E731
+                                                   for (a, b), dj in zip(edges, d)])
+    check_factor(f, x, white)
 
 
 def test_edge_offset_rest_is_first_common_frame():
@@ -142,16 +177,17 @@ def test_edge_offset_rest_is_first_common_frame():
         EdgeOffsetFactor.rest_offset(a[:1], b[:1])
 
 
-def test_edge_length_range_factor():
-    pts = [np.array([10.0, 20.0]), np.array([13.0, 2.0])]
-    L, w = 17.0, 0.45
-    f = EdgeLengthFactor.create(KEYS[0], KEYS[1], L, EdgeLengthFactor.noise_model(w))
-    assert isinstance(f, gtsam.RangeFactor2)
-    np.testing.assert_allclose(f.unwhitenedError(values_of(pts)), EdgeLengthFactor.residual(*pts, L), atol=1e-12)
-    check_linearisation(f, pts, lambda P: EdgeLengthFactor.residual(*P, L), np.sqrt(w) * np.eye(1))
-    np.testing.assert_allclose(np.hstack(EdgeLengthFactor.jacobians(*pts, L)),
-                               np.hstack(numeric_jacobians(lambda P: EdgeLengthFactor.residual(*P, L), pts)),
-                               atol=1e-8)
+def test_edge_length():
+    x = [np.array([10.0, 20.0, 13.0, 2.0, 30.0, -5.0])]
+    edges = np.array([[0, 1], [1, 2]])
+    L, w = np.array([17.0, 20.0]), 0.45
+    f = EdgeLengthFactor.create(KEYS[0], N, edges, L, w)
+    white = lambda X: np.sqrt(w) * np.concatenate([EdgeLengthFactor.residual(node(X[0], a), node(X[0], b), Lj)  # noqa: E731
+                                                   for (a, b), Lj in zip(edges, L)])
+    check_factor(f, x, white)
+    pa, pb = node(x[0], 0), node(x[0], 1)
+    H = numeric_jacobian(lambda X: EdgeLengthFactor.residual(node(X[0], 0), node(X[0], 1), L[0]), x)
+    np.testing.assert_allclose(np.hstack(EdgeLengthFactor.jacobians(pa, pb, L[0])), H[:, :4], atol=1e-8)
 
 
 def test_edge_length_rest_is_median_of_common_frames():

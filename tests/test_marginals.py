@@ -13,7 +13,8 @@ import scipy.sparse as sp
 from rce_gtsam.graph import BranchGraph
 from rce_gtsam.marginals import SingularInformationError, banded_selected_inverse, frame_bandwidth
 from rce_gtsam.presets import SmootherConfig
-from rce_gtsam.smooth import build_problem, smooth_tracks, variable_key
+from rce_gtsam.factors import frame_key
+from rce_gtsam.smooth import build_problem, smooth_tracks
 from rce_gtsam.tracks import Tracks
 
 
@@ -90,16 +91,14 @@ def test_marginals_equal_gtsam_marginals(overrides):
     N, F = tracks.n_nodes, tracks.n_frames
     problem = build_problem(res.presmoothed, graph, cfg)
     solution = gtsam.Values()
-    for i in range(N):
-        for t in range(F):
-            solution.insert(variable_key(i, t, N), res.tracks.xy[i, t])
+    for t in range(F):
+        solution.insert(frame_key(t), res.tracks.xy[:, t].ravel())
     marg = gtsam.Marginals(problem.graph, solution)
     for t in (0, 1, 12, 17, F - 1):
-        keys = [variable_key(i, t, N) for i in range(N)]
-        joint = marg.jointMarginalCovariance(keys).fullMatrix()
+        joint = marg.marginalCovariance(frame_key(t))  # the frame state: all nodes at frame t
         np.testing.assert_allclose(res.frame_cov[t], joint, rtol=1e-8, atol=1e-8 * np.abs(joint).max())
         for i in range(N):
-            c = marg.marginalCovariance(keys[i])
+            c = joint[2 * i:2 * i + 2, 2 * i:2 * i + 2]
             np.testing.assert_allclose(res.cov[i, t], c, rtol=1e-8, atol=1e-8 * np.abs(c).max())
 
 
