@@ -110,7 +110,7 @@ PAPER = Preset(name="paper")
 #: * no edge prior: the paper's frame-0 offset prior pulls every frame toward the first frame's shape
 #:   and scrambles kappa (all other choices below with the offset prior: 0.870). A length-only prior
 #:   did not improve kappa (8 seeds: 0.343 vs 0.331 without) and makes the problem
-#:   non-convex: LM needs 7-25 iterations (12 s on plant 2) and can stop short at tracking glitches.
+#:   non-convex: LM needs 7-25 iterations (11 s on plant 2) and can stop short at tracking glitches.
 #:   Without it the graph is linear and LM converges in one iteration. It stays available
 #:   (``edge_prior="length"``, ``edge_weight > 0``);
 #: * a stronger acceleration prior instead of the 5-frame moving average: tracker noise is white-ish
