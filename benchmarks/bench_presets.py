@@ -36,7 +36,7 @@ def variants():
         "default, count shrinkage (paper's)": d.with_(compliance={"shrinkage": "count"}),
         "default + anisotropic 3:1": d.with_(smoother={"along_across_ratio": 3.0}),
         "default + Huber": d.with_(smoother={"robust": "huber"}),
-        "default + marginal weights": d.with_(compliance={"weighted": True}),
+        "default, unweighted (equal weights)": d.with_(compliance={"weighted": False}),
     }
 
 

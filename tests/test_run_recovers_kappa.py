@@ -1,11 +1,10 @@
 """End to end on the simulator's rendered video: `rce run` with the default (OpenCV) tracker recovers kappa_true.
 
-Issue 4 asks for Spearman(kappa, kappa_true) >= 0.8 on the simulator video. With the branch-colour mask and the
-re-acquisition distinctness check the tracker reaches it on 600-frame clips through `rce run` (seeds 0, 1, 2:
-0.81, 0.86, 0.86; it was 0.80, 0.71, 0.71), but not on this test's 400-frame clip: 0.68 (0.72 before; one
-distal bend, 16->17, whose nodes are visible in only ~30 % of frames, gets a kappa 10x too high). So the issue's
-target stays an expected failure here (non-strict: it reports XPASS the day it is met) and the regression guard
-asserts what is reliably achieved: far better than the 0.38 of the tracker before the articulated templates.
+Issue 4 asks for Spearman(kappa, kappa_true) >= 0.8 on the simulator video. Measured with the default preset
+(marginal-variance-weighted fit): 0.816 on this test's 400-frame clip (seed 1); 0.934 / 0.903 / 0.653 on
+600-frame clips of seeds 0 / 2 / 3. Equal weights gave 0.678 here: one distal bend (16->17), whose nodes are
+visible in only ~30 % of frames, got a kappa 10x too high from frames where the smoother could only
+interpolate; the weighted fit discounts exactly those frames.
 """
 
 from __future__ import annotations
@@ -59,15 +58,8 @@ def test_tracks_are_accurate(run_outputs):
     assert vis.mean() > 0.8                   # measured 0.85: ambiguous re-acquisitions are left invisible
 
 
-def test_kappa_recovered_regression_guard(run_outputs):
-    summary, truth, _, _ = run_outputs
-    est, tru = _kappa_pairs(summary, truth)
-    assert spearmanr(est, tru)[0] >= 0.5  # the old single-rotation tracker gave 0.38 on this seed
-
-
-@pytest.mark.xfail(reason="issue 4 target met on 600-frame clips (0.81-0.86, seeds 0-2), not yet on this "
-                          "400-frame clip (measured 0.68)", strict=False)
 def test_kappa_recovered_issue_target(run_outputs):
+    """Issue 4: Spearman(kappa, kappa_true) >= 0.8 through `rce run` (measured 0.816 here)."""
     summary, truth, _, _ = run_outputs
     est, tru = _kappa_pairs(summary, truth)
     assert spearmanr(est, tru)[0] >= 0.8
