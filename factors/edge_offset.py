@@ -22,7 +22,7 @@ from functools import lru_cache
 import gtsam
 import numpy as np
 
-from ._frame import linear_container
+from ._frame import linear_container, node_columns
 from ._noise import sigma_from_weight
 
 
@@ -73,6 +73,6 @@ def _edge_system(n_nodes: int, edge_bytes: bytes, offset_bytes: bytes, s: float)
     A = np.zeros((2 * E, 2 * n_nodes))
     eye = s * np.eye(2)
     for j, (a, b) in enumerate(edges.tolist()):
-        A[2 * j:2 * j + 2, 2 * a:2 * a + 2] -= eye
-        A[2 * j:2 * j + 2, 2 * b:2 * b + 2] += eye
+        A[2 * j:2 * j + 2, node_columns(a)] -= eye
+        A[2 * j:2 * j + 2, node_columns(b)] += eye
     return A, s * offsets.ravel()

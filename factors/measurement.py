@@ -84,7 +84,7 @@ class MeasurementFactor:
         b = np.einsum("kab,kb->ka", W, m).ravel()
         if robust is None:
             return linear_container([key], [A], b, zeros)
-        loss = robust_loss(robust, robust_k)
+        loss = RobustLoss(robust, robust_k)
         N = int(n_nodes)
 
         def error(this: gtsam.CustomFactor, values: gtsam.Values, H):
@@ -143,6 +143,3 @@ class RobustLoss:
         G = np.where(small[:, None, None], eye, slope[:, None, None] * nnT + ratio[:, None, None] * (eye - nnT))
         return e * ratio[:, None], G
 
-
-def robust_loss(name: str, k: float) -> RobustLoss:
-    return RobustLoss(name, k)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from rce_gtsam.factors import (AccelerationFactor, EdgeLengthFactor, EdgeOffsetFactor,
-                               MeasurementFactor, RobustLoss, VelocityFactor, frame_key,
+                               MeasurementFactor, RobustLoss, VelocityFactor, frame_key, node_columns,
                                oriented_covariance, sigma_from_weight, zero_values)
 
 RNG = np.random.default_rng(7)
@@ -54,7 +54,7 @@ def check_factor(factor, xs, whitened_fn, cost=None):
 
 
 def node(x, i):
-    return x[2 * i:2 * i + 2]
+    return x[node_columns(i)]
 
 
 def test_sigma_from_weight_rejects_non_positive():
