@@ -152,3 +152,25 @@ def test_colour_mask_keeps_bark_and_drops_a_leaf():
     assert fg[38:43, 50:54].mean() > 0.9       # dark knot (noisier chromaticity: fewer photons)
     assert fg[38:43, 82:90].mean() < 0.05      # leaf in front of the stem
     assert fg[5:25, :].mean() < 0.05           # background
+
+
+def test_lost_node_is_not_reacquired_while_its_parent_is_lost():
+    """A node re-found while its parent is still lost has no graph check on it (simulator seed 0: a tip
+    re-found 18 px off beside a leaf, then followed to 67 px while marked visible). It must stay invisible
+    until the parent is seen again, and then be found where it is."""
+    bv = branch_video(n_frames=16, size=(200, 200), n_nodes=5, tip_amp_px=0.0, gust_amp_px=0.0, occluder=False,
+                      seed=4)
+    frames = bv.frames.astype(float)
+    rng = np.random.default_rng(1)
+    cover = {3: range(2, 10), 4: range(2, 6)}  # node 4 (the tip) comes back at frame 6, its parent at 10
+    for node, span in cover.items():
+        x, y = np.round(bv.true_xy[node, 0]).astype(int)
+        for f in span:
+            frames[f, y - 8:y + 9, x - 8:x + 9] = 90.0
+    frames = np.clip(frames + rng.normal(0, 2, frames.shape), 0, 255).astype(np.uint8)
+    graph = BranchGraph.from_edges(0, bv.edges)
+    res = LKTracker(LKConfig(mask_to_branch=False)).track(ArraySource(frames), bv.true_xy[:, 0], graph)
+    err = np.hypot(*(res.xy - bv.true_xy).transpose(2, 0, 1))
+    assert not res.visible[3, 2:10].any() and not res.visible[4, 2:10].any()  # tip waits for its parent
+    assert res.info["rejected_unanchored"] > 0
+    assert res.visible[3:, 11:].all() and (err[3:, 11:] < 0.5).all()  # both found again afterwards
