@@ -45,8 +45,10 @@ never recovers after an occlusion. This tracker uses frame-to-frame pyramidal LK
    neighbouring knot of a self-similar stem; this cut the p99 error of visible points from 16 to 1.2 px
    on simulator seed 0); the node is being re-acquired while its parent is lost too (no graph check
    would apply to the match: on simulator seed 0 a tip re-found beside a leaf 18 px off was then followed
-   to 67 px while marked visible; with this rule the largest error of a visible point on seeds 0-4 went
-   from 74/27/14/2.7/50 px to 2.3/9.6/14/2.7/50 px, at 0-4 % fewer visible point-frames); the forward-backward error
+   to 67 px while marked visible); a search in the wide window (2h: the node had no frame-to-frame or
+   segment prediction) counts as re-acquiring for both checks, whatever the previous frame said. With
+   these two rules the largest error of a visible point on simulator seeds 0-4 went from
+   74/27/14/2.7/50 px to 2.3/9.6/14/2.7/16 px, at 0-4 % fewer visible point-frames; the forward-backward error
    exceeds ``max_fb_fraction`` of the patch radius; or, with a graph, the distance to its parent
    (when the parent is visible) stretches beyond ``(1 + max_stretch) * L0 + length_tol_px`` or
    shrinks below ``min_length_fraction * L0 - length_tol_px`` (L0 = frame-0 segment length; a branch
@@ -608,6 +610,9 @@ class LKTracker:
                                 seg_theta[(i, ch)] = _turn(xi, f2f[ch], q0[i], q0[ch])
                             else:  # child not followed: assume the branch continues straight
                                 seg_theta[(i, ch)] = seg_theta.get((p, i), theta)
+                    # a wide search (no frame-to-frame or segment prediction to trust) is a re-acquisition
+                    # whatever the previous frame said: the same ambiguity and geometry checks apply
+                    reacquiring = not prev_vis[i] or r > h
                     m = self._anchor(gray0, gray, i, q0[i], pred, theta, r, seg_theta)
                     ok = m is not None
                     if not ok:
@@ -617,14 +622,14 @@ class LKTracker:
                         if score < cfg.min_ncc:
                             ok = False
                             counts["rejected_ncc"] += 1
-                        elif (cfg.distinct_reacquire and not prev_vis[i]
+                        elif (cfg.distinct_reacquire and reacquiring
                               and second > score - cfg.distinct_sigmas / math.sqrt(n_eff)):
                             ok = False
                             counts["rejected_ambiguous"] += 1
                         elif fb > fb_max:
                             ok = False
                             counts["rejected_fb"] += 1
-                        elif p >= 0 and not prev_vis[i] and not new_vis[p]:
+                        elif p >= 0 and reacquiring and not new_vis[p]:
                             # re-acquiring while the parent is lost too: nothing checks the match's
                             # geometry (a tip re-found next to a leaf edge 18 px off, then followed
                             # to 67 px, on simulator seed 0); wait until the parent is seen again
