@@ -37,6 +37,7 @@ def variants():
         "default + anisotropic 3:1": d.with_(smoother={"along_across_ratio": 3.0}),
         "default + Huber": d.with_(smoother={"robust": "huber"}),
         "default, unweighted (equal weights)": d.with_(compliance={"weighted": False}),
+        "default with moving-block bootstrap (paper)": d.with_(compliance={"bootstrap": "block"}),
     }
 
 

@@ -16,6 +16,7 @@ Two response conventions:
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
 
@@ -34,6 +35,7 @@ class Rank1Fit:
     direction: (E,) +1 / -1, the sign of the fitted gain (always +1 for the ``abs`` response).
     z: (T,) excitation in degrees (>= 0 for ``abs``).
     n_used: (E,) frames with data and |z| > EPS in the final kappa step (the shrinkage's n).
+    shrinkage: (E,) the factor s of the final kappa step, log kappa = s log kappa_hat (1 = not shrunk).
     iterations: ALS iterations run; converged: whether the tolerance was met before ``n_iter``.
     max_log_change: the last iteration's max |log kappa change|.
     """
@@ -42,6 +44,7 @@ class Rank1Fit:
     direction: np.ndarray
     z: np.ndarray
     n_used: np.ndarray
+    shrinkage: np.ndarray
     iterations: int
     converged: bool
     max_log_change: float
@@ -55,8 +58,12 @@ class Rank1Fit:
 class BootstrapCI:
     """Percentile bootstrap intervals of kappa.
 
-    low, high: (E,) 2.5th / 97.5th percentiles; samples: (n_boot, E) the resampled kappa;
-    block_length: frames per block; seed: the RNG seed; n_boot: resamples.
+    low, high: (E,) 2.5th / 97.5th percentiles; samples: (n_boot, E) the resampled kappa (for the
+    ``"phase"`` bootstrap already widened about kappa_hat by ``width_factor``, so that their percentiles
+    are the interval); block_length: frames per block (0: no blocks); seed: the RNG seed; n_boot: resamples.
+    method: ``"block"`` or ``"phase"``. effective_samples: for ``"phase"``, the effective number of
+    independent noise samples kappa's error rests on (:func:`excitation_dof`); width_factor: how much the
+    resampled log-kappa deviations were widened for it (1 = not at all).
     """
 
     low: np.ndarray
@@ -64,6 +71,9 @@ class BootstrapCI:
     samples: np.ndarray
     block_length: int
     seed: int
+    method: str = "block"
+    effective_samples: float | None = None
+    width_factor: float = 1.0
 
     @property
     def n_boot(self) -> int:
@@ -142,7 +152,8 @@ def _precision_shrinkage(terms: _PrecisionTerms, zm, k_hat, num, den, n, tau):
 def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray | None = None):
     """Fit (B, E, T) data (NaN = missing) as B independent rank-1 problems.
 
-    Returns (kappa_signed (B, E), z (B, T), n_used (B, E), iterations (B,), converged (B,), change (B,)).
+    Returns (kappa_signed (B, E), z (B, T), n_used (B, E), iterations (B,), converged (B,), change (B,),
+    shrinkage (B, E): the factor s of the last kappa step, log|kappa| = s log|kappa_hat| (1 = none)).
     """
     signed = config.response == "signed"
     W = np.isfinite(Y)
@@ -157,6 +168,7 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
     converged = np.zeros(B, dtype=bool)
     change = np.full(B, np.inf)
     n_used = np.zeros((B, E))
+    shrink_used = np.ones((B, E))
     WY = Wf * Y0  # constant over iterations: every step below is a batched mat-vec (BLAS)
     Wc = W.astype(float)
     precision = config.shrinkage == "precision"
@@ -199,13 +211,15 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
         z_new = np.where(_matvec_t(Wca, mk) > 0, z_new, 0.0)
         ch = np.max(np.abs(np.log(np.maximum(np.abs(k_new), EPS)) - np.log(np.maximum(np.abs(prev), EPS))), axis=1)
         if full:  # results of rows that had already converged are discarded
+            shrink = np.broadcast_to(shrink, k_new.shape)[a]
             k_new, z_new, n, ch = k_new[a], z_new[a], n[a], ch[a]
         kappa[a], z[a], n_used[a], change[a] = k_new, z_new, n, ch
+        shrink_used[a] = np.where(n > 0, shrink, 1.0)
         iterations[a] += 1
         done = ch < config.tol
         converged[a[done]] = True
         active[a[done]] = False
-    return kappa, z, n_used, iterations, converged, change
+    return kappa, z, n_used, iterations, converged, change, shrink_used
 
 
 def fit_rank1(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray | None = None) -> Rank1Fit:
@@ -214,10 +228,10 @@ def fit_rank1(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray | Non
     ``weights`` (E, T) >= 0 turns the least-squares steps into weighted ones (e.g. 1 / angle variance).
     """
     Y = np.asarray(Y, dtype=float)
-    k, z, n, it, conv, ch = fit_rank1_batch(Y[None], config, None if weights is None else weights[None])
+    k, z, n, it, conv, ch, sh = fit_rank1_batch(Y[None], config, None if weights is None else weights[None])
     k, z = k[0], z[0]
     direction = np.where(k < 0, -1.0, 1.0)
-    return Rank1Fit(kappa=np.abs(k), direction=direction, z=z, n_used=n[0], iterations=int(it[0]),
+    return Rank1Fit(kappa=np.abs(k), direction=direction, z=z, n_used=n[0], shrinkage=sh[0], iterations=int(it[0]),
                     converged=bool(conv[0]), max_log_change=float(ch[0]))
 
 
@@ -238,15 +252,126 @@ def block_bootstrap_indices(n_columns: int, block_length: int, n_boot: int,
     return out
 
 
+def phase_randomised_residuals(R: np.ndarray, n_boot: int, rng: np.random.Generator) -> np.ndarray:
+    """(n_boot, E, T) resampled zero-mean residual series of an (E, T) residual matrix R (NaN = 0).
+
+    Multivariate Fourier surrogates (Prichard & Theiler 1994): the rows (means removed) are Fourier
+    transformed, every frequency's phase is shifted by one random angle shared by all rows, and the
+    result is transformed back. Each row keeps its periodogram, so its (circular) autocovariance at every
+    lag, and every pair of rows keeps its cross-spectrum, so the anti-correlated noise of bends that share
+    a tracked node stays; only the phases, i.e. *when* the noise happens, are new. That is the structure
+    a drifting tracker leaves: correlated over seconds, longer than any usable frame block.
+
+    The mean of a residual row is a noise sample too (slow drift does not average out over a clip, and it
+    enters kappa through the excitation's mean): the surrogate's mean is drawn with the spectrum at the
+    lowest non-zero frequency as its variance, sqrt(2) Re(F_1 exp(i phi_0)), jointly across rows.
+    """
+    E, T = R.shape
+    ok = np.isfinite(R)
+    X = np.where(ok, R, 0.0)
+    X = X - X.mean(axis=1, keepdims=True)
+    F = np.fft.rfft(X, axis=1)  # (E, K)
+    K = F.shape[1]
+    phase = rng.uniform(0.0, 2 * np.pi, size=(n_boot, K))
+    Fs = F[None] * np.exp(1j * phase)[:, None, :]
+    if K > 1:
+        dc_phase = rng.uniform(0.0, 2 * np.pi, size=(n_boot, 1))
+        Fs[:, :, 0] = math.sqrt(2.0) * np.real(F[None, :, 1] * np.exp(1j * dc_phase))
+    if T % 2 == 0 and K > 1:
+        Fs[:, :, -1] = np.real(Fs[:, :, -1]) * math.sqrt(2.0)  # the Nyquist term must stay real
+    return np.fft.irfft(Fs, n=T, axis=2)
+
+
+def excitation_dof(R: np.ndarray, z: np.ndarray) -> float:
+    """Effective number of independent noise samples that kappa's error rests on (>= 1).
+
+    kappa_hat_e - kappa_e = sum_t n_e(t) z_t / sum_t z_t^2 weighs the noise n_e at each frequency f by the
+    excitation's power |Z(f)|^2 there, so its variance is a sum over frequencies of w(f) = S_n(f) |Z(f)|^2.
+    When a few frequencies carry that sum (wind excitation is concentrated at the lowest frequencies, and
+    so is tracker drift), it is an average of few independent terms: n_eff = (sum w)^2 / sum w^2 (a
+    Satterthwaite count; w from the residual periodograms summed over edges, the mean excluded).
+    Measured (default preset): 2.1 on plant 2, 4.0 on plant 1.
+    """
+    Rz = np.where(np.isfinite(R), R, 0.0)
+    Rz = Rz - Rz.mean(axis=1, keepdims=True)
+    S = (np.abs(np.fft.rfft(Rz, axis=1)) ** 2).sum(axis=0)
+    if len(S) > 1:
+        S[0] = S[1]  # the residual mean's noise power: the spectrum at the lowest frequency (as resampled)
+    w = S * np.abs(np.fft.rfft(np.asarray(z, float))) ** 2
+    tot = float(w.sum())
+    if not np.isfinite(tot) or tot <= 0:
+        return float(len(w)) if len(w) else 1.0
+    return max(1.0, tot * tot / float((w * w).sum()))
+
+
+def small_sample_factor(n_eff: float, level: float = 0.95) -> float:
+    """Widening of bootstrap log-kappa deviations for an error that rests on ``n_eff`` noise samples.
+
+    The resampled spread is an estimate from the residuals' periodogram; where n_eff frequencies carry
+    kappa's error it has about nu = 2 n_eff degrees of freedom (each frequency's periodogram ordinate is
+    a chi-square with 2), so an interval from it needs Student-t quantiles instead of normal ones:
+    t_nu(q) / z(q), q = (1 + level) / 2, nu floored at 1. It tends to 1 for broadband excitation.
+    """
+    from scipy import stats
+
+    nu = max(2.0 * float(n_eff), 1.0)
+    q = 0.5 * (1.0 + level)
+    return float(stats.t.ppf(q, nu)) / float(stats.norm.ppf(q))
+
+
 def bootstrap_kappa(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray | None = None,
-                    chunk: int = 64) -> BootstrapCI | None:
-    """Moving-block bootstrap of the whole rank-1 fit; None when n_boot = 0 or T < 8 frames."""
+                    chunk: int = 64, fit: Rank1Fit | None = None) -> BootstrapCI | None:
+    """Bootstrap of the whole rank-1 fit; None when n_boot = 0 or T < 8 frames.
+
+    ``config.bootstrap == "block"``: moving blocks of frames of the data, refitted. ``"phase"``: the
+    fitted model (``fit``; computed here when not given) plus phase-randomised residuals
+    (:func:`phase_randomised_residuals`), refitted; each edge's resampled log-kappa deviations (from their
+    median) are widened by :func:`small_sample_factor` of :func:`excitation_dof` and by 1 / sqrt(s_e)
+    for an edge shrunk by s_e, then put around kappa_hat.
+
+    Calibration with a known truth. Spread of log kappa over 30 noise draws / mean resampled spread
+    before widening (12 edges, AR(1) noise of correlation time tau, the simulator's excitation): tau = 60
+    frames (2-s drift): block 2.05, phase 1.02-1.06; white: block 1.04, phase 1.13. Through the whole
+    pipeline on simulated tracks (20 seeds, 900 frames, 250 resamples), share of edges whose 95 %
+    interval covers kappa_true: block 82.8 %, phase 91.1 % (seeds 0-19); block 75.6 %, phase 86.4 %
+    (seeds 100-119).
+    """
     E, T = Y.shape
     if config.n_boot <= 0 or T < 8:
         return None
     rng = np.random.default_rng(config.seed)
-    idx = block_bootstrap_indices(T, config.block_length, config.n_boot, rng)
     samples = np.empty((config.n_boot, E))
+    if config.bootstrap == "phase":
+        if config.response != "signed":
+            raise ValueError("the phase-randomised bootstrap needs the signed response (|delta| residuals "
+                             "are not a zero-mean series)")
+        if fit is None:
+            fit = fit_rank1(Y, config, weights)
+        mask = np.isfinite(Y)
+        pred = fit.predict()
+        R = np.where(mask, Y - pred, np.nan)
+        for s in range(0, config.n_boot, chunk):
+            n = min(chunk, config.n_boot - s)
+            Yb = pred[None] + phase_randomised_residuals(R, n, rng)
+            Yb[:, ~mask] = np.nan
+            Wb = None if weights is None else np.broadcast_to(weights, Yb.shape)
+            samples[s:s + n] = np.abs(fit_rank1_batch(Yb, config, Wb)[0])
+        n_eff = excitation_dof(R, fit.z)
+        factor = small_sample_factor(n_eff)
+        k_hat = np.maximum(fit.kappa, EPS)
+        # a shrunk estimate s log kappa_hat varies s times as much as log kappa_hat, while the posterior of
+        # the log-normal prior it comes from has sqrt(s) times its spread: widen by 1 / sqrt(s) (1 for the
+        # well-measured edges; a stiff edge buried in noise is pulled toward 1 and gets the prior's width)
+        post = 1.0 / np.sqrt(np.clip(fit.shrinkage, 1e-6, 1.0))
+        # deviations from the resamples' own median: data made from an already shrunk kappa_hat and
+        # shrunk again sit further toward 1; that offset is the estimator's, not kappa's, uncertainty
+        dev = np.log(np.maximum(samples, EPS))
+        dev -= np.median(dev, axis=0)
+        samples = k_hat * np.exp(factor * post * dev)
+        low, high = np.percentile(samples, [2.5, 97.5], axis=0)
+        return BootstrapCI(low=low, high=high, samples=samples, block_length=0, seed=config.seed,
+                           method="phase", effective_samples=n_eff, width_factor=factor)
+    idx = block_bootstrap_indices(T, config.block_length, config.n_boot, rng)
     for s in range(0, config.n_boot, chunk):
         cols = idx[s:s + chunk]
         Yb = np.transpose(Y[:, cols], (1, 0, 2))

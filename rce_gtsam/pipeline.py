@@ -251,7 +251,7 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     if effects:
         ci, boot_info = bootstrap_extended(fit, preset.compliance)
     else:
-        ci = bootstrap_kappa(response.Y, preset.compliance, weights)
+        ci = bootstrap_kappa(response.Y, preset.compliance, weights, fit=fit)
     timings["bootstrap"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     return AnalysisResult(graph=graph, tracks=tracks, preset=preset, smoothed=smoothed, geometry=geometry,

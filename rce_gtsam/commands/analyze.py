@@ -109,7 +109,15 @@ def _fit_line(result) -> str:
     fit = result.fit
     state = "converged" if fit.converged else "NOT converged"
     if not getattr(result, "effects", ()):
-        return f"rank-1 fit: {fit.iterations} ALS iterations, {state}"
+        line = f"rank-1 fit: {fit.iterations} ALS iterations, {state}"
+        ci = result.ci
+        if ci is not None and ci.method == "phase":
+            line += (f"\nCIs: {ci.n_boot} phase-randomised residual resamples; kappa's error rests on ~"
+                     f"{ci.effective_samples:.1f} effective independent samples (the excitation's power sits in "
+                     f"few frequencies), so intervals are widened x{ci.width_factor:.2f} (Student t)")
+        elif ci is not None:
+            line += f"\nCIs: {ci.n_boot} moving-block resamples, blocks of {ci.block_length} frames"
+        return line
     mf = fit.model_fit
     return (f"model {mf.model.name}: {fit.iterations} iterations, {state}; fit RMSE "
             f"{fit.baseline_rmse_deg:.3f} deg (rank-1) -> {mf.rmse:.3f} deg")
