@@ -72,6 +72,7 @@ def main() -> int:
     ap.add_argument("--strength-mult", type=float, default=1.0,
                     help="hidden effect strength = this x rce_gtsam.simulate.EFFECT_DEFAULTS (default 1)")
     ap.add_argument("--effects", default="none,delay,dynamics,second_mode,offset,nonlinear")
+    ap.add_argument("--folds", type=int, default=8, help="cross-validation blocks of diagnose (default 8)")
     a = ap.parse_args()
     from rce_gtsam.diagnose import diagnose
     print(f"input: {'matrices (simulator equations + noise)' if a.matrices else 'full pipeline (simulate -> analyze default preset)'}; "
@@ -83,7 +84,7 @@ def main() -> int:
         for sd in range(a.seeds):
             Y, W, s, k, y, tp, labels = case(hidden, sd, a.frames, a.matrices, a.strength_mult)
             t = time.perf_counter()
-            d = diagnose(Y, weights=W, root_distance=s, seed=0, edge_labels=labels)
+            d = diagnose(Y, weights=W, root_distance=s, seed=0, edge_labels=labels, n_folds=a.folds)
             ts.append(time.perf_counter() - t)
             tps.append(tp)
             ok += d.verdict == hidden

@@ -84,6 +84,16 @@ def test_delay_recovered_on_noise_free_data_with_z_fixed_and_free():
     assert np.sqrt(np.mean(np.log(np.abs(fit.kappa) / k) ** 2)) < 0.02
 
 
+def test_a_long_tip_lag_is_within_reach_of_the_default_delay():
+    """A 1.2-s tip lag at 30 fps (36 frames) is fitted, not clipped at the bound (it was 25 frames)."""
+    t = np.arange(600)
+    Y, s, k, _ = _delay_data(T=600, tau=36.0)
+    z = np.sin(2 * np.pi * t / 170.0) + 0.6 * np.sin(2 * np.pi * t / 61.0 + 1.0)  # slow sway: lag is unique
+    Y = np.stack([k[e] * delayed(z, 36.0 * s[e]) for e in range(len(s))])
+    fit = (ResponseModel() + effects.Delay()).fit(Y, root_distance=s)
+    assert abs(float(fit.states[0]["params"]["tau"]) - 36.0) < 1.0
+
+
 def test_delay_z_step_is_the_exact_least_squares_solution():
     """The banded sparse z solve equals a dense least-squares solve of the same step."""
     from rce_gtsam.model import _operator_z_solve
