@@ -21,6 +21,7 @@ import warnings
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import stats
 
 from .presets import ComplianceConfig
 
@@ -312,8 +313,6 @@ def small_sample_factor(n_eff: float, level: float = 0.95) -> float:
     a chi-square with 2), so an interval from it needs Student-t quantiles instead of normal ones:
     t_nu(q) / z(q), q = (1 + level) / 2, nu floored at 1. It tends to 1 for broadband excitation.
     """
-    from scipy import stats
-
     nu = max(2.0 * float(n_eff), 1.0)
     q = 0.5 * (1.0 + level)
     return float(stats.t.ppf(q, nu)) / float(stats.norm.ppf(q))
@@ -339,45 +338,56 @@ def bootstrap_kappa(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
     E, T = Y.shape
     if config.n_boot <= 0 or T < 8:
         return None
-    rng = np.random.default_rng(config.seed)
-    samples = np.empty((config.n_boot, E))
     if config.bootstrap == "phase":
-        if config.response != "signed":
-            raise ValueError("the phase-randomised bootstrap needs the signed response (|delta| residuals "
-                             "are not a zero-mean series)")
-        if fit is None:
-            fit = fit_rank1(Y, config, weights)
-        mask = np.isfinite(Y)
-        pred = fit.predict()
-        R = np.where(mask, Y - pred, np.nan)
-        for s in range(0, config.n_boot, chunk):
-            n = min(chunk, config.n_boot - s)
-            Yb = pred[None] + phase_randomised_residuals(R, n, rng)
-            Yb[:, ~mask] = np.nan
-            Wb = None if weights is None else np.broadcast_to(weights, Yb.shape)
-            samples[s:s + n] = np.abs(fit_rank1_batch(Yb, config, Wb)[0])
-        n_eff = excitation_dof(R, fit.z)
-        factor = small_sample_factor(n_eff)
-        k_hat = np.maximum(fit.kappa, EPS)
-        # a shrunk estimate s log kappa_hat varies s times as much as log kappa_hat, while the posterior of
-        # the log-normal prior it comes from has sqrt(s) times its spread: widen by 1 / sqrt(s) (1 for the
-        # well-measured edges; a stiff edge buried in noise is pulled toward 1 and gets the prior's width)
-        post = 1.0 / np.sqrt(np.clip(fit.shrinkage, 1e-6, 1.0))
-        # deviations from the resamples' own median: data made from an already shrunk kappa_hat and
-        # shrunk again sit further toward 1; that offset is the estimator's, not kappa's, uncertainty
-        dev = np.log(np.maximum(samples, EPS))
-        dev -= np.median(dev, axis=0)
-        samples = k_hat * np.exp(factor * post * dev)
-        low, high = np.percentile(samples, [2.5, 97.5], axis=0)
-        return BootstrapCI(low=low, high=high, samples=samples, block_length=0, seed=config.seed,
-                           method="phase", effective_samples=n_eff, width_factor=factor)
+        return _phase_bootstrap(Y, config, weights, chunk, fit if fit is not None else fit_rank1(Y, config, weights))
+    return _block_bootstrap(Y, config, weights, chunk)
+
+
+def _block_bootstrap(Y, config: ComplianceConfig, weights, chunk: int) -> BootstrapCI:
+    """Moving blocks of ``config.block_length`` frames of the data, every resample refitted."""
+    E, T = Y.shape
+    rng = np.random.default_rng(config.seed)
     idx = block_bootstrap_indices(T, config.block_length, config.n_boot, rng)
+    samples = np.empty((config.n_boot, E))
     for s in range(0, config.n_boot, chunk):
         cols = idx[s:s + chunk]
         Yb = np.transpose(Y[:, cols], (1, 0, 2))
         Wb = None if weights is None else np.transpose(weights[:, cols], (1, 0, 2))
-        k = fit_rank1_batch(Yb, config, Wb)[0]
-        samples[s:s + chunk] = np.abs(k)
+        samples[s:s + chunk] = np.abs(fit_rank1_batch(Yb, config, Wb)[0])
     low, high = np.percentile(samples, [2.5, 97.5], axis=0)
     return BootstrapCI(low=low, high=high, samples=samples,
                        block_length=max(3, min(config.block_length, T)), seed=config.seed)
+
+
+def _phase_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, fit: Rank1Fit) -> BootstrapCI:
+    """The fit plus phase-randomised residuals, refitted; deviations widened (see :func:`bootstrap_kappa`)."""
+    if config.response != "signed":
+        raise ValueError("the phase-randomised bootstrap needs the signed response (|delta| residuals "
+                         "are not a zero-mean series)")
+    E, T = Y.shape
+    rng = np.random.default_rng(config.seed)
+    mask = np.isfinite(Y)
+    pred = fit.predict()
+    R = np.where(mask, Y - pred, np.nan)
+    samples = np.empty((config.n_boot, E))
+    for s in range(0, config.n_boot, chunk):
+        n = min(chunk, config.n_boot - s)
+        Yb = pred[None] + phase_randomised_residuals(R, n, rng)
+        Yb[:, ~mask] = np.nan
+        Wb = None if weights is None else np.broadcast_to(weights, Yb.shape)
+        samples[s:s + n] = np.abs(fit_rank1_batch(Yb, config, Wb)[0])
+    n_eff = excitation_dof(R, fit.z)
+    factor = small_sample_factor(n_eff)
+    # deviations from the resamples' own median: data made from an already shrunk kappa_hat and shrunk
+    # again sit further toward 1; that offset is the estimator's, not kappa's, uncertainty
+    dev = np.log(np.maximum(samples, EPS))
+    dev -= np.median(dev, axis=0)
+    # a shrunk estimate s log kappa_hat varies s times as much as log kappa_hat, while the posterior of the
+    # log-normal prior it comes from has sqrt(s) times its spread: widen by 1 / sqrt(s) (1 for well-measured
+    # edges; a stiff edge buried in noise is pulled toward 1 and gets the prior's width)
+    post = 1.0 / np.sqrt(np.clip(fit.shrinkage, 1e-6, 1.0))
+    samples = np.maximum(fit.kappa, EPS) * np.exp(factor * post * dev)
+    low, high = np.percentile(samples, [2.5, 97.5], axis=0)
+    return BootstrapCI(low=low, high=high, samples=samples, block_length=0, seed=config.seed,
+                       method="phase", effective_samples=n_eff, width_factor=factor)
+
