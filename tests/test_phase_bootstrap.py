@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -72,7 +74,7 @@ def test_phase_intervals_cover_kappa_under_slow_drift_where_blocks_do_not():
     kappa /= np.exp(np.log(kappa).mean())
     z = make_excitation(T, 30.0, np.random.default_rng(6), rms_deg=1.3)
     rho = np.exp(-1 / tau)
-    cfg = DEFAULT.compliance.__class__(**{**DEFAULT.compliance.__dict__, "n_boot": 80, "weighted": False})
+    cfg = replace(DEFAULT.compliance, n_boot=80, weighted=False)
     cover = {"phase": [], "block": []}
     for k in range(12):
         e = np.random.default_rng(100 + k).standard_normal((E, T + 300))
@@ -80,7 +82,7 @@ def test_phase_intervals_cover_kappa_under_slow_drift_where_blocks_do_not():
         Y = kappa[:, None] * z[None] + 0.6 * noise
         fit = fit_rank1(Y, cfg)
         for method in cover:
-            c = cfg.__class__(**{**cfg.__dict__, "bootstrap": method})
+            c = replace(cfg, bootstrap=method)
             ci = bootstrap_kappa(Y, c, fit=fit)
             cover[method].append(np.mean((kappa >= ci.low) & (kappa <= ci.high)))
     assert np.mean(cover["phase"]) >= 0.85, cover
@@ -90,7 +92,7 @@ def test_phase_intervals_cover_kappa_under_slow_drift_where_blocks_do_not():
 def test_phase_bootstrap_is_deterministic_and_reports_its_widening():
     rng = np.random.default_rng(2)
     Y = np.outer(np.exp(rng.normal(0, 0.4, 6)), make_excitation(300, 30.0, rng)) + rng.normal(0, 0.3, (6, 300))
-    cfg = DEFAULT.compliance.__class__(**{**DEFAULT.compliance.__dict__, "n_boot": 40, "weighted": False})
+    cfg = replace(DEFAULT.compliance, n_boot=40, weighted=False)
     a, b = bootstrap_kappa(Y, cfg), bootstrap_kappa(Y, cfg)
     np.testing.assert_array_equal(a.samples, b.samples)
     assert a.method == "phase" and a.effective_samples >= 1 and a.width_factor >= 1

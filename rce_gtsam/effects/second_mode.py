@@ -17,6 +17,8 @@ search), not the one with the most variance.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from .base import Effect, Parameter
@@ -133,8 +135,19 @@ def noise_correlation(R: np.ndarray, shrink: float = 0.05) -> np.ndarray:
 def _frame_precisions(corr: np.ndarray, W: np.ndarray) -> np.ndarray:
     """(T, E, E) noise precision per frame: D^1/2 inv(C_oo) D^1/2 over the edges observed (W > 0), 0 elsewhere.
 
-    inv(C_oo) is computed once per distinct pattern of observed edges."""
-    E, T = W.shape
+    The same (corr, W) comes back on every block sweep of a fit, so the result is cached by their bytes
+    (read-only: callers only multiply with it)."""
+    corr = np.ascontiguousarray(corr, dtype=float)
+    W = np.ascontiguousarray(W, dtype=float)
+    return _precisions_cached(corr.tobytes(), W.tobytes(), W.shape)
+
+
+@lru_cache(maxsize=4)
+def _precisions_cached(corr_bytes: bytes, w_bytes: bytes, shape: tuple[int, int]) -> np.ndarray:
+    """:func:`_frame_precisions` on raw bytes; inv(C_oo) once per distinct pattern of observed edges."""
+    E, T = shape
+    corr = np.frombuffer(corr_bytes, dtype=float).reshape(E, E)
+    W = np.frombuffer(w_bytes, dtype=float).reshape(E, T)
     obs = W > 0
     patterns, which = np.unique(obs.T, axis=0, return_inverse=True)
     invs = np.zeros((len(patterns), E, E))
@@ -143,7 +156,9 @@ def _frame_precisions(corr: np.ndarray, W: np.ndarray) -> np.ndarray:
         if idx.size:
             invs[k][np.ix_(idx, idx)] = np.linalg.inv(corr[np.ix_(idx, idx)])
     sw = np.sqrt(np.where(obs, W, 0.0)).T  # (T, E)
-    return invs[np.ravel(which)] * sw[:, :, None] * sw[:, None, :]
+    P = invs[np.ravel(which)] * sw[:, :, None] * sw[:, None, :]
+    P.flags.writeable = False
+    return P
 
 
 def _normalise(state, W):
