@@ -38,6 +38,7 @@ def variants():
         "default + Huber": d.with_(smoother={"robust": "huber"}),
         "default, unweighted (equal weights)": d.with_(compliance={"weighted": False}),
         "default with moving-block bootstrap (paper)": d.with_(compliance={"bootstrap": "block"}),
+        "default + correlated (GLS) fit": d.with_(compliance={"correlated": True}),
     }
 
 

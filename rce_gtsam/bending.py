@@ -38,6 +38,10 @@ class BendingResult:
     delta_deg: (B, F) angle - rest, degrees.
     inlier: (B, F) bool, finite and within the MAD threshold.
     variance_deg2: (B, F) first-order angle variance in deg^2, or None without covariances.
+    covariance_deg2: (F, B, B) first-order covariance between the bends at each frame in deg^2 (bends
+        that share a node are correlated: a node's error turns one bend one way and the next the other
+        way), or None without covariances; NaN where either angle is missing. Its diagonal is
+        ``variance_deg2``.
     signed: whether angles are signed turning angles (True) or unsigned interior angles.
     """
 
@@ -48,6 +52,7 @@ class BendingResult:
     inlier: np.ndarray
     variance_deg2: np.ndarray | None
     signed: bool
+    covariance_deg2: np.ndarray | None = None
 
     @property
     def edges(self) -> list[tuple[int, int]]:
@@ -142,5 +147,31 @@ def compute_bending(xy: np.ndarray, node_ids, graph: BranchGraph, config: Bendin
     if config.signed:
         delta = (delta + 180.0) % 360.0 - 180.0  # keep deviations continuous across +-180
     inlier = mad_inliers(delta, config.mad_threshold)
+    covariance = None if frame_cov is None else bend_covariance(xy, row, bends, frame_cov, angle, config.signed)
     return BendingResult(bends=bends, angle_deg=angle, rest_deg=rest, delta_deg=delta, inlier=inlier,
-                         variance_deg2=variance, signed=config.signed)
+                         variance_deg2=variance, signed=config.signed, covariance_deg2=covariance)
+
+
+def bend_covariance(xy: np.ndarray, row: dict[int, int], bends, frame_cov: np.ndarray, angle: np.ndarray,
+                    signed: bool) -> np.ndarray:
+    """(F, B, B) first-order covariance of all bend angles at each frame, deg^2: J Sigma J^T with J the
+    (B, 2N) angle Jacobian (3 non-zero 2-blocks per row) and Sigma = ``frame_cov`` (F, 2N, 2N) in px^2.
+
+    The unsigned interior angle is 180 - |turning angle|, so its gradient carries the factor
+    -sign(turning angle); the variances do not change, the covariances between bends can.
+    """
+    n_frames = xy.shape[1]
+    J = np.zeros((n_frames, len(bends), frame_cov.shape[1]))
+    for k, bend in enumerate(bends):
+        nodes = [row[n] for n in bend.nodes]
+        grad = angle_gradient(*(xy[i] for i in nodes))  # (F, 6), radians per pixel
+        if not signed:
+            turn = bend_angles(*(xy[i] for i in nodes), True)
+            grad = grad * -np.sign(np.nan_to_num(turn))[:, None]
+        for a, i in enumerate(nodes):
+            J[:, k, 2 * i:2 * i + 2] += grad[:, 2 * a:2 * a + 2]
+    J = np.nan_to_num(J)
+    cov = np.matmul(np.matmul(J, frame_cov), np.transpose(J, (0, 2, 1))) * _RAD2DEG**2
+    missing = ~np.isfinite(angle.T)  # (F, B)
+    cov[missing[:, :, None] | missing[:, None, :]] = np.nan
+    return cov

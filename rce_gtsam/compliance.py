@@ -223,17 +223,149 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
     return kappa, z, n_used, iterations, converged, change, shrink_used
 
 
-def fit_rank1(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray | None = None) -> Rank1Fit:
+def frame_precisions(covariance: np.ndarray, observed: np.ndarray) -> np.ndarray:
+    """(T, E, E) per-frame precision matrices from covariances (T, E, E) and the observed mask (E, T).
+
+    At each frame the covariance of the observed entries is inverted; rows and columns of missing
+    entries are zero. Frames are grouped by their observed pattern so each group is one batched
+    inverse. A frame whose covariance block is not finite or not positive definite falls back to the
+    inverse of its diagonal (plain inverse-variance weights), or to zero where even that is unusable.
+    """
+    T, E, _ = covariance.shape
+    P = np.zeros((T, E, E))
+    obs = observed.T  # (T, E)
+    patterns, which = np.unique(obs, axis=0, return_inverse=True)
+    for g, pattern in enumerate(patterns):
+        idx = np.flatnonzero(pattern)
+        frames = np.flatnonzero(which.reshape(-1) == g)
+        if idx.size == 0:
+            continue
+        C = covariance[np.ix_(frames, idx, idx)]
+        ok = np.isfinite(C).all(axis=(1, 2))
+        good = np.zeros(frames.size, dtype=bool)
+        if ok.any():
+            eig_min = np.linalg.eigvalsh(np.where(ok[:, None, None], C, np.eye(idx.size)))[:, 0]
+            good = ok & (eig_min > 0)
+        block = np.zeros_like(C)
+        if good.any():
+            block[good] = np.linalg.inv(C[good])
+        bad = ~good
+        if bad.any():
+            d = np.diagonal(C[bad], axis1=1, axis2=2)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                inv = np.where(np.isfinite(d) & (d > 0), 1.0 / d, 0.0)
+            block[bad] = inv[:, :, None] * np.eye(idx.size)
+        P[np.ix_(frames, idx, idx)] = block
+    return P
+
+
+def _gls_shrinkage(P, Y0, W, z, k_hat, A_inv_diag, n, tau):
+    """(B, E) precision-shrinkage factors for the correlated fit: se^2(kappa_hat_e) = [A^-1]_ee
+    * sigma^2 * (1 + rho_e) / (1 - rho_e), A = sum_t z_t^2 P_t, sigma^2 the reduced chi-square
+    sum_t r_t' P_t r_t / (observations - E - frames), rho_e the lag-1 autocorrelation of edge e's
+    residuals (as in :func:`_precision_shrinkage`)."""
+    R = (Y0 - k_hat[:, :, None] * z[:, None, :]) * W  # (B, E, T)
+    Rt = np.transpose(R, (0, 2, 1))[..., None]  # (B, T, E, 1)
+    chi2 = np.sum(Rt[..., 0] * np.matmul(P, Rt)[..., 0], axis=(1, 2))
+    used = (np.abs(z) > EPS)
+    dof = np.maximum(np.sum(W * used[:, None, :], axis=(1, 2)) - k_hat.shape[1] - used.sum(axis=1), 1)
+    sigma2 = np.maximum(chi2, 0.0) / dof
+    lag = np.sum(R[:, :, 1:] * R[:, :, :-1], axis=2)
+    rho = np.clip(lag / np.maximum(np.sum(R * R, axis=2), 1e-300), 0.0, 0.99)
+    var_k = A_inv_diag * sigma2[:, None] * (1 + rho) / (1 - rho)
+    se2_log = var_k / np.maximum(k_hat * k_hat, 1e-300)
+    return tau * tau / (tau * tau + se2_log)
+
+
+def fit_rank1_gls_batch(Y: np.ndarray, config: ComplianceConfig, precision: np.ndarray):
+    """:func:`fit_rank1_batch` with correlated errors: generalised least squares in both steps.
+
+    ``precision``: (T, E, E) shared by the batch or (B, T, E, E), the per-frame inverse covariance of the
+    observed entries (zero for missing ones; see :func:`frame_precisions`). The kappa step minimises
+    sum_t (y_t - kappa z_t)' P_t (y_t - kappa z_t) over all edges jointly: A kappa = b with
+    A = sum_t z_t^2 P_t, b = sum_t z_t P_t y_t. The z step is z_t = kappa' P_t y_t / kappa' P_t kappa.
+    Shrinkage and normalisation as in the uncorrelated fit. Same return values.
+    """
+    B, E, T = Y.shape
+    signed = config.response == "signed"
+    if not signed:
+        raise ValueError("the correlated fit needs the signed response (the covariance of |delta| between "
+                         "bends depends on signs the fit does not know)")
+    P = np.asarray(precision, dtype=float)
+    if P.shape[-3:] != (T, E, E):
+        raise ValueError(f"precision has shape {P.shape}; expected (T, E, E) = ({T}, {E}, {E})")
+    W = np.isfinite(Y)
+    Y0 = np.where(W, Y, 0.0)
+    Wc = W.astype(float)
+    Pflat = P.reshape(P.shape[:-2] + (E * E,))  # (..., T, E*E)
+    PY = np.matmul(P, np.transpose(Y0, (0, 2, 1))[..., None])[..., 0]  # (B, T, E): P_t y_t
+    lam, tau = float(config.prior_strength), float(config.prior_sd_log)
+    z = _initial_z(Y, W)
+    kappa = np.ones((B, E))
+    n_used = np.zeros((B, E))
+    shrink = np.ones((B, E))
+    iterations = np.zeros(B, dtype=int)
+    converged = np.zeros(B, dtype=bool)
+    change = np.full(B, np.inf)
+    eye = np.eye(E)
+    for _ in range(config.n_iter):
+        active = ~converged
+        if not active.any():
+            break
+        zm = np.where(np.abs(z) > EPS, z, 0.0)
+        n = _matvec(Wc, (zm != 0).astype(float))
+        A = np.matmul((zm * zm)[:, None, :], Pflat)[:, 0].reshape(B, E, E)
+        b = np.einsum("bt,bte->be", zm, PY)
+        ridge = 1e-9 * np.maximum(np.trace(A, axis1=1, axis2=2) / E, EPS)
+        A = A + ridge[:, None, None] * eye
+        k_hat = np.linalg.solve(A, b[..., None])[..., 0]
+        sign = np.where(k_hat < 0, -1.0, 1.0) if signed else np.ones_like(k_hat)
+        mag = np.maximum(np.abs(k_hat) if signed else k_hat, EPS)
+        if config.shrinkage == "precision":
+            A_inv_diag = np.diagonal(np.linalg.inv(A), axis1=1, axis2=2)
+            s = _gls_shrinkage(P, Y0, W, zm, k_hat, A_inv_diag, n, tau)
+        else:
+            s = n / (n + lam)
+        k_new = np.where(n > 0, sign * np.exp(s * np.log(mag)), 1.0)
+        big = np.abs(k_new) > EPS
+        logs = np.where(big, np.log(np.maximum(np.abs(k_new), EPS)), 0.0)
+        k_new = np.where(big, k_new / np.exp(logs.sum(axis=1) / np.maximum(big.sum(axis=1), 1))[:, None], k_new)
+        km = k_new * big
+        kPk = np.matmul(Pflat, (km[:, :, None] * km[:, None, :]).reshape(B, E * E, 1))[..., 0]  # (B, T)
+        kPy = np.einsum("be,bte->bt", km, PY)
+        z_new = np.where(kPk > EPS, kPy / np.maximum(kPk, EPS), 0.0)
+        if not signed:
+            z_new = np.maximum(z_new, 0.0)
+        ch = np.max(np.abs(np.log(np.maximum(np.abs(k_new), EPS)) - np.log(np.maximum(np.abs(kappa), EPS))), axis=1)
+        a = active
+        kappa[a], z[a], n_used[a], change[a] = k_new[a], z_new[a], n[a], ch[a]
+        shrink[a] = np.where(n > 0, s, 1.0)[a]
+        iterations[a] += 1
+        converged[a] = ch[a] < config.tol
+    return kappa, z, n_used, iterations, converged, change, shrink
+
+
+def fit_rank1(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray | None = None,
+              precision: np.ndarray | None = None) -> Rank1Fit:
     """Fit y[e, t] ~ kappa_e z_t to ``Y`` (E, T) in degrees, NaN = missing.
 
-    ``weights`` (E, T) >= 0 turns the least-squares steps into weighted ones (e.g. 1 / angle variance).
+    ``weights`` (E, T) >= 0 turns the least-squares steps into weighted ones (e.g. 1 / angle variance);
+    ``precision`` (T, E, E), per-frame inverse covariances (:func:`frame_precisions`), into generalised
+    least squares that also uses the correlation between rows (it takes precedence over ``weights``).
     """
     Y = np.asarray(Y, dtype=float)
-    k, z, n, it, conv, ch, sh = fit_rank1_batch(Y[None], config, None if weights is None else weights[None])
+    k, z, n, it, conv, ch, sh = _fit_batch(Y[None], config, None if weights is None else weights[None], precision)
     k, z = k[0], z[0]
     direction = np.where(k < 0, -1.0, 1.0)
     return Rank1Fit(kappa=np.abs(k), direction=direction, z=z, n_used=n[0], shrinkage=sh[0], iterations=int(it[0]),
                     converged=bool(conv[0]), max_log_change=float(ch[0]))
+
+
+def _fit_batch(Yb, config: ComplianceConfig, Wb, precision):
+    """One batch of fits: generalised least squares when a precision is given, else (weighted) ALS."""
+    if precision is not None:
+        return fit_rank1_gls_batch(Yb, config, precision)
+    return fit_rank1_batch(Yb, config, Wb)
 
 
 def block_bootstrap_indices(n_columns: int, block_length: int, n_boot: int,
@@ -319,7 +451,8 @@ def small_sample_factor(n_eff: float, level: float = 0.95) -> float:
 
 
 def bootstrap_kappa(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray | None = None,
-                    chunk: int = 64, fit: Rank1Fit | None = None) -> BootstrapCI | None:
+                    chunk: int = 64, fit: Rank1Fit | None = None,
+                    precision: np.ndarray | None = None) -> BootstrapCI | None:
     """Bootstrap of the whole rank-1 fit; None when n_boot = 0 or T < 8 frames.
 
     ``config.bootstrap == "block"``: moving blocks of frames of the data, refitted. ``"phase"``: the
@@ -339,11 +472,13 @@ def bootstrap_kappa(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
     if config.n_boot <= 0 or T < 8:
         return None
     if config.bootstrap == "phase":
-        return _phase_bootstrap(Y, config, weights, chunk, fit if fit is not None else fit_rank1(Y, config, weights))
-    return _block_bootstrap(Y, config, weights, chunk)
+        if fit is None:
+            fit = fit_rank1(Y, config, weights, precision)
+        return _phase_bootstrap(Y, config, weights, chunk, fit, precision)
+    return _block_bootstrap(Y, config, weights, chunk, precision)
 
 
-def _block_bootstrap(Y, config: ComplianceConfig, weights, chunk: int) -> BootstrapCI:
+def _block_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, precision=None) -> BootstrapCI:
     """Moving blocks of ``config.block_length`` frames of the data, every resample refitted."""
     E, T = Y.shape
     rng = np.random.default_rng(config.seed)
@@ -353,13 +488,14 @@ def _block_bootstrap(Y, config: ComplianceConfig, weights, chunk: int) -> Bootst
         cols = idx[s:s + chunk]
         Yb = np.transpose(Y[:, cols], (1, 0, 2))
         Wb = None if weights is None else np.transpose(weights[:, cols], (1, 0, 2))
-        samples[s:s + chunk] = np.abs(fit_rank1_batch(Yb, config, Wb)[0])
+        Pb = None if precision is None else precision[cols]
+        samples[s:s + chunk] = np.abs(_fit_batch(Yb, config, Wb, Pb)[0])
     low, high = np.percentile(samples, [2.5, 97.5], axis=0)
     return BootstrapCI(low=low, high=high, samples=samples,
                        block_length=max(3, min(config.block_length, T)), seed=config.seed)
 
 
-def _phase_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, fit: Rank1Fit) -> BootstrapCI:
+def _phase_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, fit: Rank1Fit, precision=None) -> BootstrapCI:
     """The fit plus phase-randomised residuals, refitted; deviations widened (see :func:`bootstrap_kappa`)."""
     if config.response != "signed":
         raise ValueError("the phase-randomised bootstrap needs the signed response (|delta| residuals "
@@ -375,7 +511,7 @@ def _phase_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, fit: Rank
         Yb = pred[None] + phase_randomised_residuals(R, n, rng)
         Yb[:, ~mask] = np.nan
         Wb = None if weights is None else np.broadcast_to(weights, Yb.shape)
-        samples[s:s + n] = np.abs(fit_rank1_batch(Yb, config, Wb)[0])
+        samples[s:s + n] = np.abs(_fit_batch(Yb, config, Wb, precision)[0])
     n_eff = excitation_dof(R, fit.z)
     factor = small_sample_factor(n_eff)
     # deviations from the resamples' own median: data made from an already shrunk kappa_hat and shrunk

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .bending import BendingResult, compute_bending
-from .compliance import BootstrapCI, Rank1Fit, bootstrap_kappa, fit_rank1
+from .compliance import BootstrapCI, Rank1Fit, bootstrap_kappa, fit_rank1, frame_precisions
 from .extended_fit import ExtendedBootstrapInfo, ExtendedFit, bootstrap_extended, fit_extended
 from .geometry import Geometry, compute_geometry, edge_lengths
 from .graph import BranchGraph, load_graph
@@ -31,6 +31,8 @@ class Response:
     Y: (E, T) bending response in degrees (|delta| for the paper's ``abs`` response, signed delta
        otherwise); NaN where the bend is missing or an outlier.
     variance: (E, T) propagated angle variance in deg^2, or None.
+    covariance: (T, E, E) propagated covariance between the rows at each frame in deg^2 (NaN where an
+       entry is missing or an outlier), or None.
     edges: the downstream edge (joint, child) of each row; rows are ordered by root distance, then
        joint, then child.
     bend_rows: index of each row in ``BendingResult.bends``.
@@ -46,6 +48,13 @@ class Response:
     root_distance_px: np.ndarray
     root_distance: np.ndarray
     frames: np.ndarray
+    covariance: np.ndarray | None = None
+
+    def _weight_scale(self) -> float:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w = 1.0 / self.variance
+        w = w[np.isfinite(w) & np.isfinite(self.Y) & (w > 0)]
+        return float(w.mean()) if w.size else 1.0
 
     @property
     def weights(self) -> np.ndarray | None:
@@ -55,8 +64,18 @@ class Response:
         with np.errstate(divide="ignore", invalid="ignore"):
             w = 1.0 / self.variance
         w = np.where(np.isfinite(w) & np.isfinite(self.Y), w, 0.0)
-        mean = w[w > 0].mean() if (w > 0).any() else 1.0
-        return w / mean
+        return w / self._weight_scale()
+
+    @property
+    def precision(self) -> np.ndarray | None:
+        """(T, E, E) per-frame precision: the inverse of the covariance of the entries observed at frame t
+        (zero rows and columns elsewhere), scaled like :attr:`weights` (without correlations its diagonal
+        would equal the weights), or None without covariances. See
+        :func:`~rce_gtsam.compliance.frame_precisions`.
+        """
+        if self.covariance is None or self.variance is None:
+            return None
+        return frame_precisions(self.covariance, np.isfinite(self.Y)) / self._weight_scale()
 
 
 @dataclass(frozen=True, eq=False)
@@ -130,13 +149,17 @@ def build_response(bending: BendingResult, geometry: Geometry, preset: Preset) -
     inlier = bending.inlier[order][:, frames]
     Y = np.abs(delta) if preset.compliance.response == "abs" else delta.copy()
     Y[~inlier] = np.nan
-    variance = None
+    variance = covariance = None
     if bending.variance_deg2 is not None:
         variance = bending.variance_deg2[order][:, frames].copy()
         variance[~inlier] = np.nan
+    if bending.covariance_deg2 is not None:
+        covariance = bending.covariance_deg2[frames][:, order][:, :, order].copy()
+        out = ~inlier.T  # (T, E)
+        covariance[out[:, :, None] | out[:, None, :]] = np.nan
     rd = np.array([geometry.root_distance_px[bending.bends[k].child] for k in order])
     top = max(geometry.root_distance_px.values())
-    return Response(Y=Y, variance=variance, edges=[bending.bends[k].edge for k in order], bend_rows=order,
+    return Response(Y=Y, variance=variance, covariance=covariance, edges=[bending.bends[k].edge for k in order], bend_rows=order,
                     root_distance_px=rd, root_distance=rd / top if top > 0 else np.zeros_like(rd),
                     frames=frames)
 
@@ -241,17 +264,25 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
 
     t = time.perf_counter()
     weights = response.weights if preset.compliance.weighted else None
+    precision = None
+    if preset.compliance.correlated:
+        if effects:
+            raise ValueError(f"preset {preset.name!r}: the correlated fit has no effect terms yet; drop "
+                             f"correlated=True or the effects {', '.join(effects)}")
+        if response.covariance is None:
+            raise ValueError(f"preset {preset.name!r}: correlated=True needs the smoother's marginal covariances")
+        precision = response.precision
     boot_info = None
     if effects:
         fit = fit_extended(response.Y, effects, preset.compliance, weights, response.root_distance)
     else:
-        fit = fit_rank1(response.Y, preset.compliance, weights)
+        fit = fit_rank1(response.Y, preset.compliance, weights, precision)
     timings["fit"] = time.perf_counter() - t
     t = time.perf_counter()
     if effects:
         ci, boot_info = bootstrap_extended(fit, preset.compliance)
     else:
-        ci = bootstrap_kappa(response.Y, preset.compliance, weights, fit=fit)
+        ci = bootstrap_kappa(response.Y, preset.compliance, weights, fit=fit, precision=precision)
     timings["bootstrap"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     return AnalysisResult(graph=graph, tracks=tracks, preset=preset, smoothed=smoothed, geometry=geometry,

@@ -73,6 +73,11 @@ class ComplianceConfig:
         of segments within a factor e^2 ~ 7 of the branch's geometric mean).
     n_iter, tol: ALS iteration cap and stop tolerance on max |log kappa change|.
     weighted: weight each entry by 1 / (propagated angle variance) instead of equally.
+    correlated: use the whole propagated covariance between the bends of a frame
+        (generalised least squares, :func:`~rce_gtsam.compliance.fit_rank1_gls_batch`): neighbouring
+        bends share a node, so one node's tracking error turns them in opposite directions and their
+        angle errors are strongly negatively correlated. Replaces ``weighted``'s variances (its diagonal).
+        Needs the signed response.
     bootstrap: how resampled data sets are made. ``"block"`` (paper): moving blocks of ``block_length``
         frames of the data. ``"phase"``: the fitted model kappa_hat z_hat plus phase-randomised residuals
         (multivariate Fourier surrogates: every residual row keeps its spectrum, every pair of rows its
@@ -91,6 +96,7 @@ class ComplianceConfig:
     n_iter: int = 60
     tol: float = 1e-4
     weighted: bool = False
+    correlated: bool = False
     n_boot: int = 250
     block_length: int = 25
     bootstrap: Literal["block", "phase"] = "block"
@@ -143,6 +149,17 @@ PAPER = Preset(name="paper")
 #:   blocks, 1.17 / 1.22 with this;
 #: * kept OFF because they did not help: the anisotropic measurement covariance (0.385) and the Huber
 #:   loss (0.278); both stay available as settings.
+#: * kept OFF, a trade: the correlated (generalised least squares) fit, ``correlated=True``. It uses
+#:   the -0.63 error correlation between neighbouring bends (plants 1 and 2 alike). Under white node
+#:   noise it cuts kappa's error 3x (tests/test_gls.py: 0.07 vs 0.21). On simulated tracks, which
+#:   also drift, the gain is smaller:
+#:   - median log-RMSE 0.148 vs 0.166 (seeds 0-19) and 0.180 vs 0.194 (seeds 100-119); better on
+#:     12 and 13 of 20 seeds;
+#:   - but its phase-bootstrap intervals are 22 % narrower and cover kappa_true for only 84.7 % /
+#:     83.1 % of edges (default: 91.1 % / 86.4 %);
+#:   - on the real plants, kappa from separate thirds and quarters of the video agreed better on
+#:     plant 1 (spread 0.296 / 0.363 vs 0.319 / 0.434) and worse on plant 2 (0.378 / 0.370 vs
+#:     0.377 / 0.322). Not proven better.
 DEFAULT = Preset(
     name="default",
     smoother=SmootherConfig(presmooth_window=1, velocity_weight=0.0, acceleration_weight=20.0,
