@@ -259,15 +259,24 @@ def frame_precisions(covariance: np.ndarray, observed: np.ndarray) -> np.ndarray
     return P
 
 
-def _gls_shrinkage(P, Y0, W, z, k_hat, A_inv_diag, n, tau):
+def _apply_precision(P: np.ndarray, V: np.ndarray) -> np.ndarray:
+    """(B, T, E) -> (B, T, E): P_t v_bt. A shared (T, E, E) precision is applied as T matmuls of
+    (E, E) @ (E, B), which BLAS does far faster than B*T tiny mat-vecs; a per-resample (B, T, E, E) one
+    as mat-vecs."""
+    if P.ndim == 3:
+        return np.transpose(np.matmul(P, np.transpose(V, (1, 2, 0))), (2, 0, 1))
+    return np.matmul(P, V[..., None])[..., 0]
+
+
+def _gls_shrinkage(P, Y0, W, z, k_hat, A_inv_diag, tau):
     """(B, E) precision-shrinkage factors for the correlated fit: se^2(kappa_hat_e) = [A^-1]_ee
     * sigma^2 * (1 + rho_e) / (1 - rho_e), A = sum_t z_t^2 P_t, sigma^2 the reduced chi-square
     sum_t r_t' P_t r_t / (observations - E - frames), rho_e the lag-1 autocorrelation of edge e's
     residuals (as in :func:`_precision_shrinkage`)."""
     R = (Y0 - k_hat[:, :, None] * z[:, None, :]) * W  # (B, E, T)
-    Rt = np.transpose(R, (0, 2, 1))[..., None]  # (B, T, E, 1)
-    chi2 = np.sum(Rt[..., 0] * np.matmul(P, Rt)[..., 0], axis=(1, 2))
-    used = (np.abs(z) > EPS)
+    Rt = np.transpose(R, (0, 2, 1))  # (B, T, E)
+    chi2 = np.sum(Rt * _apply_precision(P, Rt), axis=(1, 2))
+    used = np.abs(z) > EPS
     dof = np.maximum(np.sum(W * used[:, None, :], axis=(1, 2)) - k_hat.shape[1] - used.sum(axis=1), 1)
     sigma2 = np.maximum(chi2, 0.0) / dof
     lag = np.sum(R[:, :, 1:] * R[:, :, :-1], axis=2)
@@ -287,18 +296,17 @@ def fit_rank1_gls_batch(Y: np.ndarray, config: ComplianceConfig, precision: np.n
     Shrinkage and normalisation as in the uncorrelated fit. Same return values.
     """
     B, E, T = Y.shape
-    signed = config.response == "signed"
-    if not signed:
+    if config.response != "signed":
         raise ValueError("the correlated fit needs the signed response (the covariance of |delta| between "
                          "bends depends on signs the fit does not know)")
     P = np.asarray(precision, dtype=float)
-    if P.shape[-3:] != (T, E, E):
+    if P.shape[-3:] != (T, E, E) or P.ndim not in (3, 4):
         raise ValueError(f"precision has shape {P.shape}; expected (T, E, E) = ({T}, {E}, {E})")
     W = np.isfinite(Y)
     Y0 = np.where(W, Y, 0.0)
     Wc = W.astype(float)
     Pflat = P.reshape(P.shape[:-2] + (E * E,))  # (..., T, E*E)
-    PY = np.matmul(P, np.transpose(Y0, (0, 2, 1))[..., None])[..., 0]  # (B, T, E): P_t y_t
+    PY = _apply_precision(P, np.transpose(Y0, (0, 2, 1)))  # (B, T, E): P_t y_t, fixed over iterations
     lam, tau = float(config.prior_strength), float(config.prior_sd_log)
     z = _initial_z(Y, W)
     kappa = np.ones((B, E))
@@ -309,21 +317,22 @@ def fit_rank1_gls_batch(Y: np.ndarray, config: ComplianceConfig, precision: np.n
     change = np.full(B, np.inf)
     eye = np.eye(E)
     for _ in range(config.n_iter):
-        active = ~converged
-        if not active.any():
+        a = np.flatnonzero(~converged)
+        if a.size == 0:
             break
-        zm = np.where(np.abs(z) > EPS, z, 0.0)
-        n = _matvec(Wc, (zm != 0).astype(float))
-        A = np.matmul((zm * zm)[:, None, :], Pflat)[:, 0].reshape(B, E, E)
-        b = np.einsum("bt,bte->be", zm, PY)
-        ridge = 1e-9 * np.maximum(np.trace(A, axis1=1, axis2=2) / E, EPS)
-        A = A + ridge[:, None, None] * eye
+        Pa, Pfa = (P, Pflat) if P.ndim == 3 else (P[a], Pflat[a])
+        Y0a, Wa, PYa = Y0[a], W[a], PY[a]
+        zm = np.where(np.abs(z[a]) > EPS, z[a], 0.0)
+        n = _matvec(Wc[a], (zm != 0).astype(float))
+        A = np.matmul((zm * zm)[:, None, :], Pfa)[:, 0].reshape(a.size, E, E)
+        b = np.einsum("bt,bte->be", zm, PYa)
+        A = A + (1e-9 * np.maximum(np.trace(A, axis1=1, axis2=2) / E, EPS))[:, None, None] * eye
         k_hat = np.linalg.solve(A, b[..., None])[..., 0]
-        sign = np.where(k_hat < 0, -1.0, 1.0) if signed else np.ones_like(k_hat)
-        mag = np.maximum(np.abs(k_hat) if signed else k_hat, EPS)
+        sign = np.where(k_hat < 0, -1.0, 1.0)
+        mag = np.maximum(np.abs(k_hat), EPS)
         if config.shrinkage == "precision":
             A_inv_diag = np.diagonal(np.linalg.inv(A), axis1=1, axis2=2)
-            s = _gls_shrinkage(P, Y0, W, zm, k_hat, A_inv_diag, n, tau)
+            s = _gls_shrinkage(Pa, Y0a, Wa, zm, k_hat, A_inv_diag, tau)
         else:
             s = n / (n + lam)
         k_new = np.where(n > 0, sign * np.exp(s * np.log(mag)), 1.0)
@@ -331,17 +340,14 @@ def fit_rank1_gls_batch(Y: np.ndarray, config: ComplianceConfig, precision: np.n
         logs = np.where(big, np.log(np.maximum(np.abs(k_new), EPS)), 0.0)
         k_new = np.where(big, k_new / np.exp(logs.sum(axis=1) / np.maximum(big.sum(axis=1), 1))[:, None], k_new)
         km = k_new * big
-        kPk = np.matmul(Pflat, (km[:, :, None] * km[:, None, :]).reshape(B, E * E, 1))[..., 0]  # (B, T)
-        kPy = np.einsum("be,bte->bt", km, PY)
+        kPk = np.matmul(Pfa, (km[:, :, None] * km[:, None, :]).reshape(a.size, E * E, 1))[..., 0]  # (b, T)
+        kPy = np.einsum("be,bte->bt", km, PYa)
         z_new = np.where(kPk > EPS, kPy / np.maximum(kPk, EPS), 0.0)
-        if not signed:
-            z_new = np.maximum(z_new, 0.0)
-        ch = np.max(np.abs(np.log(np.maximum(np.abs(k_new), EPS)) - np.log(np.maximum(np.abs(kappa), EPS))), axis=1)
-        a = active
-        kappa[a], z[a], n_used[a], change[a] = k_new[a], z_new[a], n[a], ch[a]
-        shrink[a] = np.where(n > 0, s, 1.0)[a]
+        ch = np.max(np.abs(np.log(np.maximum(np.abs(k_new), EPS)) - np.log(np.maximum(np.abs(kappa[a]), EPS))), axis=1)
+        kappa[a], z[a], n_used[a], change[a] = k_new, z_new, n, ch
+        shrink[a] = np.where(n > 0, s, 1.0)
         iterations[a] += 1
-        converged[a] = ch[a] < config.tol
+        converged[a] = ch < config.tol
     return kappa, z, n_used, iterations, converged, change, shrink
 
 

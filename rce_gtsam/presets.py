@@ -159,7 +159,8 @@ PAPER = Preset(name="paper")
 #:     83.1 % of edges (default: 91.1 % / 86.4 %);
 #:   - on the real plants, kappa from separate thirds and quarters of the video agreed better on
 #:     plant 1 (spread 0.296 / 0.363 vs 0.319 / 0.434) and worse on plant 2 (0.378 / 0.370 vs
-#:     0.377 / 0.322). Not proven better.
+#:     0.377 / 0.322). Not proven better;
+#:   - its bootstrap costs ~14x the CPU (plant 2: 6.9 vs 0.5 s).
 DEFAULT = Preset(
     name="default",
     smoother=SmootherConfig(presmooth_window=1, velocity_weight=0.0, acceleration_weight=20.0,
@@ -179,3 +180,66 @@ def get_preset(name: str | Preset) -> Preset:
         return PRESETS[name]
     except KeyError:
         raise ValueError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}") from None
+
+
+_STAGES = ("smoother", "bending", "compliance")
+
+
+def _parse_value(text: str, annotation: str, where: str):
+    """``text`` as the type a config field is annotated with (annotations are strings here)."""
+    t = text.strip()
+    kind = annotation.replace(" ", "")
+    if kind.startswith("Literal["):
+        choices = [c.strip("'\"") for c in kind[len("Literal["):].split("]")[0].split(",")]
+        optional = kind.endswith("|None")
+        if optional and t.lower() in ("none", "null", ""):
+            return None
+        if t not in choices:
+            raise ValueError(f"{where}: {t!r} is not one of {choices + (['none'] if optional else [])}")
+        return t
+    if kind == "bool":
+        if t.lower() in ("1", "true", "yes", "on"):
+            return True
+        if t.lower() in ("0", "false", "no", "off"):
+            return False
+        raise ValueError(f"{where}: {t!r} is not a boolean (true/false)")
+    try:
+        if kind == "int":
+            return int(t)
+        if kind == "float":
+            return float(t)
+    except ValueError:
+        raise ValueError(f"{where}: {t!r} is not a{'n integer' if kind == 'int' else ' number'}") from None
+    raise ValueError(f"{where}: fields of type {annotation} cannot be set from text")
+
+
+def parse_overrides(items) -> dict[str, dict]:
+    """``["compliance.correlated=true", "smoother.acceleration_weight=10"]`` -> per-stage field overrides
+    for :meth:`Preset.with_`. Each value is parsed as its field's type; an unknown stage or field, or a
+    value of the wrong type, raises ValueError naming the item and what is allowed."""
+    from dataclasses import fields
+
+    out: dict[str, dict] = {}
+    for item in items or ():
+        key, sep, value = str(item).partition("=")
+        stage, dot, name = key.strip().partition(".")
+        if not sep or not dot:
+            raise ValueError(f"--set {item!r}: expected STAGE.FIELD=VALUE, e.g. compliance.n_boot=500")
+        if stage not in _STAGES:
+            raise ValueError(f"--set {item!r}: unknown stage {stage!r}; stages are {list(_STAGES)}")
+        known = {f.name: f for f in fields(getattr(Preset(name="_"), stage))}
+        if name not in known:
+            raise ValueError(f"--set {item!r}: {stage} has no field {name!r}; its fields are {sorted(known)}")
+        out.setdefault(stage, {})[name] = _parse_value(value, str(known[name].type), f"--set {item!r}")
+    return out
+
+
+def with_overrides(preset: str | Preset, items) -> Preset:
+    """``preset`` with ``--set`` style overrides applied (see :func:`parse_overrides`); its name records
+    them, e.g. ``default[compliance.correlated=True]``."""
+    base = get_preset(preset)
+    overrides = parse_overrides(items)
+    if not overrides:
+        return base
+    tag = ",".join(f"{s}.{k}={v}" for s, kv in overrides.items() for k, v in kv.items())
+    return replace(base.with_(**overrides), name=f"{base.name}[{tag}]")

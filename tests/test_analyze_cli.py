@@ -62,3 +62,31 @@ def test_rerun_into_existing_folder_replaces_files(chain, tmp_path):
     assert main(["analyze", str(tracks), str(graph), "--out", str(out), "--bootstrap", "0", "--preset", "paper"]) == 0
     assert (out / "notes.txt").read_text() == "keep me"
     assert pd.read_csv(out / "compliance_summary.csv")["kappa_ci_low"].isna().all()  # no bootstrap -> no CI
+
+
+def test_set_overrides_one_setting_and_is_recorded(chain, tmp_path):
+    tracks, graph, _, _ = chain
+    out = tmp_path / "o"
+    assert main(["analyze", str(tracks), str(graph), "--out", str(out), "--bootstrap", "20", "--no-figures",
+                 "--set", "compliance.correlated=true", "--set", "smoother.acceleration_weight=10"]) == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["preset"]["compliance"]["correlated"] is True
+    assert report["preset"]["smoother"]["acceleration_weight"] == 10.0
+    assert report["preset"]["name"] == "default[compliance.correlated=True,smoother.acceleration_weight=10.0]"
+
+
+@pytest.mark.parametrize("item, message", [
+    ("compliance.corelated=true", "compliance has no field 'corelated'"),
+    ("fit.n_boot=3", "unknown stage 'fit'"),
+    ("compliance.n_boot=many", "'many' is not an integer"),
+    ("compliance.weighted=maybe", "not a boolean"),
+    ("smoother.robust=tukey", "not one of ['huber', 'cauchy', 'none']"),
+    ("compliance.n_boot", "expected STAGE.FIELD=VALUE"),
+])
+def test_bad_set_is_an_input_error_before_any_work(chain, tmp_path, capsys, item, message):
+    tracks, graph, _, _ = chain
+    out = tmp_path / "o"
+    assert main(["analyze", str(tracks), str(graph), "--out", str(out), "--set", item]) == 2
+    err = capsys.readouterr().err
+    assert "--set" in err and message in err
+    assert not out.exists()

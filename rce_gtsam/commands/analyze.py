@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..presets import PRESETS
+from .preset_args import add_preset_arguments, preset_from_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -15,8 +15,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("tracks", type=Path, help="tracks CSV: point_id,frame,x,y[,visible,sigma_px] (pixels)")
     p.add_argument("graph", type=Path, help='branch graph JSON: {"root": id, "edges": [[parent, child], ...]}')
     p.add_argument("--out", type=Path, required=True, help="output folder (created; existing files replaced)")
-    p.add_argument("--preset", choices=sorted(PRESETS), default="default",
-                   help="method preset: 'paper' reproduces the published pipeline, 'default' is ours")
+    add_preset_arguments(p)
     p.add_argument("--seed", type=int, default=None, help="bootstrap RNG seed (default: the preset's, 0)")
     p.add_argument("--bootstrap", type=int, default=None, metavar="N",
                    help="bootstrap resamples (default: the preset's, 250; 0 disables CIs)")
@@ -68,7 +67,8 @@ def run(args: argparse.Namespace) -> int:
     from ..diagnosis_io import parse_effect_names
 
     effects = parse_effect_names(args.effects) or ()  # fail on a bad name before the (slow) analysis
-    result = analyze(args.tracks, args.graph, preset=args.preset, seed=args.seed, n_boot=args.bootstrap,
+    preset = preset_from_args(args)
+    result = analyze(args.tracks, args.graph, preset=preset, seed=args.seed, n_boot=args.bootstrap,
                      effects=effects)
     files = result.write(args.out, extra_writers=extra_writers(args))
     save_recording(args, result)

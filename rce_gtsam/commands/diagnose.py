@@ -7,7 +7,7 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from ..presets import PRESETS
+from .preset_args import add_preset_arguments, preset_from_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -18,7 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("tracks", type=Path, help="tracks CSV: point_id,frame,x,y[,visible,sigma_px] (pixels)")
     p.add_argument("graph", type=Path, help='branch graph JSON: {"root": id, "edges": [[parent, child], ...]}')
     p.add_argument("--json", type=Path, required=True, dest="json_path", help="write the diagnosis JSON here")
-    p.add_argument("--preset", choices=sorted(PRESETS), default="default", help="method preset")
+    add_preset_arguments(p)
     p.add_argument("--effects", default=None, metavar="A,B",
                    help="comma-separated candidates (default: delay,dynamics,second_mode,offset,nonlinear)")
     p.add_argument("--seed", type=int, default=0, help="seed of the stratified edge split (default 0)")
@@ -37,9 +37,10 @@ def run(args: argparse.Namespace) -> int:
     from ..pipeline import analyze
 
     names = parse_effect_names(args.effects)  # fail on a bad name before the (slow) analysis
+    preset = preset_from_args(args)
     if args.folds < 2:
         raise InputError("--folds", f"need at least 2 cross-validation blocks, got {args.folds}")
-    result = analyze(args.tracks, args.graph, preset=args.preset, n_boot=0)
+    result = analyze(args.tracks, args.graph, preset=preset, n_boot=0)
     diag = diagnose_result(result, effects=names, seed=args.seed, n_folds=args.folds)
     data = diagnosis_json(diag, result)
     view = diagnosis_for_viz(diag, result) if (args.figures or args.rerun) else None

@@ -7,7 +7,7 @@ import json
 import time
 from pathlib import Path
 
-from ..presets import PRESETS
+from .preset_args import add_preset_arguments, preset_from_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,7 +22,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--model", type=Path, default=None, metavar="DIR_OR_ONNX",
                    help="TAPIR ONNX export (default: the OpenCV tracker)")
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="use only the first N frames")
-    p.add_argument("--preset", choices=sorted(PRESETS), default="default", help="method preset")
+    add_preset_arguments(p)
     p.add_argument("--seed", type=int, default=None, help="bootstrap / cross-validation seed")
     p.add_argument("--bootstrap", type=int, default=None, metavar="N", help="bootstrap resamples")
     p.add_argument("--effects", default=None, metavar="A,B",
@@ -43,6 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from .track import track_with_progress
 
     args.effects = parse_effect_names(args.effects)  # fail on a bad name before tracking
+    preset = preset_from_args(args)
     t0 = time.perf_counter()
     graph = load_graph(args.graph)
     tracker = make_tracker(args.model)
@@ -53,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     t_track = time.perf_counter() - t0
     table = tracked.to_frame()
     tracks = tracks_from_table(table, graph, source=f"tracks of {args.video}")
-    result = analyze(tracks, graph, preset=args.preset, seed=args.seed, n_boot=args.bootstrap)
+    result = analyze(tracks, graph, preset=preset, seed=args.seed, n_boot=args.bootstrap)
     result.timings_s["track"] = t_track
     result.inputs.update(video=str(args.video), annotations=str(args.annotations), graph=str(args.graph))
 
