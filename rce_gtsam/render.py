@@ -8,7 +8,9 @@ Scene (all seeded by the simulation's seed, so a rendering is reproducible):
   node), tapering from 10 px at the root to 5 px at the tip, with round caps so joints stay closed;
 * leaves: a few leaf sprites attached to distal segments; each moves with its segment and flutters about its
   petiole (angle +-10-25 degrees at 0.4-1.2 Hz), so some of them sweep over nodes now and then;
-* mild sensor noise (1 grey level RMS) per frame, then H.264 encoding.
+* mild sensor noise (1 grey level RMS) per frame, then H.264 encoding;
+* optional camera nuisances (a :class:`~rce_gtsam.nuisance.RenderConfig`: motion blur, illumination drift,
+  a moving soft shadow, camera shake, stronger compression); the default config is the clean render above.
 
 Geometry uses the TRUE positions (``sim.true_xy``) and the OpenCV pixel convention: pixel (row i, column j)
 has its centre at (x=j, y=i). Each sprite is placed by an exact affine warp (bilinear interpolation), so
@@ -29,6 +31,7 @@ import cv2
 import numpy as np
 
 from .errors import MissingDependencyError
+from .nuisance import RenderConfig, ShadowField, camera_shift, illumination
 
 BARK_BGR = np.array([45.0, 75.0, 115.0])   # brown
 LEAF_BGR = np.array([40.0, 140.0, 70.0])   # green
@@ -187,28 +190,84 @@ def _blit(canvas: np.ndarray, sp: _Sprite, P: np.ndarray, C: np.ndarray, t_s: fl
     roi += warped[..., :3]
 
 
-def iter_frames(sim, *, n_frames: int | None = None, sensor_noise: float = 1.0) -> Iterator[np.ndarray]:
-    """Yield the rendered frames as (H, W, 3) uint8 BGR arrays (OpenCV order), one at a time."""
+def _subframe_positions(xy: np.ndarray, f: int, offsets: np.ndarray) -> np.ndarray:
+    """(K, N, 2) node positions at ``f + offsets`` (frames), linear between neighbouring frames (pixels).
+
+    Beyond the clip's ends the nearest frame-to-frame velocity is extended.
+    """
+    F = xy.shape[1]
+    fwd = xy[:, f + 1] - xy[:, f] if f + 1 < F else (xy[:, f] - xy[:, f - 1] if F > 1 else 0 * xy[:, f])
+    bwd = xy[:, f] - xy[:, f - 1] if f > 0 else fwd
+    o = offsets[:, None, None]
+    return xy[None, :, f] + np.where(o >= 0, o * fwd[None], o * bwd[None])
+
+
+def _composite(background: np.ndarray, sprites: list[_Sprite], row: dict[int, int], xy: np.ndarray,
+               t_s: float) -> np.ndarray:
+    """Background plus every sprite for node positions ``xy`` (N, 2) pixels at time ``t_s`` seconds."""
+    canvas = background.copy()
+    for sp in sprites:
+        p, c = sp.edge
+        _blit(canvas, sp, xy[row[p]], xy[row[c]], t_s)
+    return canvas
+
+
+def iter_frames(sim, *, n_frames: int | None = None, sensor_noise: float | None = None,
+                config: RenderConfig | None = None) -> Iterator[np.ndarray]:
+    """Yield the rendered frames as (H, W, 3) uint8 BGR arrays (OpenCV order), one at a time.
+
+    ``config``: camera nuisances (:class:`~rce_gtsam.nuisance.RenderConfig`; default = the clean render).
+    ``sensor_noise`` (grey levels RMS) overrides ``config.sensor_noise`` when given. With camera shake the
+    nodes appear at :func:`~rce_gtsam.nuisance.image_xy`, not at ``sim.true_xy``.
+    """
+    cfg = config or RenderConfig()
+    noise_rms = cfg.sensor_noise if sensor_noise is None else float(sensor_noise)
     background, sprites = build_scene(sim)
     row = {int(n): i for i, n in enumerate(sim.tracks.node_ids)}
     F = sim.true_xy.shape[1] if n_frames is None else min(n_frames, sim.true_xy.shape[1])
     rng = np.random.default_rng(np.random.SeedSequence([sim.config.seed, 0xF4A3E]))
+    fps = sim.config.fps
+    shift = camera_shift(sim, cfg)
+    gain, offset = illumination(sim, cfg)
+    shadow = ShadowField(sim, cfg) if cfg.shadow_depth > 0 else None
+    speed = np.zeros(sim.true_xy.shape[1])
+    if sim.true_xy.shape[1] > 1:  # fastest node displacement around each frame (pixels per frame)
+        v = np.hypot(*np.diff(sim.true_xy, axis=1).transpose(2, 0, 1)).max(axis=0)
+        speed = np.maximum(np.r_[v[:1], v], np.r_[v, v[-1:]])
     for f in range(F):
-        canvas = background.copy()
-        t_s = f / sim.config.fps
-        for sp in sprites:
-            p, c = sp.edge
-            _blit(canvas, sp, sim.true_xy[row[p], f], sim.true_xy[row[c], f], t_s)
-        if sensor_noise > 0:
-            canvas += sensor_noise * rng.standard_normal(canvas.shape, dtype=np.float32)
+        bg = background
+        if shift[f].any():
+            m = np.array([[1.0, 0.0, shift[f, 0]], [0.0, 1.0, shift[f, 1]]])
+            bg = cv2.warpAffine(background, m, background.shape[1::-1], flags=cv2.INTER_LANCZOS4,
+                                borderMode=cv2.BORDER_REFLECT)
+        if cfg.exposure > 0:
+            # leaves flutter up to ~4 px/frame at their tips on top of the node motion
+            k = int(np.clip(math.ceil(cfg.exposure * (speed[f] + 4.0) / cfg.blur_step_px), 2, cfg.max_subframes))
+            offs = cfg.exposure * ((np.arange(k) + 0.5) / k - 0.5)
+            subs = _subframe_positions(sim.true_xy, f, offs) + shift[f]
+            canvas = _composite(bg, sprites, row, subs[0], (f + offs[0]) / fps)
+            for j in range(1, k):
+                canvas += _composite(bg, sprites, row, subs[j], (f + offs[j]) / fps)
+            canvas *= np.float32(1.0 / k)
+        else:
+            xy = sim.true_xy[:, f] + shift[f] if shift[f].any() else sim.true_xy[:, f]
+            canvas = _composite(bg, sprites, row, xy, f / fps)
+        if cfg.lighting:
+            light = np.float32(gain[f]) * (shadow(f) if shadow is not None else np.float32(1.0))
+            canvas *= np.asarray(light, np.float32)[..., None] if np.ndim(light) else light
+            canvas += np.float32(offset[f])
+        if noise_rms > 0:
+            canvas += noise_rms * rng.standard_normal(canvas.shape, dtype=np.float32)
         yield np.clip(canvas + 0.5, 0, 255).astype(np.uint8)
 
 
-def render_video(sim, path: str | Path, *, crf: int = 16, preset: str = "veryfast",
-                 n_frames: int | None = None) -> Path:
+def render_video(sim, path: str | Path, *, crf: int | None = None, preset: str = "veryfast",
+                 n_frames: int | None = None, config: RenderConfig | None = None) -> Path:
     """Write ``sim`` as an H.264 (libx264, yuv420p) mp4 at the simulation's fps; frames are streamed.
 
-    ``crf``: x264 constant rate factor (lower = better quality; 16 keeps the bark texture crisp).
+    ``config``: camera nuisances (:class:`~rce_gtsam.nuisance.RenderConfig`; default = the clean render).
+    ``crf``: x264 constant rate factor (lower = better quality; 16 keeps the bark texture crisp); overrides
+    ``config.crf`` when given.
     The file is written next to ``path`` under a temporary name and renamed when complete.
     """
     try:
@@ -224,8 +283,9 @@ def render_video(sim, path: str | Path, *, crf: int = 16, preset: str = "veryfas
         with av.open(tmp, mode="w", format="mp4") as container:
             stream = container.add_stream("libx264", rate=Fraction(sim.config.fps).limit_denominator(1001))
             stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
-            stream.options = {"crf": str(crf), "preset": preset}
-            for img in iter_frames(sim, n_frames=n_frames):
+            cfg = config or RenderConfig()
+            stream.options = {"crf": str(cfg.crf if crf is None else crf), "preset": preset}
+            for img in iter_frames(sim, n_frames=n_frames, config=cfg):
                 frame = av.VideoFrame.from_ndarray(img, format="bgr24")
                 for packet in stream.encode(frame):
                     container.mux(packet)

@@ -533,9 +533,15 @@ class Simulation:
             "config": _jsonable(cfg),
         }
 
-    def write(self, out_dir: str | Path, video: bool = False) -> dict[str, Path]:
+    def write(self, out_dir: str | Path, video: bool = False, render=None) -> dict[str, Path]:
         """Write tracks.csv, true_tracks.csv, graph.json, truth.json, annotations.json (+ video.mp4).
 
+        ``render``: camera nuisances of the video (:class:`~rce_gtsam.nuisance.RenderConfig`; None = the
+        clean render). With camera shake, true_tracks.csv and tracks.csv hold positions in the image
+        (``nuisance.image_xy``: true positions plus the per-frame camera shift, which is zero at frame 0, so
+        annotations.json is unchanged); a non-default config is recorded in truth.json under ``"render"``
+        (its fields and ``camera_shift_px``, (F, 2) pixels). kappa, z and the bends do not change: a
+        translation of the whole image turns no segment.
         Atomic: files are written into a temporary folder next to ``out_dir`` that then replaces it.
         Refuses to overwrite a non-empty folder that holds anything this method does not write.
         Returns {name: path}.
@@ -552,18 +558,26 @@ class Simulation:
         out.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
         try:
-            df = self.tracks.to_frame()
+            from .nuisance import RenderConfig, camera_shift
+            tracks, true_xy, truth = self.tracks, self.true_xy, self.truth_json()
+            if render is not None and render != RenderConfig():
+                shift = camera_shift(self, render)
+                if shift.any():
+                    true_xy = true_xy + shift[None]
+                    tracks = Tracks(tracks.node_ids, tracks.xy + shift[None], tracks.sigma_px, source=tracks.source)
+                truth["render"] = {**asdict(render), "camera_shift_px": [[round(float(v), 4) for v in r] for r in shift]}
+            df = tracks.to_frame()
             write_table_atomic(df.round(4), tmp / "tracks.csv")
-            tt = Tracks(self.tracks.node_ids, self.true_xy, source="truth").to_frame()
+            tt = Tracks(self.tracks.node_ids, true_xy, source="truth").to_frame()
             write_table_atomic(tt.round(4), tmp / "true_tracks.csv")
             (tmp / "graph.json").write_text(json.dumps(self.graph.to_json()) + "\n")
-            (tmp / "truth.json").write_text(json.dumps(self.truth_json()) + "\n")
+            (tmp / "truth.json").write_text(json.dumps(truth) + "\n")
             row = {nid: i for i, nid in enumerate(self.tracks.node_ids)}
             pts = [[round(float(v), 4) for v in self.true_xy[row[n], 0]] for n in sorted(row)]
             (tmp / "annotations.json").write_text(json.dumps({"points": pts}) + "\n")
             if video:
                 from .render import render_video
-                render_video(self, tmp / "video.mp4")
+                render_video(self, tmp / "video.mp4", config=render)
             if out.exists():
                 old = out.parent / f".{out.name}.old.{os.getpid()}"
                 out.rename(old)

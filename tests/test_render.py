@@ -66,3 +66,74 @@ def test_lucas_kanade_follows_the_rendered_nodes(tmp_path):
         pts, _, _ = cv2.calcOpticalFlowPyrLK(frames[f - 1], frames[f], pts, None, winSize=(15, 15), maxLevel=3)
         errs.append(np.linalg.norm(pts.reshape(-1, 2) - sim.true_xy[:half, f], axis=1))
     assert np.median(errs) < 0.5
+
+
+def test_default_render_config_is_the_clean_render():
+    """No nuisance by default: the frames are the plain composite of background and sprites (+ sensor noise),
+    the same with an explicit RenderConfig() and with the ``clean`` preset."""
+    from rce_gtsam.nuisance import REALISM, RenderConfig
+    from rce_gtsam.render import _blit, build_scene
+
+    sim = _sim(n_frames=10)
+    a = list(iter_frames(sim, n_frames=4))
+    for cfg in (RenderConfig(), REALISM["clean"]):
+        assert all(np.array_equal(x, y) for x, y in zip(a, iter_frames(sim, n_frames=4, config=cfg)))
+    background, sprites = build_scene(sim)
+    row = {int(n): i for i, n in enumerate(sim.tracks.node_ids)}
+    for f, img in enumerate(iter_frames(sim, n_frames=3, sensor_noise=0)):
+        canvas = background.copy()
+        for sp in sprites:
+            _blit(canvas, sp, sim.true_xy[row[sp.edge[0]], f], sim.true_xy[row[sp.edge[1]], f], f / sim.config.fps)
+        assert np.array_equal(img, np.clip(canvas + 0.5, 0, 255).astype(np.uint8))
+
+
+def test_nuisances_change_the_frames_as_intended():
+    from rce_gtsam.nuisance import RenderConfig, camera_shift, illumination, image_xy
+
+    sim = _sim(n_frames=60, seed=1)
+    clean = [f.astype(float) for f in iter_frames(sim, sensor_noise=0)]
+    # illumination: the mean brightness follows the global gain (no offset, no clipping in this scene)
+    cfg = RenderConfig(gain_sd=0.25, light_time_s=0.3)
+    gain, offset = illumination(sim, cfg)
+    lit = [f.astype(float) for f in iter_frames(sim, sensor_noise=0, config=cfg)]
+    ratio = np.array([b.mean() / a.mean() for a, b in zip(clean, lit)])
+    assert np.ptp(gain) > 0.2 and not offset.any()
+    np.testing.assert_allclose(ratio, gain, rtol=0.01)
+    # shake: the whole image moves by the camera shift (phase correlation of background-dominated frames)
+    cfg = RenderConfig(shake_px=2.0)
+    shift = camera_shift(sim, cfg)
+    assert not shift[0].any() and np.abs(shift).max() > 1.0
+    shaken = [f.astype(float) for f in iter_frames(sim, sensor_noise=0, config=cfg)]
+    for f in (20, 40, 59):
+        g0, g1 = (np.float32(x.mean(axis=2)[40:-40, 40:-40]) for x in (clean[f], shaken[f]))
+        (dx, dy), _ = cv2.phaseCorrelate(g0, g1)
+        assert np.hypot(dx - shift[f, 0], dy - shift[f, 1]) < 0.3  # phase correlation: ~0.1-0.25 px
+    np.testing.assert_allclose(image_xy(sim, cfg), sim.true_xy + shift[None])
+    # motion blur: the fastest frame loses detail near the branch, the static background is unchanged
+    blurred = [f.astype(float) for f in iter_frames(sim, sensor_noise=0, config=RenderConfig(exposure=0.5))]
+    v = np.hypot(*np.diff(sim.true_xy, axis=1).transpose(2, 0, 1)).max(axis=0)
+    f = int(np.argmax(v)) + 1
+    changed = np.abs(blurred[f] - clean[f]).sum(axis=2) > 0
+    assert 0 < changed.mean() < 0.1
+    x0, y0 = np.floor(sim.true_xy[:, f].min(axis=0)).astype(int) - 10
+    x1, y1 = np.ceil(sim.true_xy[:, f].max(axis=0)).astype(int) + 10
+    lap = [cv2.Laplacian(np.float32(x.mean(axis=2)[y0:y1, x0:x1]), cv2.CV_32F).var() for x in (clean[f], blurred[f])]
+    assert lap[1] < 0.9 * lap[0]
+
+
+def test_simulate_write_with_shake_records_image_positions(tmp_path):
+    import json
+
+    import pandas as pd
+
+    from rce_gtsam.nuisance import RenderConfig, camera_shift
+
+    sim = _sim(n_frames=20)
+    cfg = RenderConfig(shake_px=1.0, crf=28)
+    sim.write(tmp_path / "s", video=True, render=cfg)
+    tt = pd.read_csv(tmp_path / "s" / "true_tracks.csv").sort_values(["point_id", "frame"])
+    row = {int(n): i for i, n in enumerate(sim.tracks.node_ids)}
+    expect = (sim.true_xy + camera_shift(sim, cfg)[None])[[row[p] for p in tt["point_id"]], tt["frame"]]
+    np.testing.assert_allclose(tt[["x", "y"]].to_numpy(), expect, atol=1e-4)
+    truth = json.loads((tmp_path / "s" / "truth.json").read_text())
+    assert truth["render"]["crf"] == 28 and len(truth["render"]["camera_shift_px"]) == 20

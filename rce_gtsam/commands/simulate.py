@@ -2,7 +2,9 @@
 
 Writes a simulated recording with its ground truth: tracks.csv (noisy, tracker-like), true_tracks.csv
 (noise-free), graph.json, truth.json (kappa_true, z_true, response_true, effect parameters), annotations.json
-(first-frame node positions) and, with --video, video.mp4 (H.264).
+(first-frame node positions) and, with --video, video.mp4 (H.264). ``--realism`` names the camera nuisances
+of the video (``rce_gtsam.nuisance.REALISM``: clean = the crisp default render; outdoor = motion blur,
+drifting light, a moving soft shadow, ~1 px camera shake, crf 28).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..errors import InputError
+from ..nuisance import REALISM
 from ..simulate import EFFECT_DEFAULTS, EFFECT_MEANING, EFFECTS, NoiseConfig, SimulationConfig, simulate
 
 
@@ -69,6 +72,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--clean", action="store_true", help="noise-free tracks (no jitter, drift, jumps or gaps)")
     p.add_argument("--sigma", action="store_true", help="write a per-observation sigma_px column")
     p.add_argument("--video", action="store_true", help="also render video.mp4 (H.264, 640x480)")
+    p.add_argument("--realism", choices=tuple(REALISM), default="clean",
+                   help="camera nuisances of the video: clean (default; crisp, still, constant light) or outdoor "
+                        "(180-degree-shutter motion blur, light drift and a moving soft shadow, ~1 px tripod "
+                        "shake, crf 28; true_tracks.csv then includes the camera shake)")
     p.set_defaults(func=run)
 
 
@@ -81,9 +88,11 @@ def run(args: argparse.Namespace) -> int:
         if not args.z_rms > 0:
             raise InputError("--z-rms", f"must be > 0 degrees, got {args.z_rms}")
         cfg = replace(cfg, z_rms_deg=args.z_rms)
+    if args.realism != "clean" and not args.video:
+        raise InputError("--realism", "only applies to the rendered video: add --video")
     t0 = time.perf_counter()
     sim = simulate(cfg)
-    files = sim.write(args.out, video=args.video)
+    files = sim.write(args.out, video=args.video, render=REALISM[args.realism])
     eff = ", ".join(f"{e} (strength {cfg.strength(e):g})" for e in cfg.effects) or "none"
     obs = sim.tracks.observed
     print(f"simulated {len(sim.graph.nodes)} nodes x {cfg.n_frames} frames (seed {cfg.seed}, {cfg.branch_layout}); "
