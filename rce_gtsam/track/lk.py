@@ -22,11 +22,26 @@ never recovers after an occlusion. This tracker uses frame-to-frame pyramidal LK
    a leaf hanging in front of a node flutters and spoils its template, and background at the band's
    edges pins it (measured on 600-frame simulator clips, seeds 0-4: Spearman of kappa 0.80/0.71/0.71/
    0.25/0.87 -> 0.81/0.85/0.86/0.66/0.94 with the re-acquisition check below). Below 4 (2h + 1) band
-   pixels the full patch is used instead; every tip falls below that (a 5-px stem reaching into half of
-   its patch: 30-60 pixels), so tips are matched with a patch that is mostly static background, and
-   nearly all visible errors > 2 px on the 600-frame clips come from such full-patch matches (using the
-   band down to 16 pixels cut them 10-50x but lowered Spearman of kappa on seeds 2/3 from 0.90/0.67 to
-   0.81/0.41, so it is not done; the acceptance checks below catch the worst of them instead).
+   pixels the full patch is used instead -- except at a **tip** (a node with a parent and no child), which
+   uses its band down to 16 pixels (``_TIP_MIN_BAND_PX``). A tip's band is small by construction (only one
+   segment reaches into its patch, and the stem is thinnest there: 28-55 pixels on the simulator clips),
+   whereas an interior node below 4 (2h + 1) has lost its band to a leaf in front of it (the colour mask), and
+   its template is spoiled. With the full patch, which is mostly static background, a tip's match was pinned
+   toward its frame-0 surroundings: nearly all visible errors > 2 px on the 600-frame clips came from tips,
+   and the tip's kappa on seed 3 was 3.2 (true 0.84). Measured (``rce run``, 600-frame simulator clips, seed
+   1: 400): Spearman of kappa on seeds 0-4 0.909/0.849/0.903/0.674/0.948 -> 0.899/0.835/0.903/0.765/0.942,
+   max visible error 1.6/7.8/14.1/2.7/9.1 -> 1.6/7.8/3.0/2.5/6.3 px, p99 0.70/1.66/1.73/1.10/0.71 ->
+   0.69/1.66/1.01/0.83/0.56 px, visible fraction 0.848/0.812/0.955/0.910/0.946 -> 0.857/0.812/0.943/
+   0.908/0.944 (the tip is marked invisible more often on seeds 2-4: the band, unlike the background, does
+   not match where a leaf covers it). Applying the 16-pixel floor to every node (interior nodes behind a
+   leaf included) cuts the tails further (p99 0.42-0.73 px) but gives Spearman 0.893/0.940/0.808/0.383/0.930.
+   Not adopted (measured): choosing a tip's template rotation by the image -- a 1-D search over the rotation
+   maximising the correlation peak, jointly with the position, instead of the rotation implied by the tip's
+   own match (a position -> rotation -> template feedback that amplifies a matching bias). On a controlled
+   render (seed 3, branch static, tip segment swinging +-20 degrees, leaves on) it cut the tip's
+   across-branch error slope from -0.012 to -0.0015 px/degree; on the 600-frame clips the seed-3 tip's slope
+   stayed ~+0.03 px/degree (its bias there is not that feedback), Spearman was 0.878/0.843/0.920/0.773/0.932
+   (refinement pass only: 0.899/0.835/0.903/0.773/0.932) at 7 or more extra template matches per tip and pass.
    Because the measurement always compares with frame 0,
    errors do not accumulate: a node that returns to its first pose is measured where it is.
    **Articulated templates** (with a graph): a node is a joint, and its parent segment and child segments
@@ -192,6 +207,11 @@ class LKConfig:
     anchor_highpass_px: float = 0.0
 
 
+# A tip's template uses its branch band whenever the band holds at least this many (weighted) pixels: a 4x4
+# block, where the correlation of an unrelated patch has a standard error of 1/sqrt(16) = 0.25, so ``min_ncc``
+# (0.5) is still two standard errors above chance. See the module docstring ("Below 4 (2h + 1) band pixels").
+_TIP_MIN_BAND_PX = 16.0
+
 _LK_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01)
 
 
@@ -288,6 +308,8 @@ class LKTracker:
         if h < 2:
             raise InputError(source, f"patch radius must be >= 2 px, got {h}")
         self.h = h
+        # terminal nodes (a parent, no children): their band is matched down to _TIP_MIN_BAND_PX pixels
+        self._tips = {j for j in range(n) if self.parent[j] >= 0 and not self.children[j]}
         # Rotation baseline partner: walk toward the root until >= 2h away, else toward the tip.
         self.partner = [-1] * n
         if graph is not None and cfg.rotate_templates:
@@ -505,7 +527,9 @@ class LKTracker:
             inside = wacc > 1e-3
             prev = np.where(inside, acc / np.maximum(wacc, 1e-3), prev).astype(np.float32)
             wts = np.minimum(wacc, 1.0)[r:r + 2 * h + 1, r:r + 2 * h + 1]
-            if float(wts.sum()) < 4 * (2 * h + 1):  # fewer pixels than a 2-px-wide strip: use the full patch
+            # fewer pixels than a 2-px-wide strip: use the full patch -- except at a tip, whose band is short
+            # by construction (one segment, the thinnest stem), down to _TIP_MIN_BAND_PX
+            if float(wts.sum()) < (_TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * h + 1)):
                 wts = None
         else:
             m = cv2.getRotationMatrix2D((float(p0[0]), float(p0[1])), -math.degrees(theta), 1.0)
