@@ -145,9 +145,34 @@ def _precision_shrinkage(terms: _PrecisionTerms, zm, k_hat, num, den, n, tau):
     lag = (_matvec(terms.YY1, mm) - k * (_matvec(terms.Ylead, zm[:, :-1] * mm) + _matvec(terms.Ylag, zm[:, 1:] * mm))
            + k2 * _matvec(terms.pair, zm[:, 1:] * zm[:, :-1] * mm))
     rho = np.clip(lag / np.maximum(sumsq, 1e-300), 0.0, 0.99)
-    var_k = sigma2 / np.maximum(den, EPS) * (1 + rho) / (1 - rho)
-    se2_log = var_k / np.maximum(k2, 1e-300)
+    return _log_normal_shrinkage(sigma2 / np.maximum(den, EPS), rho, k_hat, tau)
+
+
+def _log_normal_shrinkage(var_k_white, rho, k_hat, tau):
+    """tau^2 / (tau^2 + se^2(log kappa_hat)): se^2(kappa_hat) = ``var_k_white`` (its variance for
+    independent frames) * (1 + rho) / (1 - rho) (AR(1) effective sample size), and the delta method
+    se(log kappa_hat) = se(kappa_hat) / |kappa_hat|."""
+    var_k = var_k_white * (1 + rho) / (1 - rho)
+    se2_log = var_k / np.maximum(k_hat * k_hat, 1e-300)
     return tau * tau / (tau * tau + se2_log)
+
+
+def _shrink_and_normalise(k_hat, shrink, n, signed: bool):
+    """The kappa step's end, shared by both fits: log|kappa| = shrink * log|kappa_hat| (kappa = 1 for an
+    edge without usable frames), then geometric-mean normalisation over edges with |kappa| > EPS.
+    Returns (kappa (B, E), big: the edges with |kappa| > EPS)."""
+    sign = np.where(k_hat < 0, -1.0, 1.0) if signed else np.ones_like(k_hat)
+    mag = np.maximum(np.abs(k_hat) if signed else k_hat, EPS)
+    k_new = np.where(n > 0, sign * np.exp(shrink * np.log(mag)), 1.0)
+    big = np.abs(k_new) > EPS
+    logs = np.where(big, np.log(np.maximum(np.abs(k_new), EPS)), 0.0)
+    gm = np.exp(logs.sum(axis=1) / np.maximum(big.sum(axis=1), 1))
+    return np.where(big, k_new / gm[:, None], k_new), big
+
+
+def _log_change(k_new, k_old):
+    """(B,) max over edges of |log|k_new| - log|k_old||: the convergence measure of both fits."""
+    return np.max(np.abs(np.log(np.maximum(np.abs(k_new), EPS)) - np.log(np.maximum(np.abs(k_old), EPS))), axis=1)
 
 
 def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray | None = None):
@@ -189,19 +214,12 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
         num = _matvec(WYa, za * m)
         den = np.maximum(_matvec(Wfa, za * za * m), EPS)
         k_hat = num / den
-        sign = np.where(k_hat < 0, -1.0, 1.0) if signed else np.ones_like(k_hat)
-        mag = np.maximum(np.abs(k_hat) if signed else k_hat, EPS)
         if precision:
             shrink = _precision_shrinkage(terms if full else terms.take(a), za * m, k_hat, num, den, n,
                                           float(config.prior_sd_log))
         else:
             shrink = n / (n + lam)
-        k_new = np.where(n > 0, sign * np.exp(shrink * np.log(mag)), 1.0)
-        # geometric-mean normalisation over edges with |kappa| > EPS
-        big = np.abs(k_new) > EPS
-        logs = np.where(big, np.log(np.maximum(np.abs(k_new), EPS)), 0.0)
-        gm = np.exp(logs.sum(axis=1) / np.maximum(big.sum(axis=1), 1))
-        k_new = np.where(big, k_new / gm[:, None], k_new)
+        k_new, big = _shrink_and_normalise(k_hat, shrink, n, signed)
         # z step over edges observed at t with |kappa| > EPS
         mk = big.astype(float)
         znum = _matvec_t(WYa, k_new * mk)
@@ -210,7 +228,7 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
         if not signed:
             z_new = np.maximum(z_new, 0.0)
         z_new = np.where(_matvec_t(Wca, mk) > 0, z_new, 0.0)
-        ch = np.max(np.abs(np.log(np.maximum(np.abs(k_new), EPS)) - np.log(np.maximum(np.abs(prev), EPS))), axis=1)
+        ch = _log_change(k_new, prev)
         if full:  # results of rows that had already converged are discarded
             shrink = np.broadcast_to(shrink, k_new.shape)[a]
             k_new, z_new, n, ch = k_new[a], z_new[a], n[a], ch[a]
@@ -281,9 +299,7 @@ def _gls_shrinkage(P, Y0, W, z, k_hat, A_inv_diag, tau):
     sigma2 = np.maximum(chi2, 0.0) / dof
     lag = np.sum(R[:, :, 1:] * R[:, :, :-1], axis=2)
     rho = np.clip(lag / np.maximum(np.sum(R * R, axis=2), 1e-300), 0.0, 0.99)
-    var_k = A_inv_diag * sigma2[:, None] * (1 + rho) / (1 - rho)
-    se2_log = var_k / np.maximum(k_hat * k_hat, 1e-300)
-    return tau * tau / (tau * tau + se2_log)
+    return _log_normal_shrinkage(A_inv_diag * sigma2[:, None], rho, k_hat, tau)
 
 
 def fit_rank1_gls_batch(Y: np.ndarray, config: ComplianceConfig, precision: np.ndarray):
@@ -328,22 +344,17 @@ def fit_rank1_gls_batch(Y: np.ndarray, config: ComplianceConfig, precision: np.n
         b = np.einsum("bt,bte->be", zm, PYa)
         A = A + (1e-9 * np.maximum(np.trace(A, axis1=1, axis2=2) / E, EPS))[:, None, None] * eye
         k_hat = np.linalg.solve(A, b[..., None])[..., 0]
-        sign = np.where(k_hat < 0, -1.0, 1.0)
-        mag = np.maximum(np.abs(k_hat), EPS)
         if config.shrinkage == "precision":
             A_inv_diag = np.diagonal(np.linalg.inv(A), axis1=1, axis2=2)
             s = _gls_shrinkage(Pa, Y0a, Wa, zm, k_hat, A_inv_diag, tau)
         else:
             s = n / (n + lam)
-        k_new = np.where(n > 0, sign * np.exp(s * np.log(mag)), 1.0)
-        big = np.abs(k_new) > EPS
-        logs = np.where(big, np.log(np.maximum(np.abs(k_new), EPS)), 0.0)
-        k_new = np.where(big, k_new / np.exp(logs.sum(axis=1) / np.maximum(big.sum(axis=1), 1))[:, None], k_new)
+        k_new, big = _shrink_and_normalise(k_hat, s, n, signed=True)
         km = k_new * big
         kPk = np.matmul(Pfa, (km[:, :, None] * km[:, None, :]).reshape(a.size, E * E, 1))[..., 0]  # (b, T)
         kPy = np.einsum("be,bte->bt", km, PYa)
         z_new = np.where(kPk > EPS, kPy / np.maximum(kPk, EPS), 0.0)
-        ch = np.max(np.abs(np.log(np.maximum(np.abs(k_new), EPS)) - np.log(np.maximum(np.abs(kappa[a]), EPS))), axis=1)
+        ch = _log_change(k_new, kappa[a])
         kappa[a], z[a], n_used[a], change[a] = k_new, z_new, n, ch
         shrink[a] = np.where(n > 0, s, 1.0)
         iterations[a] += 1
