@@ -126,7 +126,6 @@ def compute_bending(xy: np.ndarray, node_ids, graph: BranchGraph, config: Bendin
     n_frames = xy.shape[1]
     angle = np.full((len(bends), n_frames), np.nan)
     rest = np.full(len(bends), np.nan)
-    variance = None if frame_cov is None else np.full((len(bends), n_frames), np.nan)
     for k, bend in enumerate(bends):
         ig, ij, ic = (row[n] for n in bend.nodes)
         angle[k] = bend_angles(xy[ig], xy[ij], xy[ic], config.signed)
@@ -137,17 +136,14 @@ def compute_bending(xy: np.ndarray, node_ids, graph: BranchGraph, config: Bendin
             rest[k] = angle[k, finite[0]]
         else:
             rest[k] = np.median(angle[k, finite])
-        if variance is not None:
-            grad = angle_gradient(xy[ig], xy[ij], xy[ic])  # (F, 6)
-            sel = np.concatenate([[2 * i, 2 * i + 1] for i in (ig, ij, ic)])
-            cov6 = frame_cov[:, sel][:, :, sel]  # (F, 6, 6)
-            var = np.einsum("fi,fij,fj->f", grad, cov6, grad) * _RAD2DEG**2
-            variance[k] = np.where(np.isfinite(angle[k]), var, np.nan)
     delta = angle - rest[:, None]
     if config.signed:
         delta = (delta + 180.0) % 360.0 - 180.0  # keep deviations continuous across +-180
     inlier = mad_inliers(delta, config.mad_threshold)
-    covariance = None if frame_cov is None else bend_covariance(xy, row, bends, frame_cov, angle, config.signed)
+    covariance = variance = None
+    if frame_cov is not None:
+        covariance = bend_covariance(xy, row, bends, frame_cov, angle, config.signed)
+        variance = np.diagonal(covariance, axis1=1, axis2=2).T.copy()  # NaN where the angle is missing
     return BendingResult(bends=bends, angle_deg=angle, rest_deg=rest, delta_deg=delta, inlier=inlier,
                          variance_deg2=variance, signed=config.signed, covariance_deg2=covariance)
 
