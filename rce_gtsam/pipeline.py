@@ -50,21 +50,22 @@ class Response:
     frames: np.ndarray
     covariance: np.ndarray | None = None
 
-    def _weight_scale(self) -> float:
+    def _inverse_variance(self) -> tuple[np.ndarray, float]:
+        """(E, T) 1 / variance (0 where the entry or its variance is unusable) and its mean over the
+        positive entries (1.0 if none): the normalisation :attr:`weights` and :attr:`precision` share."""
         with np.errstate(divide="ignore", invalid="ignore"):
             w = 1.0 / self.variance
-        w = w[np.isfinite(w) & np.isfinite(self.Y) & (w > 0)]
-        return float(w.mean()) if w.size else 1.0
+        w = np.where(np.isfinite(w) & np.isfinite(self.Y), w, 0.0)
+        pos = w > 0
+        return w, float(w[pos].mean()) if pos.any() else 1.0
 
     @property
     def weights(self) -> np.ndarray | None:
         """(E, T) inverse-variance weights (1/deg^2) normalised to mean 1 over finite entries, or None."""
         if self.variance is None:
             return None
-        with np.errstate(divide="ignore", invalid="ignore"):
-            w = 1.0 / self.variance
-        w = np.where(np.isfinite(w) & np.isfinite(self.Y), w, 0.0)
-        return w / self._weight_scale()
+        w, scale = self._inverse_variance()
+        return w / scale
 
     @property
     def precision(self) -> np.ndarray | None:
@@ -75,7 +76,7 @@ class Response:
         """
         if self.covariance is None or self.variance is None:
             return None
-        return frame_precisions(self.covariance, np.isfinite(self.Y)) / self._weight_scale()
+        return frame_precisions(self.covariance, np.isfinite(self.Y)) / self._inverse_variance()[1]
 
 
 @dataclass(frozen=True, eq=False)
