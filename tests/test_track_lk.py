@@ -178,6 +178,27 @@ def test_lost_node_is_not_reacquired_while_its_parent_is_lost():
     assert res.visible[3:, 11:].all() and (err[3:, 11:] < 0.5).all()  # both found again afterwards
 
 
+def _track_simulator_render(tmp_path, config):
+    """Render ``simulate(config)`` to H.264 and track it with the default tracker from the true first-frame
+    positions: (simulation, video path, TrackResult, (N, F) error in px against the true positions)."""
+    simulate = pytest.importorskip("rce_gtsam.simulate")
+    render = pytest.importorskip("rce_gtsam.render")
+
+    sim = simulate.simulate(config)
+    video = render.render_video(sim, tmp_path / "v.mp4")
+    return (sim, video, *_track_video(sim, video))
+
+
+def _track_video(sim, video):
+    from rce_gtsam.track import open_video
+
+    truth = np.zeros_like(sim.true_xy)
+    truth[list(sim.tracks.node_ids)] = sim.true_xy
+    with open_video(video) as src:
+        res = LKTracker().track(src, truth[:, 0], sim.graph)
+    return res, np.hypot(*(res.xy - truth).transpose(2, 0, 1))
+
+
 def test_tip_is_not_visible_beside_the_stem_on_simulator_seed0(tmp_path, monkeypatch):
     """Regression (simulator seed 0, 150 frames, 12 nodes, clean H.264 render): the tip (node 11) swings
     ~35 degrees further than its parent segment and is lost; re-acquired in the wide window with its
@@ -189,17 +210,9 @@ def test_tip_is_not_visible_beside_the_stem_on_simulator_seed0(tmp_path, monkeyp
     Since tips are matched with their branch band (``_TIP_MIN_BAND_PX``) the tip is no longer re-acquired
     beside the stem on this clip at all (max error 0.78 px, visible 0.976, tip visible 0.71, no refinement
     rejection), so the check itself is exercised with the full-patch tip template it was made for."""
-    simulate = pytest.importorskip("rce_gtsam.simulate")
-    render = pytest.importorskip("rce_gtsam.render")
-    from rce_gtsam.track import open_video
+    from rce_gtsam.simulate import SimulationConfig
 
-    sim = simulate.simulate(simulate.SimulationConfig(n_nodes=12, n_frames=150, seed=0))
-    video = render.render_video(sim, tmp_path / "v.mp4")
-    truth = np.zeros_like(sim.true_xy)
-    truth[list(sim.tracks.node_ids)] = sim.true_xy
-    with open_video(video) as src:
-        res = LKTracker().track(src, truth[:, 0], sim.graph)
-    err = np.hypot(*(res.xy - truth).transpose(2, 0, 1))
+    sim, video, res, err = _track_simulator_render(tmp_path, SimulationConfig(n_nodes=12, n_frames=150, seed=0))
     assert err[res.visible].max() < 3.0
     assert res.visible.mean() > 0.94
     assert res.visible[11].mean() > 0.4  # the tip is still followed where it can be (0.51 -> 0.49 -> 0.71)
@@ -207,9 +220,7 @@ def test_tip_is_not_visible_beside_the_stem_on_simulator_seed0(tmp_path, monkeyp
     from rce_gtsam.track import lk as lk_module
 
     monkeypatch.setattr(lk_module, "_TIP_MIN_BAND_PX", math.inf)  # the tip matched with its full patch
-    with open_video(video) as src:
-        res = LKTracker().track(src, truth[:, 0], sim.graph)
-    err = np.hypot(*(res.xy - truth).transpose(2, 0, 1))
+    res, err = _track_video(sim, video)
     assert err[res.visible].max() < 3.0
     assert res.visible[11].mean() > 0.4
     assert res.info["rejected_refine"] > 0
@@ -223,17 +234,9 @@ def test_tip_is_matched_with_its_branch_band_on_simulator_seed2(tmp_path):
     16 pixels): max error of the visible tip 0.86 px. On the 600-frame clip of this seed the visible tip's max
     error went 14.1 -> 0.74 px (71 -> 0 frames > 2 px, visible 0.55 -> 0.30); Spearman of kappa unchanged
     there (0.903), and on seed 3 0.674 -> 0.765."""
-    simulate = pytest.importorskip("rce_gtsam.simulate")
-    render = pytest.importorskip("rce_gtsam.render")
-    from rce_gtsam.track import open_video
+    from rce_gtsam.simulate import SimulationConfig
 
-    sim = simulate.simulate(simulate.SimulationConfig(n_frames=40, seed=2))
-    video = render.render_video(sim, tmp_path / "v.mp4")
-    truth = np.zeros_like(sim.true_xy)
-    truth[list(sim.tracks.node_ids)] = sim.true_xy
-    with open_video(video) as src:
-        res = LKTracker().track(src, truth[:, 0], sim.graph)
-    err = np.hypot(*(res.xy - truth).transpose(2, 0, 1))
+    sim, _, res, err = _track_simulator_render(tmp_path, SimulationConfig(n_frames=40, seed=2))
     tip = 19
     assert sim.graph.parent[tip] == 18 and not sim.graph.children.get(tip)
     assert res.visible[tip].mean() > 0.4            # measured 0.62 (old: 0.85, but off)
