@@ -48,6 +48,10 @@ from .jsonutil import jsonable as _jsonable
 from scipy import signal, stats
 
 from . import effects as effects_mod
+from .diagnosis.budget import VarianceBudget, variance_budget
+from .diagnosis.noise_floor import NoiseFloor
+from .diagnosis.statistics import ResidualContext
+from .diagnosis.sysid import ResidualAnalysis, residual_analysis
 from .model import ModelFit, ResponseModel, validate_inputs
 
 BLOCK_LENGTH = 25  # frames: the moving-block bootstrap's block length (reference §2.9)
@@ -74,6 +78,7 @@ class CandidateResult:
     supported: bool
     statistics: dict
     extra: dict = field(default_factory=dict)  # effective-sample IC terms, likelihood-ratio test
+    frame_loss: np.ndarray | None = None  # (T,) held-out MSE per frame (deg^2), NaN where not scored
 
     def as_dict(self) -> dict:
         return {**_jsonable(self.extra), "effect": self.effect, "heldout_rmse": _num(self.heldout_rmse), "evidence": _num(self.evidence),
@@ -100,6 +105,22 @@ class Diagnosis:
     residual_summary: dict
     settings: dict
     edge_labels: list = field(default_factory=list)
+    baseline_frame_loss: np.ndarray | None = None  # (T,) held-out MSE per frame of the rank-1 model (deg^2)
+    residual_analysis: ResidualAnalysis | None = None  # system-identification views of the baseline residuals
+    budget: VarianceBudget | None = None  # variance budget against the model-free noise floor
+    noise_floor: NoiseFloor | None = None
+
+    @property
+    def status(self) -> str:
+        """``"effect"`` (a candidate explains the misfit), ``"adequate"`` (what the rank-1 model leaves is
+        consistent with the noise floor), ``"misses"`` (significantly more than noise is left and no candidate
+        explains it), ``"inconclusive"`` (the noise floor is only bounded and the bounds straddle the
+        residual), or ``"untested"`` (no noise floor was given: held-out comparison only)."""
+        if self.verdict is not None:
+            return "effect"
+        if self.budget is None:
+            return "untested"
+        return {"noise": "adequate", "misses": "misses", "inconclusive": "inconclusive"}[self.budget.status]
 
     def candidate(self, name: str) -> CandidateResult:
         for c in self.candidates:
@@ -123,6 +144,12 @@ class Diagnosis:
             "residuals": _jsonable(self.residual_summary),
             "edges": [str(e) for e in self.edge_labels],
             "settings": _jsonable(self.settings),
+            "status": self.status,
+            "budget": _jsonable(self.budget.as_dict()) if self.budget is not None else None,
+            "budget_per_segment": _jsonable(self.budget.per_segment) if self.budget is not None else None,
+            "noise_floor": _jsonable(self.noise_floor.as_dict()) if self.noise_floor is not None else None,
+            "residual_analysis": (_jsonable(self.residual_analysis.as_dict())
+                                  if self.residual_analysis is not None else None),
         }
 
     def to_json(self, **kw) -> str:
@@ -227,11 +254,14 @@ def node_disjoint_split(s: np.ndarray, shared: np.ndarray, seed: int, run: int =
 
 
 def heldout_errors(model: ResponseModel, full: ModelFit, Y, W, s, blocks, halves, gap: int,
-                   cv_iter: int = 60) -> tuple[np.ndarray, np.ndarray]:
-    """Per-fold held-out sum of squared errors and counts (degrees^2, entries) of ``model``."""
+                   cv_iter: int = 60, per_frame: bool = False):
+    """Per-fold held-out sum of squared errors and counts (degrees^2, entries) of ``model``; with
+    ``per_frame`` also the same two sums per frame (T,) (zero outside the scored test blocks)."""
     E, T = Y.shape
     sse = np.zeros(len(blocks))
     cnt = np.zeros(len(blocks))
+    sse_t = np.zeros(T)
+    cnt_t = np.zeros(T)
     z_var_full = float(np.mean(full.z ** 2))
     full_ridge = (full.wsse / max(full.n_obs, 1)) / z_var_full if z_var_full > 0 else 0.0
     for k, (a, b) in enumerate(blocks):
@@ -273,9 +303,12 @@ def heldout_errors(model: ResponseModel, full: ModelFit, Y, W, s, blocks, halves
             pred = est.predict()[np.ix_(B, np.arange(a, b))]
             y = Y[np.ix_(B, np.arange(a, b))]
             ok = np.isfinite(y)
-            sse[k] += float(np.sum((y[ok] - pred[ok]) ** 2))
+            sq = np.where(ok, (y - pred) ** 2, 0.0)
+            sse[k] += float(np.sum(sq))
             cnt[k] += int(ok.sum())
-    return sse, cnt
+            sse_t[a:b] += sq.sum(axis=0)
+            cnt_t[a:b] += ok.sum(axis=0)
+    return (sse, cnt, sse_t, cnt_t) if per_frame else (sse, cnt)
 
 
 def _blank_latents(state: dict, lo: int, hi: int) -> dict:
@@ -293,134 +326,12 @@ def _blank_latents(state: dict, lo: int, hi: int) -> dict:
 # Residual structure
 # ----------------------------------------------------------------------------------------------------------
 
-def _ar1_inflation(R: np.ndarray) -> float:
-    """(1 + rho) / (1 - rho) for the pooled lag-1 autocorrelation rho >= 0 of the residuals."""
-    a, b = R[:, :-1], R[:, 1:]
-    ok = np.isfinite(a) & np.isfinite(b)
-    if ok.sum() < 3:
-        return 1.0
-    rho = float(np.sum(a[ok] * b[ok]) / max(np.sqrt(np.sum(a[ok] ** 2) * np.sum(b[ok] ** 2)), 1e-300))
-    rho = min(max(rho, 0.0), 0.98)
-    return (1 + rho) / (1 - rho)
-
-
-def _per_edge_regression(R, X):
-    """Per-edge LS slope of residual rows R on regressor rows X (NaN-aware): (coef (E,), se (E,))."""
-    ok = np.isfinite(R) & np.isfinite(X)
-    Xo, Ro = np.where(ok, X, 0.0), np.where(ok, R, 0.0)
-    sxx = np.sum(Xo * Xo, axis=1)
-    coef = np.sum(Xo * Ro, axis=1) / np.maximum(sxx, 1e-300)
-    res = Ro - coef[:, None] * Xo
-    n = ok.sum(axis=1)
-    s2 = np.sum(np.where(ok, res * res, 0.0), axis=1) / np.maximum(n - 1, 1)
-    return coef, np.sqrt(s2 / np.maximum(sxx, 1e-300))
-
-
-def _slope_vs(x, v, se):
-    """Weighted LS slope of v on x (weights 1/se^2), its t statistic and the Pearson correlation."""
-    w = 1.0 / np.maximum(se, 1e-12) ** 2
-    ok = np.isfinite(v) & np.isfinite(w)
-    x, v, w = x[ok], v[ok], w[ok]
-    if len(x) < 3 or np.ptp(x) <= 0:
-        return 0.0, 0.0, 0.0
-    xm, vm = np.sum(w * x) / w.sum(), np.sum(w * v) / w.sum()
-    sxx = np.sum(w * (x - xm) ** 2)
-    slope = np.sum(w * (x - xm) * (v - vm)) / sxx
-    res = v - vm - slope * (x - xm)
-    s2 = max(np.sum(w * res * res) / max(len(x) - 2, 1), 1.0)  # at least the nominal variance
-    t = slope / math.sqrt(s2 / sxx)
-    r = float(np.corrcoef(x, v)[0, 1]) if np.std(v) > 0 else 0.0
-    return float(slope), float(t), r
-
-
-def residual_statistics(fit: ModelFit) -> dict[str, dict]:
-    """Residual-structure statistics of a (baseline) fit, one dict per candidate effect."""
-    R = fit.residuals
-    E, T = R.shape
-    k, z, s = fit.kappa, fit.z, fit.root_distance
-    infl = _ar1_inflation(R)
-    out: dict[str, dict] = {}
-    # delay: r_e ~ -kappa_e tau_e dz/dt  => per-edge lag tau_e, and its trend with root distance
-    dz = np.gradient(z)
-    lag, lag_se = _per_edge_regression(R, -k[:, None] * dz[None, :])
-    lag_se = lag_se * math.sqrt(infl)
-    slope, t, r = _slope_vs(s, lag, lag_se)
-    xc = []
-    for L in range(-5, 6):  # pooled lagged cross-correlation of residuals with kappa_e z(t - L)
-        zz = np.roll(z, L)
-        if L > 0:
-            zz[:L] = np.nan
-        elif L < 0:
-            zz[L:] = np.nan
-        X = k[:, None] * zz[None, :]
-        ok = np.isfinite(R) & np.isfinite(X)
-        xc.append(float(np.corrcoef(R[ok], X[ok])[0, 1]) if ok.sum() > 3 else 0.0)
-    out["delay"] = {"lag_per_edge_frames": lag, "lag_slope_frames": slope, "lag_slope_t": t,
-                    "lag_vs_root_distance_r": r,
-                    "residual_xcorr_with_kappa_z_lag_m5_to_p5": xc}
-    # dynamics: r_e ~ kappa_e (a_e dz + b_e d2z): a second-order term with a tip-ward trend; spectrum
-    d2z = np.gradient(dz)
-    acc, acc_se = _per_edge_regression(R, k[:, None] * d2z[None, :])
-    acc_se = acc_se * math.sqrt(infl)
-    aslope, at, ar = _slope_vs(s, acc, acc_se)
-    Rf = np.where(np.isfinite(R), R, 0.0)
-    nper = int(min(256, T))
-    f, pr = signal.welch(Rf, nperseg=nper, axis=1)
-    _, pz = signal.welch(z, nperseg=nper)
-    ratio = pr.mean(axis=0) / np.maximum(pz * np.mean(k * k), 1e-300)
-    band = (f > 0) & (pz > 1e-3 * pz.max())  # where z has power, a resonance can be excited
-    if band.any():
-        j = np.flatnonzero(band)[np.argmax(ratio[band])]
-        peak_f, peak_ratio = float(f[j]), float(ratio[j] / max(np.median(ratio[band]), 1e-300))
-    else:
-        peak_f, peak_ratio = float("nan"), float("nan")
-    out["dynamics"] = {"accel_coef_per_edge_frames2": acc, "accel_slope_frames2": aslope, "accel_slope_t": at,
-                       "accel_vs_root_distance_r": ar, "residual_to_signal_spectrum_peak_cycles_per_frame": peak_f,
-                       "residual_to_signal_spectrum_peak_over_median": peak_ratio}
-    # second mode: singular values of the residual matrix vs the noise bulk
-    sv = np.linalg.svd(np.where(np.isfinite(R), R, 0.0), compute_uv=False)
-    if len(sv) >= 2:
-        sigma = float(np.median(sv)) / math.sqrt(T)  # bulk noise level (E << T)
-        mp_edge = sigma * (math.sqrt(T) + math.sqrt(E))  # largest singular value of pure noise (Marchenko-Pastur)
-        out["second_mode"] = {"s1_over_noise_edge": float(sv[0] / max(mp_edge, 1e-300)),
-                              "s1_over_s2": float(sv[0] / max(sv[1], 1e-300)),
-                              "s1_variance_fraction": float(sv[0] ** 2 / max(np.sum(sv ** 2), 1e-300))}
-    else:
-        out["second_mode"] = {}
-    # offset: per-edge residual mean and linear trend with AR(1)-inflated standard errors
-    tt = np.arange(T) / T
-    means, tmeans, trends, ttrend = [], [], [], []
-    for e in range(E):
-        ok = np.isfinite(R[e])
-        if ok.sum() < 3:
-            means.append(0.0), tmeans.append(0.0), trends.append(0.0), ttrend.append(0.0)
-            continue
-        X = np.stack([np.ones(ok.sum()), tt[ok] - tt[ok].mean()], axis=1)
-        beta, *_ = np.linalg.lstsq(X, R[e, ok], rcond=None)
-        res = R[e, ok] - X @ beta
-        s2 = float(np.sum(res ** 2) / max(ok.sum() - 2, 1)) * infl
-        cov = s2 * np.linalg.inv(X.T @ X)
-        means.append(beta[0]), tmeans.append(beta[0] / math.sqrt(cov[0, 0]))
-        trends.append(beta[1]), ttrend.append(beta[1] / math.sqrt(cov[1, 1]))
-    means, tmeans, trends, ttrend = map(np.array, (means, tmeans, trends, ttrend))
-    out["offset"] = {"mean_per_edge_deg": means, "trend_per_edge_deg": trends,
-                     "max_abs_mean_t": float(np.max(np.abs(tmeans))), "max_abs_trend_t": float(np.max(np.abs(ttrend))),
-                     "rms_mean_deg": float(np.sqrt(np.mean(means ** 2))),
-                     "rms_trend_deg": float(np.sqrt(np.mean(trends ** 2)))}
-    # nonlinear: curvature of the residual against the prediction (odd cubic term, per-edge scaled)
-    P = k[:, None] * z[None, :]
-    q = np.nanquantile(np.abs(P), 0.99) if np.isfinite(P).any() else 1.0
-    u = P / max(q, 1e-12)
-    X3 = u ** 3 - u * (np.nansum(u ** 4, axis=1, keepdims=True) / np.maximum(np.nansum(u ** 2, axis=1, keepdims=True), 1e-300))
-    ok = np.isfinite(R)
-    c3 = float(np.sum(X3[ok] * R[ok]) / max(np.sum(X3[ok] ** 2), 1e-300))
-    res = R[ok] - c3 * X3[ok]
-    se3 = math.sqrt(float(np.sum(res ** 2)) / max(ok.sum() - 1, 1) * infl / max(np.sum(X3[ok] ** 2), 1e-300))
-    X2 = u ** 2 - np.nanmean(u ** 2, axis=1, keepdims=True)
-    c2 = float(np.sum(X2[ok] * R[ok]) / max(np.sum(X2[ok] ** 2), 1e-300))
-    out["nonlinear"] = {"cubic_residual_at_q99_deg": c3, "cubic_t": c3 / max(se3, 1e-300),
-                        "quadratic_residual_at_q99_deg": c2, "q99_deflection_deg": float(q)}
-    return out
+def residual_statistics(fit: ModelFit, effects=None) -> dict[str, dict]:
+    """Each candidate effect's own evidence in the residuals of a (baseline) fit: {name: statistics}
+    (:meth:`rce_gtsam.effects.Effect.evidence`; default: every registered effect)."""
+    ctx = ResidualContext.from_fit(fit)
+    effects = _resolve_effects(effects, len(fit.kappa))
+    return {eff.name: eff.evidence(ctx) for eff in effects}
 
 
 def worst_edges_and_frames(fit: ModelFit, labels, block_length: int, frames=None, n: int = 3):
@@ -460,7 +371,8 @@ def worst_edges_and_frames(fit: ModelFit, labels, block_length: int, frames=None
 
 def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8, seed: int = 0,
              block_length: int = BLOCK_LENGTH, prior_strength: float = 12.0, response: str = "signed",
-             alpha: float = 0.05, edge_labels=None, frames=None, edge_nodes=None) -> Diagnosis:
+             alpha: float = 0.05, edge_labels=None, frames=None, edge_nodes=None,
+             noise_floor: NoiseFloor | None = None) -> Diagnosis:
     """Diagnose which physical effect the rank-1 model misses.
 
     Y: (E, T) bend response in degrees (NaN = missing/outlier); weights: (E, T) >= 0 or None;
@@ -496,20 +408,24 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8
                                              max_iter=FULL_ITER)))
     memory = max([0.0] + [e.memory_frames(st) for _, _, f in fulls for e, st in zip(f.model.effects, f.states)])
     gap = max(int(block_length), int(math.ceil(memory)))
-    b_sse, b_cnt = heldout_errors(base_model, base, Y, W, s, blocks, halves, gap)
+    b_sse, b_cnt, b_sse_t, b_cnt_t = heldout_errors(base_model, base, Y, W, s, blocks, halves, gap, per_frame=True)
     used = b_cnt > 0
     b_mse = b_sse[used] / b_cnt[used]
     b_rmse = float(math.sqrt(b_sse[used].sum() / max(b_cnt[used].sum(), 1)))
-    stats_all = residual_statistics(base)
+    b_loss = frame_loss(b_sse_t, b_cnt_t)
+    stats_all = residual_statistics(base, cands)
     n_c = max(len(cands), 1)
     t_crit = float(stats.t.ppf(1 - alpha / n_c, max(int(used.sum()) - 1, 1)))
     ess = effective_sample(base)
     base_ic = effective_ic(base, ess)
     results = []
     for eff, model, full in fulls:
-        sse, cnt = heldout_errors(model, full, Y, W, s, blocks, halves, gap, cv_iter=CV_ITER)
+        sse, cnt, sse_t, cnt_t = heldout_errors(model, full, Y, W, s, blocks, halves, gap, cv_iter=CV_ITER,
+                                                per_frame=True)
         mse = sse[used] / np.maximum(cnt[used], 1)
         rmse = float(math.sqrt(sse[used].sum() / max(cnt[used].sum(), 1)))
+        loss = frame_loss(sse_t, cnt_t)
+        dm = loss_difference_test(b_loss, loss, block_length)
         ev = paired_t(b_mse, mse)
         imp = 100.0 * (1 - rmse / b_rmse) if b_rmse > 0 else 0.0
         ic = effective_ic(full, ess)
@@ -518,11 +434,12 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8
         lr = max(ess["n_eff"] * math.log(max(base.wsse, 1e-300) / max(full.wsse, 1e-300)), 0.0)
         extra = {"k_eff": ic["k_eff"], "delta_k_eff": dk, "lr_statistic": lr,
                  "lr_p_value": float(stats.chi2.sf(lr, max(dk, 1e-9))),
-                 "delta_aic_nominal": full.aic - base.aic}
+                 "delta_aic_nominal": full.aic - base.aic, "threshold_t": t_crit,
+                 "full_data_t": dm["t"], "full_data_dof": dm["dof"], "full_data_batch_frames": dm["batch_frames"]}
         supported = bool(np.isfinite(ev) and ev > t_crit and rmse < b_rmse and daic < 0)
         results.append(CandidateResult(effect=eff.name, fit=full, heldout_rmse=rmse, fold_mse=mse, evidence=ev,
                                        improvement_pct=imp, delta_aic=daic, delta_bic=dbic, supported=supported,
-                                       statistics=stats_all.get(eff.name, {}), extra=extra))
+                                       statistics=stats_all.get(eff.name, {}), extra=extra, frame_loss=loss))
     results.sort(key=lambda c: c.heldout_rmse)
     verdict, parsimony = choose_verdict(results, t_crit)
     worst_e, worst_f, summary = worst_edges_and_frames(base, labels, block_length, frames)
@@ -532,11 +449,104 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8
                 "node_disjoint_halves": node_disjoint, "weighted": weights is not None,
                 "residual_lag1_autocorrelation": ess["rho"], "n_obs": ess["n"], "n_eff": ess["n_eff"],
                 "frames_eff": ess["t_eff"], "baseline_k_eff": base_ic["k_eff"], "parsimony": parsimony}
+    budget = None
+    if noise_floor is not None:
+        added = {}
+        if verdict is not None:
+            vf = next(c.fit for c in results if c.effect == verdict)
+            added[verdict] = (vf.residuals, vf.n_params)
+        budget = variance_budget(Y, base.residuals, base.n_params, noise_floor, added, labels,
+                                 base_kappa=base.kappa)
     diag = Diagnosis(baseline=base, baseline_heldout_rmse=b_rmse, baseline_fold_mse=b_mse, candidates=results,
                      verdict=verdict, explanation="", worst_edges=worst_e, worst_frames=worst_f,
-                     residual_summary=summary, settings=settings, edge_labels=labels)
+                     residual_summary=summary, settings=settings, edge_labels=labels, budget=budget,
+                     baseline_frame_loss=b_loss,
+                     residual_analysis=residual_analysis(
+                         Y, base.kappa, base.z, noise_floor.series_deg if noise_floor is not None else None,
+                         shared=shared, root_distance=s),
+                     noise_floor=noise_floor)
     object.__setattr__(diag, "explanation", explain(diag))
     return diag
+
+
+def frame_loss(sse_t: np.ndarray, cnt_t: np.ndarray) -> np.ndarray:
+    """(T,) held-out mean squared error per frame (deg^2), NaN at frames nothing was scored on."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(cnt_t > 0, sse_t / np.maximum(cnt_t, 1), np.nan)
+
+
+def integrated_time(d: np.ndarray) -> float:
+    """Integrated autocorrelation time (frames) of a series: 1 + 2 sum of its autocorrelations, summed in
+    pairs while positive (Geyer's initial positive sequence); >= 1."""
+    x = d - d.mean()
+    n = len(x)
+    if n < 8 or not np.any(x):
+        return 1.0
+    f = np.fft.rfft(x, 2 * n)
+    ac = np.fft.irfft(f * np.conj(f))[:n]
+    ac = ac / ac[0]
+    tau = 1.0
+    for k in range(1, n - 1, 2):
+        pair = ac[k] + ac[k + 1]
+        if pair <= 0:
+            break
+        tau += 2 * pair
+    return float(min(max(tau, 1.0), n / 4))
+
+
+def loss_difference_test(loss_ref: np.ndarray, loss: np.ndarray, min_batch: int = BLOCK_LENGTH) -> dict:
+    """Diebold-Mariano test on the full held-out series: is ``loss`` lower than ``loss_ref`` on average?
+
+    d_t = loss_ref_t - loss_t over frames scored by both (NaN elsewhere). Its mean's standard error comes
+    from batch means over consecutive scored frames, with batches ``max(min_batch, 2 x integrated
+    autocorrelation time of d)`` long, so that batch means are nearly independent; t has n_batches - 1
+    degrees of freedom. Every scored frame counts (thousands of values instead of 8 fold means), and the
+    long memory of tracking drift widens the batches rather than faking evidence. Returns {t, dof,
+    mean_diff, batch_frames, n_batches}."""
+    ok = np.isfinite(loss_ref) & np.isfinite(loss)
+    d = (loss_ref - loss)[ok]
+    if d.size < 4:
+        return {"t": float("nan"), "dof": 0, "mean_diff": float("nan"), "batch_frames": 0, "n_batches": 0}
+    L = int(max(min_batch, math.ceil(2 * integrated_time(d))))
+    nb = d.size // L
+    if nb < 2:
+        return {"t": float("nan"), "dof": 0, "mean_diff": float(d.mean()), "batch_frames": L, "n_batches": nb}
+    means = d[: nb * L].reshape(nb, L).mean(axis=1)
+    sd = float(np.std(means, ddof=1))
+    t = (float(np.mean(means)) / (sd / math.sqrt(nb))) if sd > 0 else (math.inf if means.mean() > 0 else 0.0)
+    return {"t": t, "dof": nb - 1, "mean_diff": float(d.mean()), "batch_frames": L, "n_batches": nb}
+
+
+def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray) -> dict:
+    """The same held-out test with a perfect candidate: the noise-free response ``truth`` (E, T, degrees,
+    put on Y's per-row rest reference) scored on exactly the entries the baseline was scored on.
+
+    No method can do better than a model that knows the effect's form and parameters; its evidence t is the
+    ceiling a candidate's t reaches toward. Returns {t: the fold-paired t the verdict uses, threshold_t,
+    supported (t above the verdict's threshold and a lower held-out error), full_data_t
+    (:func:`loss_difference_test`), improvement_pct (held-out RMSE, baseline -> truth)}. (The candidates'
+    AIC condition has no counterpart for a model with no fitted parameters.)"""
+    st = diag.settings
+    y = truth + np.nanmean(Y - truth, axis=1, keepdims=True)
+    rows = np.union1d(np.asarray(st["edge_halves"][0], int), np.asarray(st["edge_halves"][1], int))
+    sq = (Y - y) ** 2
+    T = Y.shape[1]
+    sse_t, cnt_t = np.zeros(T), np.zeros(T)
+    for a, b in st["fold_blocks"]:
+        blk = sq[np.ix_(rows, np.arange(a, b))]
+        ok = np.isfinite(blk)
+        sse_t[a:b] += np.where(ok, blk, 0.0).sum(axis=0)
+        cnt_t[a:b] += ok.sum(axis=0)
+    loss = frame_loss(sse_t, cnt_t)
+    base = diag.baseline_frame_loss
+    dm = loss_difference_test(base, loss, st["block_length"])
+    fold_mse = np.array([np.nanmean(loss[a:b]) for a, b in st["fold_blocks"]])
+    t = paired_t(diag.baseline_fold_mse, fold_mse[: len(diag.baseline_fold_mse)])
+    crit = st["evidence_threshold_t"]
+    both = np.isfinite(base) & np.isfinite(loss)
+    imp = 100.0 * (1 - math.sqrt(np.mean(loss[both]) / np.mean(base[both]))) if both.any() else float("nan")
+    return {"t": t, "threshold_t": crit, "supported": bool(np.isfinite(t) and t > crit and imp > 0),
+            "full_data_t": dm["t"], "full_data_dof": dm["dof"], "improvement_pct": imp}
 
 
 def paired_t(mse_ref: np.ndarray, mse: np.ndarray) -> float:
@@ -625,8 +635,7 @@ def choose_verdict(results: list, t_crit: float) -> tuple[str | None, dict]:
 
 def _resolve_effects(effects, n_edges):
     if effects is None:
-        names = list(effects_mod.EFFECT_NAMES)
-        effects = names
+        effects = list(effects_mod.names())
     out = []
     for e in effects:
         out.append(effects_mod.make(e) if isinstance(e, str) else e)
@@ -639,80 +648,52 @@ def _resolve_effects(effects, n_edges):
 # Explanation and reports
 # ----------------------------------------------------------------------------------------------------------
 
-_PHYSICS = {
-    "delay": ("the bending reaches distal joints later than proximal ones: the load (a wind front or a "
-              "bending wave) travels along the branch, so a single instantaneous excitation z cannot describe "
-              "all joints at once. Fit the model with Delay() (lag grows with root distance); kappa from the "
-              "delayed model no longer mixes amplitude with phase. Check the camera/tracker timing only if "
-              "the lag is implausibly large."),
-    "dynamics": ("the segments do not follow the wind quasi-statically: they have inertia and resonate "
-                 "(distal segments at lower natural frequency), so they lag, amplify near resonance and ring "
-                 "after gusts. Fit with Dynamics(); interpret kappa as the static (low-frequency) gain, and "
-                 "report the natural frequencies — they are a mechanical property of the plant."),
-    "second_mode": ("the joints are driven by a second, independent excitation with its own spatial pattern "
-                    "(crosswind, out-of-plane swing, a touching leaf or side branch), so one shared z cannot "
-                    "explain every joint. Fit with SecondMode(); kappa is then the gain of the dominant mode. "
-                    "Check the footage for out-of-plane motion; a second camera view would separate it."),
-    "offset": ("the rest pose is wrong or drifts: the reference angle (first frame or median) was itself "
-               "deflected, or the plant sags/relaxes over the recording, leaving a constant and a trend in "
-               "each joint's residual. Fit with Offset(); consider a rest pose from a calm period, and note "
-               "that the paper's |delta| response turns offsets into spurious compliance."),
-    "nonlinear": ("the response is not proportional to the load at large deflections: compliant joints "
-                  "saturate (stiffen) during strong gusts, so one linear gain per joint over-predicts the "
-                  "peaks. Fit with Nonlinear(); kappa is then the small-deflection gain, and the saturation "
-                  "angle says where linear compliance stops being a good description."),
-}
-
-
 def explain(diag: Diagnosis) -> str:
     """Plain-language explanation of the verdict with the numbers behind it."""
     base = diag.baseline_heldout_rmse
     if diag.verdict is None:
         best = diag.candidates[0] if diag.candidates else None
-        txt = (f"No candidate effect improves the held-out error beyond fold-to-fold noise: the rank-1 model "
-               f"(held-out RMSE {base:.3f} deg) is adequate for these data at this noise level.")
+        closest = ""
         if best is not None:
-            txt += (f" The closest candidate, {best.effect}, changes held-out RMSE to {best.heldout_rmse:.3f} deg "
-                    f"({-best.improvement_pct:+.1f}%), evidence t = {best.evidence:.2f} against the threshold "
-                    f"{diag.settings['evidence_threshold_t']:.2f}.")
-        txt += " Remaining misfit looks like measurement noise; more frames or less tracking noise would be " \
-               "needed to resolve smaller effects."
-        return txt
+            closest = (f" The closest candidate, {best.effect}, changes held-out RMSE to {best.heldout_rmse:.3f} deg "
+                       f"({-best.improvement_pct:+.1f}%), evidence t = {best.evidence:.2f} against the threshold "
+                       f"{best.extra.get('threshold_t', diag.settings['evidence_threshold_t']):.2f}.")
+        b = diag.budget
+        if b is None:
+            return (f"No candidate effect improves the held-out error beyond its sampling noise (rank-1 held-out RMSE "
+                    f"{base:.3f} deg).{closest} Without a noise floor (tracks) this cannot say whether the remaining "
+                    "misfit is measurement noise or an effect outside the library.")
+        share = lambda v: 100.0 * b.share(v)  # noqa: E731
+        head = (f"The rank-1 model explains {share(b.rank1):.0f}% of the bending variance ({b.total:.3g} deg^2); the "
+                f"model-free noise floor is {share(b.noise_floor):.0f}%, which leaves {share(b.unexplained):+.0f}% "
+                f"unexplained (+/- {share(b.unexplained_se):.0f}%).")
+        worst = sorted(b.per_segment, key=lambda r: -(r["unexplained"] or 0.0))[:3]
+        where = ", ".join(f"{r['segment']} ({r['unexplained']:.2g} deg^2)" for r in worst if (r["unexplained"] or 0) > 0)
+        if b.status == "noise":
+            return (head + " That is consistent with zero: what the rank-1 model leaves is tracking noise, and the model"
+                    " is adequate for these data." + closest)
+        if b.status == "misses":
+            return (head + " That is significantly more than noise, and no candidate effect in the library explains it:"
+                    f" the model misses real structure, most in segments {where or 'none singled out'}."
+                    + closest + " Look at the residual analysis (cross-correlation with z, frequency response,"
+                    " cross-spectrum singular values) for what kind of structure it is.")
+        bound = ", ".join(b.floor_is_bound[:6]) + (" ..." if len(b.floor_is_bound) > 6 else "")
+        return (head + f" Inconclusive: on {len(b.floor_is_bound)} segments ({bound}) the segments stretch with the "
+                f"branch's motion by more than tracking noise could (out-of-plane swing, or a tracker sliding along the "
+                f"stem), so there the noise floor is only bounded: the unexplained part lies between "
+                f"{share(b.unexplained_range[0]):+.0f}% and {share(b.unexplained_range[1]):+.0f}% of the variance."
+                + closest + " Out-of-plane motion is outside this 2-D model; a second camera view would settle it.")
     c = diag.candidate(diag.verdict)
-    p = c.fit.effect_summary().get(c.effect, {})
     lines = [f"Missing effect: {c.effect}. Adding it lowers the held-out RMSE from {base:.3f} to "
              f"{c.heldout_rmse:.3f} deg ({c.improvement_pct:.1f}% lower; evidence t = {c.evidence:.1f} over "
-             f"{diag.settings['n_folds']} folds, threshold {diag.settings['evidence_threshold_t']:.2f}; "
+             f"{diag.settings['n_folds']} folds, threshold {c.extra.get('threshold_t', float('nan')):.2f}; "
              f"delta AIC {c.delta_aic:.0f} on the effective sample of "
              f"{diag.settings.get('n_eff', float('nan')):.0f} observations)."]
-    st = c.statistics
-    if c.effect == "delay":
-        tau = p.get("tau", {}).get("value")
-        lines.append(f"Fitted tip lag {tau:.2f} frames relative to the root; in the baseline residuals the "
-                     f"per-edge lag grows with root distance at {st.get('lag_slope_frames', 0):.2f} frames per "
-                     f"branch length (t = {st.get('lag_slope_t', 0):.1f}).")
-    elif c.effect == "dynamics":
-        d = c.fit.effect_summary()["dynamics"]
-        lines.append(f"Fitted natural periods {d.get('period_root_frames', float('nan')):.1f} frames at the root "
-                     f"and {d.get('period_tip_frames', float('nan')):.1f} frames at the tip, damping ratio "
-                     f"{(p.get('zeta', {}).get('value') or float('nan')):.2f}; residual spectrum peaks at "
-                     f"{st.get('residual_to_signal_spectrum_peak_cycles_per_frame', float('nan')):.3f} cycles/frame.")
-    elif c.effect == "second_mode":
-        lines.append(f"The baseline residual matrix has a leading singular value "
-                     f"{st.get('s1_over_noise_edge', float('nan')):.2f}x the noise edge and "
-                     f"{st.get('s1_over_s2', float('nan')):.2f}x the next one; the second mode's RMS amplitude is "
-                     f"{c.fit.effect_summary()['second_mode'].get('rms_amplitude_deg', float('nan')):.2f} deg.")
-    elif c.effect == "offset":
-        lines.append(f"Baseline residuals have per-edge means of RMS {st.get('rms_mean_deg', 0):.2f} deg "
-                     f"(max |t| {st.get('max_abs_mean_t', 0):.1f}) and trends of RMS {st.get('rms_trend_deg', 0):.2f} "
-                     f"deg over the record (max |t| {st.get('max_abs_trend_t', 0):.1f}).")
-    elif c.effect == "nonlinear":
-        sat = c.fit.effect_summary()["nonlinear"].get("saturation_deg")
-        lines.append(f"Saturation angle {sat:.2f} deg (99th percentile of the linear deflection "
-                     f"{st.get('q99_deflection_deg', float('nan')):.2f} deg); the baseline residual bends against "
-                     f"the prediction by {st.get('cubic_residual_at_q99_deg', 0):.3f} deg at that deflection "
-                     f"(t = {st.get('cubic_t', 0):.1f}).")
-    lines.append("What it means: " + _PHYSICS.get(c.effect, ""))
+    eff = next((e for e in c.fit.model.effects if e.name == c.effect), None)
+    if eff is not None:
+        lines.append(eff.explain(c.fit.effect_summary().get(c.effect, {}), c.statistics))
+        lines.append(f"What it means: {eff.physics} Add it to the model (command line: --effects {c.effect}; "
+                     f"Python: ResponseModel() + {type(eff).__name__}()) and read kappa from the extended fit.")
     par = diag.settings.get("parsimony") or {}
     if par.get("preferred_simpler") == c.effect:
         lo = diag.candidate(par["lowest_heldout"])
@@ -794,6 +775,17 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
     for w in diag.worst_frames:
         out.append(f"    worst frames {w['first_frame']}-{w['last_frame']}: residual RMS {w['residual_rms_deg']:.3f} deg "
                    f"({w['ratio_to_overall']:.2f}x overall)")
+    if diag.budget is not None:
+        bd = diag.budget
+        pc = lambda v: 100.0 * bd.share(v)  # noqa: E731
+        out.append("[[Variance budget]]  (deg^2 over scored segment-frames; share of total)")
+        out.append(f"    total {bd.total:.4g}   rank-1 {bd.rank1:.4g} ({pc(bd.rank1):.0f}%)   "
+                   + "".join(f"{k} {v:.3g} ({pc(v):.0f}%)   " for k, v in bd.effects.items())
+                   + f"noise floor {bd.noise_floor:.4g} ({pc(bd.noise_floor):.0f}%)   unexplained {bd.unexplained:.3g} "
+                   f"+/- {bd.unexplained_se:.2g} ({pc(bd.unexplained):+.0f}%): {bd.status}")
+        nf = diag.noise_floor
+        out.append(f"    noise floor from segment stretch (inextensibility) x across/along ratio {nf.across_over_along:.2f}; "
+                   f"{int(nf.valid.sum())}/{len(nf.valid)} segments consistent, others use the white-noise lower bound")
     out.append("[[Candidates]]  (held-out RMSE before -> after, deg)")
     out.append(f"    {'effect':<12} {'held-out RMSE':>22} {'change':>8} {'evidence t':>11} {'dAIC':>10} {'dBIC':>10}  supported")
     for c in diag.candidates:
@@ -801,7 +793,11 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
                    f"{-c.improvement_pct:+7.1f}% {c.evidence:11.2f} {c.delta_aic:10.1f} {c.delta_bic:10.1f}  "
                    f"{'yes' if c.supported else 'no'}")
     out.append("[[Verdict]]")
-    out.append(f"    {diag.verdict or 'none (the rank-1 model is adequate)'}")
+    none_text = {"adequate": "none (the rank-1 model is adequate: the residual is at the noise floor)",
+                 "misses": "none of the candidates, but the rank-1 model misses more than noise",
+                 "inconclusive": "none of the candidates; whether the rest is noise is inconclusive",
+                 "untested": "none (no candidate beats the rank-1 model on held-out frames)"}
+    out.append(f"    {diag.verdict or none_text.get(diag.status, 'none')}")
     out.append("    " + diag.explanation)
     if diag.verdict is not None:
         out.append("")

@@ -27,8 +27,8 @@ from .errors import InputError
 
 def effect_names() -> tuple[str, ...]:
     """The candidate effect names, in the order the diagnosis tries them."""
-    from .effects import EFFECT_NAMES
-    return tuple(EFFECT_NAMES)
+    from .effects import names
+    return names()
 
 
 def parse_effect_names(effects: str | Sequence[str] | None, source: str = "--effects") -> tuple[str, ...] | None:
@@ -64,6 +64,7 @@ def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = N
     Returns a :class:`~rce_gtsam.diagnose.Diagnosis`.
     """
     from .diagnose import diagnose
+    from .diagnosis.noise_floor import noise_floor_of
 
     names = parse_effect_names(effects, source="effects")
     resp, cfg = result.response, result.preset.compliance
@@ -72,7 +73,8 @@ def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = N
                     effects=list(names) if names is not None else None, seed=int(seed),
                     block_length=cfg.block_length, prior_strength=cfg.prior_strength, response=cfg.response,
                     edge_labels=[f"{j}->{c}" for j, c in resp.edges], frames=resp.frames,
-                    edge_nodes=[result.bending.bends[k].nodes for k in resp.bend_rows], **kw)
+                    edge_nodes=[result.bending.bends[k].nodes for k in resp.bend_rows],
+                    noise_floor=noise_floor_of(result), **kw)
 
 
 def diagnosis_json(diagnosis, result=None) -> dict:
@@ -105,6 +107,7 @@ def diagnosis_for_viz(diagnosis, result=None) -> dict:
     data["after_prediction"] = (np.asarray(diagnosis.candidate(diagnosis.verdict).fit.predict(), dtype=float)
                                 if diagnosis.verdict is not None else None)
     data["report"] = diagnosis.report()
+    data["residual_analysis_obj"] = getattr(diagnosis, "residual_analysis", None)
     return data
 
 

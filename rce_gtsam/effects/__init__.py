@@ -20,7 +20,25 @@ CANDIDATES = {
     "nonlinear": Nonlinear,
 }
 
+#: the built-in effects' names (registered effects are added to :data:`CANDIDATES`; see :func:`names`)
 EFFECT_NAMES = tuple(CANDIDATES)
+
+
+def register(cls: type[Effect]) -> type[Effect]:
+    """Make an :class:`Effect` subclass a candidate everywhere (diagnosis, ``analyze(effects=...)``, CLI
+    names), under its ``name``; returns the class, so it also works as a decorator. A name already
+    registered by another class is an error."""
+    if not (isinstance(cls, type) and issubclass(cls, Effect)) or not cls.name or cls.name == Effect.name:
+        raise ValueError(f"{cls!r} is not an Effect subclass with its own name")
+    if CANDIDATES.get(cls.name, cls) is not cls:
+        raise ValueError(f"an effect named {cls.name!r} is already registered ({CANDIDATES[cls.name].__name__})")
+    CANDIDATES[cls.name] = cls
+    return cls
+
+
+def names() -> tuple[str, ...]:
+    """Names of every candidate effect (built-in and registered), in the order the diagnosis tries them."""
+    return tuple(CANDIDATES)
 
 
 def make(name: str) -> Effect:
@@ -32,4 +50,4 @@ def make(name: str) -> Effect:
 
 
 __all__ = ["Effect", "Parameter", "Delay", "Dynamics", "Nonlinear", "Offset", "SecondMode", "CANDIDATES",
-           "EFFECT_NAMES", "make"]
+           "EFFECT_NAMES", "make", "names", "register"]

@@ -12,10 +12,14 @@ values live in a ``dict`` (the effect's *state*) that the model passes in and ge
 offset) and ``latents`` (per-frame series re-estimated from the data of every new frame, like z itself).
 
 To write a new effect: subclass :class:`Effect`, give it a ``name``, an ``equation``, a ``fitting``
-sentence and :meth:`Effect.parameters`, implement :meth:`Effect.init` and :meth:`Effect.update`, and
-override exactly one of the contribution hooks (``apply``/``apply_T`` for an operator on z, ``output``
-for a pointwise map of kappa*x, ``additive`` for a term added to the prediction). The model composes
-effects by chaining operators, applying the (single) output map and summing additive terms.
+sentence, its ``physics`` and :meth:`Effect.parameters`, implement :meth:`Effect.init` and
+:meth:`Effect.update`, and override exactly one of the contribution hooks (``apply``/``apply_T`` for an
+operator on z, ``output`` for a pointwise map of kappa*x, ``additive`` for a term added to the prediction).
+For the diagnosis, give it :meth:`Effect.evidence` (its residual signature with a null band) and
+:meth:`Effect.explain`; then ``rce_gtsam.effects.register(MyEffect)`` makes it a candidate everywhere (the
+diagnosis, ``analyze(effects=...)``, the CLI). The model composes effects by chaining operators, applying
+the (single) output map and summing additive terms. ``tests/test_effect_conformance.py`` checks every
+registered effect against this protocol.
 """
 
 from __future__ import annotations
@@ -57,6 +61,8 @@ class Effect:
     fitting: ClassVar[str] = ""
     #: Which hook the effect implements: "operator", "output" or "additive".
     kind: ClassVar[str] = "additive"
+    #: What a verdict for this effect means physically and what to check (plain text, no API names).
+    physics: ClassVar[str] = ""
 
     # -- description ------------------------------------------------------------------------------
     def parameters(self, n_edges: int) -> tuple[Parameter, ...]:
@@ -111,6 +117,19 @@ class Effect:
     def describe(self, state: dict) -> dict:
         """Derived, human-meaningful numbers for the report (default: nothing extra)."""
         return {}
+
+    # -- evidence (used by the diagnosis) -----------------------------------------------------------
+    def evidence(self, ctx) -> dict:
+        """This effect's signature in the rank-1 baseline's residuals, with its null band (a t statistic or a
+        ratio to the noise level): ``ctx`` is a :class:`~rce_gtsam.diagnosis.statistics.ResidualContext`.
+        Plain floats and arrays; the diagnosis reports it as the candidate's ``statistics``."""
+        return {}
+
+    def explain(self, summary: dict, statistics: dict) -> str:
+        """One or two sentences with the fitted numbers behind a verdict for this effect. ``summary``: the
+        extended fit's ``effect_summary()[name]`` (parameters with standard errors plus :meth:`describe`);
+        ``statistics``: what :meth:`evidence` returned."""
+        return ""
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"

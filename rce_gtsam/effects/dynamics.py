@@ -18,6 +18,9 @@ import numpy as np
 from scipy import signal
 from scipy.optimize import least_squares
 
+import math
+
+from ..diagnosis.statistics import per_edge_regression, slope_vs
 from .base import Effect, Parameter, scalar
 from .delay import _sse_after_z
 from .offset import _index
@@ -88,6 +91,10 @@ class Dynamics(Effect):
                 "log w_e = (1 - s_e) log w_root + s_e log w_tip   (w in rad/frame)")
     fitting = ("(log w_root, log w_tip, zeta) by bounded least squares (scipy.optimize.least_squares) with "
                "kappa and z fixed, alternating with the core; started from the best of a grid")
+    physics = ("the segments do not follow the wind quasi-statically: they have inertia and resonate (distal "
+               "segments at a lower natural frequency), so they lag, amplify near resonance and ring after gusts. "
+               "Kappa is then the static (low-frequency) gain; the natural frequencies are a mechanical property "
+               "of the plant.")
 
     def parameters(self, n_edges: int):
         return (Parameter("omega_root", "rad/frame", OMEGA_MIN, OMEGA_MAX, description="natural frequency at the root"),
@@ -163,3 +170,36 @@ class Dynamics(Effect):
         p = state["params"]
         return {"period_root_frames": float(2 * np.pi / scalar(p["omega_root"])),
                 "period_tip_frames": float(2 * np.pi / scalar(p["omega_tip"]))}
+
+    def evidence(self, ctx) -> dict:
+        """Residual ~ kappa_e b_e d2z/dt2 with a tip-ward trend of b_e (t statistic), and the peak of the
+        residual-to-signal spectrum ratio inside the band where z has power (a resonance it excites)."""
+        from scipy import signal
+
+        R, k, z = ctx.R, ctx.kappa, ctx.z
+        E, T = R.shape
+        d2z = np.gradient(np.gradient(z))
+        acc, acc_se = per_edge_regression(R, k[:, None] * d2z[None, :])
+        acc_se = acc_se * math.sqrt(ctx.inflation)
+        aslope, at, ar = slope_vs(ctx.s, acc, acc_se)
+        Rf = np.where(np.isfinite(R), R, 0.0)
+        nper = int(min(256, T))
+        f, pr = signal.welch(Rf, nperseg=nper, axis=1)
+        _, pz = signal.welch(z, nperseg=nper)
+        ratio = pr.mean(axis=0) / np.maximum(pz * np.mean(k * k), 1e-300)
+        band = (f > 0) & (pz > 1e-3 * pz.max())
+        if band.any():
+            j = np.flatnonzero(band)[np.argmax(ratio[band])]
+            peak_f, peak_ratio = float(f[j]), float(ratio[j] / max(np.median(ratio[band]), 1e-300))
+        else:
+            peak_f, peak_ratio = float("nan"), float("nan")
+        return {"accel_coef_per_edge_frames2": acc, "accel_slope_frames2": aslope, "accel_slope_t": at,
+                "accel_vs_root_distance_r": ar, "residual_to_signal_spectrum_peak_cycles_per_frame": peak_f,
+                "residual_to_signal_spectrum_peak_over_median": peak_ratio}
+
+    def explain(self, summary: dict, statistics: dict) -> str:
+        zeta = (summary.get("zeta") or {}).get("value") or float("nan")
+        return (f"Fitted natural periods {summary.get('period_root_frames', float('nan')):.1f} frames at the root "
+                f"and {summary.get('period_tip_frames', float('nan')):.1f} frames at the tip, damping ratio "
+                f"{zeta:.2f}; residual spectrum peaks at "
+                f"{statistics.get('residual_to_signal_spectrum_peak_cycles_per_frame', float('nan')):.3f} cycles/frame.")

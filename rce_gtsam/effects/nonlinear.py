@@ -27,6 +27,10 @@ class Nonlinear(Effect):
     kind = "output"
     fitting = ("c by bounded least squares (scipy.optimize.least_squares) with kappa and z fixed, "
                "alternating with Gauss-Newton core steps; started from the best of a grid")
+    physics = ("the response is not proportional to the load at large deflections: compliant joints saturate "
+               "(stiffen) during strong gusts, so one linear gain per joint over-predicts the peaks. Kappa is then "
+               "the small-deflection gain, and the saturation angle says where linear compliance stops being a "
+               "good description.")
 
     def __init__(self, form: str = "saturation"):
         if form not in ("saturation", "cubic"):
@@ -90,3 +94,29 @@ class Nonlinear(Effect):
     def describe(self, state):
         c = scalar(state["params"]["c"])
         return {"saturation_deg": float(1 / np.sqrt(c)) if c > 0 else float("inf")}
+
+    def evidence(self, ctx) -> dict:
+        """Curvature of the residual against the prediction: an odd cubic term (per-edge scaled, orthogonal
+        to the linear one) with its AR(1)-inflated t statistic, and the even quadratic term."""
+        R, k, z = ctx.R, ctx.kappa, ctx.z
+        P = k[:, None] * z[None, :]
+        q = np.nanquantile(np.abs(P), 0.99) if np.isfinite(P).any() else 1.0
+        u = P / max(q, 1e-12)
+        X3 = u ** 3 - u * (np.nansum(u ** 4, axis=1, keepdims=True)
+                           / np.maximum(np.nansum(u ** 2, axis=1, keepdims=True), 1e-300))
+        ok = np.isfinite(R)
+        c3 = float(np.sum(X3[ok] * R[ok]) / max(np.sum(X3[ok] ** 2), 1e-300))
+        res = R[ok] - c3 * X3[ok]
+        se3 = np.sqrt(float(np.sum(res ** 2)) / max(ok.sum() - 1, 1) * ctx.inflation
+                      / max(np.sum(X3[ok] ** 2), 1e-300))
+        X2 = u ** 2 - np.nanmean(u ** 2, axis=1, keepdims=True)
+        c2 = float(np.sum(X2[ok] * R[ok]) / max(np.sum(X2[ok] ** 2), 1e-300))
+        return {"cubic_residual_at_q99_deg": c3, "cubic_t": c3 / max(float(se3), 1e-300),
+                "quadratic_residual_at_q99_deg": c2, "q99_deflection_deg": float(q)}
+
+    def explain(self, summary: dict, statistics: dict) -> str:
+        sat = summary.get("saturation_deg", float("nan"))
+        return (f"Saturation angle {sat:.2f} deg (99th percentile of the linear deflection "
+                f"{statistics.get('q99_deflection_deg', float('nan')):.2f} deg); the baseline residual bends against "
+                f"the prediction by {statistics.get('cubic_residual_at_q99_deg', 0):.3f} deg at that deflection "
+                f"(t = {statistics.get('cubic_t', 0):.1f}).")

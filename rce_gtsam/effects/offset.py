@@ -22,6 +22,10 @@ class Offset(Effect):
     kind = "additive"
     equation = "y_e(t) = kappa_e z_t + c_e + d_e t/T"
     fitting = "closed form: per-edge weighted least squares of the partial residual on [1, t/T]"
+    physics = ("the rest pose is wrong or drifts: the reference angle (first frame or median) was itself "
+               "deflected, or the plant sags or relaxes over the recording, leaving a constant and a trend in each "
+               "joint's residual. Consider a rest pose from a calm period; the paper's |delta| response turns "
+               "offsets into spurious compliance.")
 
     def __init__(self, trend: bool = True):
         self.trend = bool(trend)
@@ -68,6 +72,36 @@ class Offset(Effect):
         p = state["params"]
         return {"rms_offset_deg": float(np.sqrt(np.mean(p["c"] ** 2))),
                 "rms_creep_deg": float(np.sqrt(np.mean(p["d"] ** 2)))}
+
+    def evidence(self, ctx) -> dict:
+        """Per-edge residual mean and linear trend over the record, each with an AR(1)-inflated t statistic."""
+        R = ctx.R
+        E, T = R.shape
+        tt = np.arange(T) / T
+        means, tmeans, trends, ttrend = np.zeros(E), np.zeros(E), np.zeros(E), np.zeros(E)
+        for e in range(E):
+            ok = np.isfinite(R[e])
+            if ok.sum() < 3:
+                continue
+            X = np.stack([np.ones(ok.sum()), tt[ok] - tt[ok].mean()], axis=1)
+            beta, *_ = np.linalg.lstsq(X, R[e, ok], rcond=None)
+            res = R[e, ok] - X @ beta
+            s2 = float(np.sum(res ** 2) / max(ok.sum() - 2, 1)) * ctx.inflation
+            cov = s2 * np.linalg.inv(X.T @ X)
+            means[e], tmeans[e] = beta[0], beta[0] / np.sqrt(cov[0, 0])
+            trends[e], ttrend[e] = beta[1], beta[1] / np.sqrt(cov[1, 1])
+        return {"mean_per_edge_deg": means, "trend_per_edge_deg": trends,
+                "max_abs_mean_t": float(np.max(np.abs(tmeans))) if E else 0.0,
+                "max_abs_trend_t": float(np.max(np.abs(ttrend))) if E else 0.0,
+                "rms_mean_deg": float(np.sqrt(np.mean(means ** 2))) if E else 0.0,
+                "rms_trend_deg": float(np.sqrt(np.mean(trends ** 2))) if E else 0.0}
+
+    def explain(self, summary: dict, statistics: dict) -> str:
+        return (f"Baseline residuals have per-edge means of RMS {statistics.get('rms_mean_deg', 0):.2f} deg "
+                f"(max |t| {statistics.get('max_abs_mean_t', 0):.1f}) and trends of RMS "
+                f"{statistics.get('rms_trend_deg', 0):.2f} deg over the record (max |t| "
+                f"{statistics.get('max_abs_trend_t', 0):.1f}).")
+
 
 
 def _index(effect, view):

@@ -34,6 +34,10 @@ class SecondMode(Effect):
     fitting = ("alternating generalised least squares on the partial residual with the noise's correlation "
                "between edges (from frame-to-frame residual differences): mu given w, then w_t per frame as "
                "the posterior mean under its N(0, 1) prior; on new frames w is re-estimated with mu frozen")
+    physics = ("the joints are driven by a second, independent excitation with its own spatial pattern "
+               "(crosswind, out-of-plane swing, a touching leaf or side branch), so one shared excitation cannot "
+               "explain every joint. Kappa is then the gain of the dominant mode. Check the footage for "
+               "out-of-plane motion; a second camera view would separate it.")
 
     def parameters(self, n_edges: int):
         return (Parameter("mu", "deg", per_edge=True, description="RMS amplitude of the second mode"),)
@@ -110,6 +114,27 @@ class SecondMode(Effect):
     def describe(self, state):
         mu = state["params"]["mu"]
         return {"rms_amplitude_deg": float(np.sqrt(np.mean(mu ** 2)))}
+
+    def evidence(self, ctx) -> dict:
+        """Leading singular value of the residual matrix against the largest one pure noise of the bulk's
+        level would give (Marchenko-Pastur edge), and against the second."""
+        R = ctx.R
+        E, T = R.shape
+        sv = np.linalg.svd(np.where(np.isfinite(R), R, 0.0), compute_uv=False)
+        if len(sv) < 2:
+            return {}
+        sigma = float(np.median(sv)) / np.sqrt(T)
+        mp_edge = sigma * (np.sqrt(T) + np.sqrt(E))
+        return {"s1_over_noise_edge": float(sv[0] / max(mp_edge, 1e-300)),
+                "s1_over_s2": float(sv[0] / max(sv[1], 1e-300)),
+                "s1_variance_fraction": float(sv[0] ** 2 / max(np.sum(sv ** 2), 1e-300))}
+
+    def explain(self, summary: dict, statistics: dict) -> str:
+        return (f"The baseline residual matrix has a leading singular value "
+                f"{statistics.get('s1_over_noise_edge', float('nan')):.2f}x the noise edge and "
+                f"{statistics.get('s1_over_s2', float('nan')):.2f}x the next one; the second mode's RMS amplitude is "
+                f"{summary.get('rms_amplitude_deg', float('nan')):.2f} deg.")
+
 
 
 def noise_correlation(R: np.ndarray, shrink: float = 0.05) -> np.ndarray:

@@ -381,4 +381,11 @@ def write_diagnosis_figures(diagnosis, out_dir: str | Path, result=None) -> dict
             fig_before_after(resp.Y, result.fit.predict(), np.asarray(after, float), resp.frames,
                              [f"{j}→{c}" for j, c in resp.edges], _get(diagnosis, "verdict") or "effect"),
             out / "effect_before_after.png")
+    ra = _get(diagnosis, "residual_analysis_obj")
+    if ra is not None:
+        from .residual_analysis import fig_residual_analysis
+        labels = ([f"{j}→{c}" for j, c in result.response.edges] if result is not None
+                  else [str(i) for i in range(ra.xcorr.shape[0])])
+        written["residual_analysis.png"] = _save(fig_residual_analysis(ra, labels, fps=30.0),
+                                                 out / "residual_analysis.png")
     return written

@@ -331,6 +331,9 @@ def log_diagnosis(diagnosis, rec: rr.RecordingStream, view: AnalysisView | None 
     vals = [float(v) if _isnum(v) else 0.0 for v in vals]
     if vals:
         rec.log("diagnosis/heldout", rr.BarChart(np.array(vals)), static=True)
+    ra = _get(diagnosis, "residual_analysis_obj") or _get(diagnosis, "residual_analysis")
+    if ra is not None and hasattr(ra, "freqs"):
+        log_residual_analysis(ra, rec, [view.edge_name(e) for e in view.edges] if view is not None else None)
     after = _get(diagnosis, "after_prediction")
     if after is None:
         after = _get(diagnosis, "Y_after")
@@ -348,3 +351,26 @@ def log_diagnosis(diagnosis, rec: rr.RecordingStream, view: AnalysisView | None 
                                   names=["observed (deg)", "rank-1 κ·z (deg)", f"with {name} (deg)"]), static=True)
         rec.send_columns(p, indexes=idx, columns=rr.Scalars.columns(
             scalars=np.stack([view.Y[i], view.pred[i], after[i]], axis=1)))
+
+
+def log_residual_analysis(ra, rec: rr.RecordingStream, names=None) -> None:
+    """Log a :class:`~rce_gtsam.diagnosis.sysid.ResidualAnalysis` under ``diagnosis/sysid/``: per segment the
+    z -> bending gain and phase against log10 frequency (2-D line strips, coherent frequencies only), the
+    residual-z cross-correlation in units of its band against lag, and bar charts of each segment's delay
+    (frames) and residual trend (deg)."""
+    E = ra.gain.shape[0]
+    names = names or [str(i) for i in range(E)]
+    f = ra.freqs
+    pos = f > 0
+    for e in range(E):
+        coh = pos & (ra.coherence[e] > ra.coherence_threshold)
+        if coh.sum() >= 2:
+            lf = np.log10(f[coh])
+            rec.log(f"diagnosis/sysid/gain/{names[e]}", rr.LineStrips2D([np.stack([lf, np.log10(ra.gain[e, coh])], 1)]),
+                    static=True)
+            rec.log(f"diagnosis/sysid/phase/{names[e]}", rr.LineStrips2D([np.stack([lf, ra.phase_deg[e, coh] / 90.0], 1)]),
+                    static=True)
+        rec.log(f"diagnosis/sysid/xcorr/{names[e]}",
+                rr.LineStrips2D([np.stack([ra.lags.astype(float), ra.xcorr[e] / ra.xcorr_band[e]], 1)]), static=True)
+    rec.log("diagnosis/sysid/delay_frames", rr.BarChart(np.nan_to_num(ra.delay_frames)), static=True)
+    rec.log("diagnosis/sysid/trend_deg", rr.BarChart(np.nan_to_num(ra.trend_deg)), static=True)

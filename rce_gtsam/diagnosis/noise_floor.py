@@ -1,0 +1,279 @@
+"""The angle-noise floor, estimated without the rank-1 model: how much of the bending is tracking noise?
+
+A bend angle at joint j is computed from three tracked nodes (grandparent g, joint j, child c). Small position
+errors *across* the branch turn it by
+
+    d theta_j = n_c / L2 - n_j (1 / L1 + 1 / L2) + n_g / L1        (radians; L1 = |g j|, L2 = |j c| in px)
+
+where n_i is node i's error perpendicular to the branch. Errors *along* the branch (u_i) leave the angle alone
+but stretch the segments — and a branch segment does not stretch. So the same combination of *relative length
+changes* of the two segments,
+
+    d_j(t) = dL_(j,c)(t) / L2 - dL_(g,j)(t) / L1 = u_c / L2 - u_j (1 / L1 + 1 / L2) + u_g / L1,
+
+is a model-free record of the along-branch tracking error that survived smoothing, with the same geometry,
+spectrum and correlation between neighbouring bends as the angle noise. (A uniform out-of-plane tilt that
+foreshortens both segments alike cancels in d_j.) Trackers slide along a featureless stem more than across
+it; the across/along variance ratio q is measured from the highest frequencies of the *raw* tracks (4th
+differences: < 0.2 % of the power of motion below 1 Hz at 30 fps, 70x the variance of white noise; a robust
+scale ignores jumps). Then
+
+    inextensibility estimate of row j:  var(noise_j) = q var(d_j)          (converted to deg^2)
+
+A second, smaller estimate needs no inextensibility: the *white* part of the raw angle noise (4th differences
+of the raw bend angles) passed through the smoother's transfer function — a lower bound, because slow drift
+is invisible at high frequencies.
+
+Which one is used, per row: the inextensibility estimate, unless it exceeds the row's whole bending variance
+by more than its sampling error allows (then the segments stretch by more than across-branch tracking noise
+could — out-of-plane swing, or a tracker sliding along the stem at low frequency — and the row falls back to
+the white lower bound, flagged). On the project's simulator it is within 3-12 % of the true angle noise
+(``benchmarks/bench_noise_floor.py``).
+
+Units: px for positions, degrees for angles, frames for time, cycles/frame for frequency.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: variance of the 4th difference of unit white noise: sum of squared binomial(4) coefficients
+D4_GAIN = 70.0
+#: MAD -> standard deviation for a normal distribution
+MAD_SD = 1.4826
+
+
+@dataclass(frozen=True, eq=False)
+class NoiseFloor:
+    """Model-free angle-noise estimate for the rows of a response matrix (degrees).
+
+    variance_deg2: (E,) the angle-noise variance used for each row (deg^2).
+    inextensible_deg2: (E,) q var(d_j): the inextensibility estimate (deg^2).
+    white_deg2: (E,) the white part of the raw angle noise after smoothing: a lower bound (deg^2).
+    valid: (E,) bool — the inextensibility estimate is consistent with the row's bending variance; False rows
+        use ``white_deg2`` (a lower bound) instead.
+    across_over_along: q, across/along variance ratio of node errors at high frequency (1 = isotropic).
+    smoother_gain: fraction of white-noise variance the smoother passes (0..1).
+    series_deg: (E, T) sqrt(q) d_j(t) in degrees — a realisation with the noise's spectrum and its correlation
+        between rows (NaN where a length is missing); surrogates phase-randomise it.
+    n_eff: (E,) effective number of independent samples of each row's d_j (for standard errors).
+    coherent_share: (E,) share of var(d_j) explained by the motion of bends sharing no node with j (0 for pure
+        tracking noise up to ~2 / n_eff by chance).
+    """
+
+    variance_deg2: np.ndarray
+    inextensible_deg2: np.ndarray
+    white_deg2: np.ndarray
+    valid: np.ndarray
+    across_over_along: float
+    smoother_gain: float
+    series_deg: np.ndarray
+    n_eff: np.ndarray
+    coherent_share: np.ndarray
+
+    @property
+    def rms_deg(self) -> float:
+        """Overall RMS angle noise over rows (deg)."""
+        return float(math.sqrt(np.mean(self.variance_deg2))) if len(self.variance_deg2) else float("nan")
+
+    @property
+    def relative_se(self) -> np.ndarray:
+        """(E,) approximate relative standard error of each row's variance estimate: sqrt(2 / n_eff)."""
+        return np.sqrt(2.0 / np.maximum(self.n_eff, 1.0))
+
+    def as_dict(self) -> dict:
+        return {"rms_deg": self.rms_deg,
+                "per_row_deg2": self.variance_deg2.tolist(),
+                "inextensible_deg2": self.inextensible_deg2.tolist(),
+                "white_lower_bound_deg2": self.white_deg2.tolist(),
+                "inextensibility_holds": [bool(v) for v in self.valid],
+                "across_over_along": float(self.across_over_along),
+                "smoother_white_gain": float(self.smoother_gain),
+                "method": "q x var(relative stretch of the two segments) of the smoothed tracks (inextensibility); "
+                          "rows where that exceeds the bending variance use the white-noise lower bound"}
+
+
+def rest_frame(xy: np.ndarray, node_ids, edges) -> tuple[np.ndarray, dict]:
+    """(N, 2) unit branch tangent per node at the median pose, and {edge: rest length px}."""
+    row = {int(n): i for i, n in enumerate(node_ids)}
+    rest = np.nanmedian(xy, axis=1)  # (N, 2)
+    tan = np.zeros_like(rest)
+    lengths = {}
+    for p, c in edges:
+        d = rest[row[c]] - rest[row[p]]
+        L = float(np.hypot(*d))
+        lengths[(p, c)] = L
+        if L > 0:
+            tan[row[c]] += d / L
+            tan[row[p]] += d / L
+    norm = np.linalg.norm(tan, axis=1, keepdims=True)
+    return tan / np.maximum(norm, 1e-12), lengths
+
+
+def robust_sd(x: np.ndarray) -> float:
+    """MAD-based standard deviation of the finite values of x (0 if none)."""
+    x = x[np.isfinite(x)]
+    return float(MAD_SD * np.median(np.abs(x - np.median(x)))) if x.size else 0.0
+
+
+def across_along_ratio(raw_xy: np.ndarray, tangent: np.ndarray) -> float:
+    """q = var(across) / var(along) of node errors, from 4th differences of the raw tracks (robust, pooled as
+    the median of per-node ratios; 1.0 when no node has 20 usable 4th differences)."""
+    nrm = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+    ratios = []
+    for i in range(raw_xy.shape[0]):
+        d4 = np.diff(raw_xy[i], n=4, axis=0)
+        ok = np.isfinite(d4).all(axis=1)
+        if ok.sum() < 20:
+            continue
+        sa, sc = robust_sd(d4[ok] @ tangent[i]), robust_sd(d4[ok] @ nrm[i])
+        if sa > 0 and sc > 0:
+            ratios.append((sc / sa) ** 2)
+    return float(np.median(ratios)) if ratios else 1.0
+
+
+def smoother_white_gain(presmooth_window: int, measurement_weight: float, velocity_weight: float,
+                        acceleration_weight: float, n_freq: int = 4096) -> float:
+    """Share of a white input's variance that the smoother passes (0..1), per coordinate.
+
+    The smoother minimises w_m sum (x - y)^2 + w_v sum (dx)^2 + w_a sum (d2x)^2 (after an optional centred
+    moving average), a linear time-invariant filter away from the ends with
+    H(f) = MA(f) w_m / (w_m + w_v |1 - e^(-i w)|^2 + w_a |1 - e^(-i w)|^4); the gain is the mean of |H|^2
+    over frequency. The edge prior (paper preset) is ignored: it couples nodes, not frames."""
+    f = (np.arange(n_freq) + 0.5) / (2 * n_freq)  # (0, 0.5) cycles/frame
+    d2 = np.abs(1 - np.exp(-2j * np.pi * f)) ** 2
+    H = measurement_weight / (measurement_weight + velocity_weight * d2 + acceleration_weight * d2 ** 2)
+    if presmooth_window and presmooth_window > 1:
+        n = int(presmooth_window)
+        w = 2 * np.pi * f
+        H = H * np.abs(np.sin(n * w / 2) / (n * np.sin(w / 2)))
+    return float(np.mean(H ** 2))
+
+
+def stretch_bends(xy: np.ndarray, node_ids, bends, lengths: dict) -> np.ndarray:
+    """(E, F) d_j(t) in radians: relative length change of (j, c) minus that of (g, j), per bend."""
+    row = {int(n): i for i, n in enumerate(node_ids)}
+
+    def rel(p, c):
+        d = xy[row[c]] - xy[row[p]]
+        L = np.hypot(d[:, 0], d[:, 1])
+        return (L - np.nanmedian(L)) / max(lengths[(p, c)], 1e-9)
+
+    return np.array([rel(j, c) - rel(g, j) for g, j, c in bends]).reshape(len(bends), xy.shape[1])
+
+
+def effective_samples(x: np.ndarray) -> float:
+    """n (1 - rho) / (1 + rho) for the lag-1 autocorrelation rho (clipped to [0, 0.99]) of the finite x."""
+    ok = np.isfinite(x)
+    n = int(ok.sum())
+    if n < 4:
+        return float(max(n, 1))
+    a, b = x[:-1], x[1:]
+    m = np.isfinite(a) & np.isfinite(b)
+    a, b = a[m] - a[m].mean(), b[m] - b[m].mean()
+    rho = float(np.sum(a * b) / max(math.sqrt(np.sum(a * a) * np.sum(b * b)), 1e-300))
+    rho = min(max(rho, 0.0), 0.99)
+    return n * (1 - rho) / (1 + rho)
+
+
+def incoherent_part(D: np.ndarray, Y: np.ndarray, shared: np.ndarray, n_components: int = 2) -> np.ndarray:
+    """(E, T) each row of D minus its least-squares projection on the top ``n_components`` principal
+    components of the rows (of D and Y) that share no tracked node with it (NaN kept).
+
+    Independent node errors cannot be predicted from bends they do not enter; whatever of d_j moves with the
+    rest of the branch (an out-of-plane swing that stretches segments with the wind, a tracker that slides
+    with the motion) is physical or motion-locked and is not counted as noise. A few components only, so the
+    projection removes at most a few of the n_eff independent samples (its loss is corrected for)."""
+    E, T = D.shape
+    out = np.full_like(D, np.nan)
+    Dz = np.where(np.isfinite(D), D - np.nanmean(D, axis=1, keepdims=True), 0.0)
+    Yz = np.where(np.isfinite(Y), Y - np.nanmean(Y, axis=1, keepdims=True), 0.0)
+    for e in range(E):
+        far = ~shared[e]
+        ok = np.isfinite(D[e])
+        if far.sum() < 1 or ok.sum() < 4 * n_components + 4:
+            out[e] = D[e]
+            continue
+        M = np.concatenate([Dz[far], Yz[far]])
+        M = M / np.maximum(np.sqrt(np.mean(M ** 2, axis=1, keepdims=True)), 1e-12)
+        _, _, Vt = np.linalg.svd(M, full_matrices=False)
+        X = Vt[:n_components].T[ok]
+        beta, *_ = np.linalg.lstsq(X, Dz[e, ok], rcond=None)
+        out[e, ok] = Dz[e, ok] - X @ beta
+    return out
+
+
+def estimate_noise_floor(raw_xy: np.ndarray, smoothed_xy: np.ndarray, node_ids, edges, bends,
+                         Y: np.ndarray, frames: np.ndarray, raw_angle_deg: np.ndarray,
+                         smoother_gain: float, shared: np.ndarray | None = None,
+                         z_crit: float = 2.0) -> NoiseFloor:
+    """Estimate the angle-noise floor of each response row without any model of the bending.
+
+    raw_xy: (N, F, 2) tracker positions (px, NaN = not observed); smoothed_xy: (N, F, 2) smoothed positions at
+    observed frames (NaN elsewhere); node_ids: (N,); edges: (parent, child) pairs of the graph; bends:
+    (grandparent, joint, child) per response row; Y: (E, T) the response (deg, NaN = missing/outlier);
+    frames: (T,) video frame of each column; raw_angle_deg: (E, F) the bend angles of the raw tracks;
+    smoother_gain: :func:`smoother_white_gain` of the preset; shared: (E, E) bool, rows whose bends share a
+    tracked node (default: rows up to two apart); the part of d_j coherent with rows that share no node
+    with j is removed (:func:`incoherent_part`); z_crit: how many standard errors the
+    inextensibility estimate may exceed the row's bending variance before it is rejected.
+    """
+    node_ids = [int(n) for n in node_ids]
+    tangent, lengths = rest_frame(smoothed_xy, node_ids, edges)
+    q = across_along_ratio(raw_xy, tangent)
+    D = np.degrees(stretch_bends(smoothed_xy, node_ids, bends, lengths))[:, frames] * math.sqrt(q)
+    D = np.where(np.isfinite(Y), D, np.nan)
+    E = Y.shape[0]
+    if shared is None:
+        idx = np.arange(E)
+        shared = np.abs(idx[:, None] - idx[None, :]) <= 2
+    D_inc = incoherent_part(D, Y, shared)
+    inext = np.zeros(E)
+    n_eff = np.ones(E)
+    coherent = np.zeros(E)
+    total = np.zeros(E)
+    white = np.zeros(E)
+    se_total = np.zeros(E)
+    for e in range(E):
+        d = D[e][np.isfinite(D[e])]
+        inext[e] = float(np.mean((d - d.mean()) ** 2)) if d.size > 1 else np.nan
+        di = D_inc[e][np.isfinite(D_inc[e])]
+        coherent[e] = 1.0 - float(np.mean(di ** 2)) / inext[e] if d.size > 1 and inext[e] > 0 else 0.0
+        n_eff[e] = effective_samples(D[e])
+        y = Y[e][np.isfinite(Y[e])]
+        total[e] = float(np.mean(y ** 2)) if y.size else np.nan
+        se_total[e] = math.sqrt(2.0 / max(effective_samples(Y[e]), 1.0))
+        white[e] = (robust_sd(np.diff(raw_angle_deg[e], n=4)) ** 2 / D4_GAIN) * smoother_gain
+    # independent node errors share no variance with bends they do not enter: the share explained by the
+    # far rows' 2 components is ~2 / n_eff by chance (its SE ~ the same); more means the segments stretch with
+    # the branch's motion (out of plane, or a tracker sliding with the motion), not by tracking noise
+    chance = 2.0 / np.maximum(n_eff, 1.0)
+    incoherent_ok = coherent <= chance + z_crit * chance
+    valid = np.isfinite(inext) & incoherent_ok & (inext <= total * (1.0 + z_crit * se_total))
+    var = np.where(valid, inext, white)
+    return NoiseFloor(variance_deg2=var, inextensible_deg2=inext, white_deg2=white, valid=valid,
+                      across_over_along=q, smoother_gain=smoother_gain, series_deg=D, n_eff=n_eff,
+                      coherent_share=coherent)
+
+
+def noise_floor_of(result) -> NoiseFloor:
+    """:func:`estimate_noise_floor` of an :class:`~rce_gtsam.pipeline.AnalysisResult` (its response rows)."""
+    from ..pipeline import observed_positions  # a function, imported late: pipeline imports diagnosis users
+
+    r = result.response
+    sm = result.preset.smoother
+    w_m = sm.measurement_weight
+    sig = result.tracks.sigma_px
+    if sig is not None and np.isfinite(sig).any():
+        w_m = float(np.nanmedian(1.0 / np.asarray(sig)[np.isfinite(sig)] ** 2))
+    gain = smoother_white_gain(sm.presmooth_window, w_m, sm.velocity_weight, sm.acceleration_weight)
+    bends = [result.bending.bends[k] for k in r.bend_rows]
+    raw_angle = result.raw_bending.angle_deg[r.bend_rows]
+    nodes = [frozenset((b.grandparent, b.joint, b.child)) for b in bends]
+    shared = np.array([[bool(a & b) for b in nodes] for a in nodes])
+    return estimate_noise_floor(result.tracks.xy, observed_positions(result.smoothed), result.tracks.node_ids,
+                                result.graph.edges, [(b.grandparent, b.joint, b.child) for b in bends],
+                                r.Y, r.frames, raw_angle, gain, shared=shared)

@@ -1,0 +1,135 @@
+"""Every registered effect follows the protocol of :mod:`rce_gtsam.effects.base` (issue 11, item 5).
+
+A new effect is one file plus ``effects.register(MyEffect)``; this test then checks it like the built-ins:
+description, parameters, a fit that uses the term, its own residual evidence, its explanation, and the
+diagnosis naming it on clean data that contain it.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+from rce_gtsam import effects
+from rce_gtsam.diagnose import diagnose, residual_statistics
+from rce_gtsam.diagnosis.statistics import ResidualContext
+from rce_gtsam.effects.base import Effect, Parameter
+from rce_gtsam.model import ResponseModel
+from _effect_data import synth
+
+BUILTIN = list(effects.EFFECT_NAMES)
+
+
+def _finite_numbers(d):
+    for v in d.values():
+        a = np.asarray(v, dtype=float)
+        assert np.all(np.isfinite(a)), d
+
+
+@pytest.mark.parametrize("name", BUILTIN)
+def test_effect_describes_itself(name):
+    eff = effects.make(name)
+    assert isinstance(eff, Effect) and eff.name == name
+    assert eff.kind in {"operator", "output", "additive"}
+    for text in (eff.equation, eff.fitting, eff.physics):
+        assert isinstance(text, str) and len(text) > 20
+    assert "()" not in eff.physics and "--" not in eff.physics  # interface-neutral physics text
+    ps = eff.parameters(6)
+    assert all(isinstance(p, Parameter) and p.unit for p in ps)
+
+
+@pytest.mark.parametrize("name", BUILTIN)
+def test_effect_fits_owns_evidence_and_explains(name):
+    from rce_gtsam.simulate import EFFECT_DEFAULTS
+    Y, s, k, z, y = synth(name, seed=3, E=10, T=400, noise=0.05, strength=3 * EFFECT_DEFAULTS[name])
+    base = ResponseModel().fit(Y, root_distance=s)
+    ext = (ResponseModel() + effects.make(name)).fit(Y, root_distance=s)
+    assert ext.wsse < base.wsse  # the term explains part of what the rank-1 model cannot
+    assert ext.model.effects[0].memory_frames(ext.states[0]) >= 0
+    stats = effects.make(name).evidence(ResidualContext.from_fit(base))
+    assert isinstance(stats, dict) and stats
+    _finite_numbers(stats)
+    summary = ext.effect_summary()[name]
+    text = effects.make(name).explain(summary, stats)
+    assert isinstance(text, str) and len(text) > 20 and "nan" not in text.lower()
+    assert residual_statistics(base, [name])[name].keys() == stats.keys()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", BUILTIN)
+def test_diagnosis_names_each_effect_on_clean_data(name):
+    from rce_gtsam.simulate import EFFECT_DEFAULTS
+    Y, s, k, z, y = synth(name, seed=5, E=12, T=450, noise=0.03, strength=3 * EFFECT_DEFAULTS[name])
+    d = diagnose(Y, root_distance=s, effects=[name, "offset" if name != "offset" else "nonlinear"], n_folds=4)
+    assert d.verdict == name, d.report()
+
+
+class Step(Effect):
+    """A researcher's own effect, written in one file: a per-edge step at a shared frame (a touch)."""
+
+    name = "step_test"
+    kind = "additive"
+    equation = "y_e(t) = kappa_e z_t + h_e [t >= t0]"
+    fitting = "t0 on a grid of frames; h_e by per-edge least squares of the partial residual"
+    physics = ("something touched or released the branch at one moment, shifting every joint's rest angle "
+               "at once; check the footage around that frame.")
+
+    def parameters(self, n_edges):
+        return (Parameter("h", "deg", per_edge=True, description="step height"),
+                Parameter("t0", "frames", description="step frame"))
+
+    def init(self, view):
+        return self.update({"params": {"h": np.zeros(view.E), "t0": np.array(view.T / 2)}, "latents": {}},
+                           view, frozen=False)
+
+    def update(self, state, view, frozen):
+        if frozen:
+            return state
+        i = next((k for k, e in enumerate(view.effects) if e is self), None)
+        target = view.partial_target(i) if i is not None else view.Y0 - view.predict()
+        R = np.where(view.W > 0, target, np.nan)  # what this term must explain
+        best = None
+        for t0 in range(10, view.T - 10, max(1, view.T // 40)):
+            step = (np.arange(view.T) >= t0).astype(float)
+            ok = np.isfinite(R)
+            h = np.array([np.sum(np.where(ok[e], R[e], 0) * step) / max(np.sum(step * ok[e]), 1) -
+                          np.sum(np.where(ok[e], R[e], 0) * (1 - step)) / max(np.sum((1 - step) * ok[e]), 1)
+                          for e in range(view.E)])
+            sse = np.nansum((R - h[:, None] * step[None]) ** 2)
+            if best is None or sse < best[0]:
+                best = (sse, h, t0)
+        return {"params": {"h": best[1], "t0": np.array(float(best[2]))}, "latents": {}}
+
+    def additive(self, state, view):
+        step = (np.arange(view.T) >= float(state["params"]["t0"])).astype(float)
+        return state["params"]["h"][:, None] * step[None, :]
+
+    def evidence(self, ctx):
+        d = np.nanmean(ctx.R[:, ctx.R.shape[1] // 2:], axis=1) - np.nanmean(ctx.R[:, : ctx.R.shape[1] // 2], axis=1)
+        return {"half_difference_rms_deg": float(np.sqrt(np.mean(d ** 2)))}
+
+    def explain(self, summary, statistics):
+        return (f"A step at frame {summary.get('t0', {}).get('value', math.nan):.0f}; baseline residual halves "
+                f"differ by {statistics['half_difference_rms_deg']:.2f} deg RMS.")
+
+
+def test_a_new_effect_is_one_class_and_a_registry_line():
+    effects.register(Step)
+    try:
+        assert "step_test" in effects.names()
+        assert "step_test" in effects.CANDIDATES
+        from rce_gtsam.diagnosis_io import parse_effect_names
+        assert parse_effect_names("step_test") == ("step_test",)
+        with pytest.raises(ValueError):
+            effects.register(type("Other", (Step,), {}))  # same name, another class
+        test_effect_describes_itself("step_test")
+        rng = np.random.default_rng(0)
+        z = np.sin(np.arange(300) / 9.0)
+        Y = np.outer(np.linspace(0.5, 2, 8), z) + 0.05 * rng.standard_normal((8, 300))
+        Y[:, 180:] += np.linspace(1, -1, 8)[:, None]  # a touch at frame 180
+        fit = (ResponseModel() + effects.make("step_test")).fit(Y)
+        assert abs(fit.effect_summary()["step_test"]["t0"]["value"] - 180) <= 8
+        assert fit.rmse < 0.5 * ResponseModel().fit(Y).rmse
+    finally:
+        effects.CANDIDATES.pop("step_test", None)
+    assert "step_test" not in effects.names()

@@ -1,0 +1,132 @@
+"""The model-free noise floor and the variance budget (issue 11, item 1)."""
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from rce_gtsam.diagnosis.budget import variance_budget
+from rce_gtsam.diagnosis.noise_floor import (NoiseFloor, across_along_ratio, noise_floor_of,
+                                             smoother_white_gain, stretch_bends)
+from rce_gtsam.pipeline import analyze
+from rce_gtsam.simulate import NoiseConfig, SimulationConfig, simulate
+
+
+def _true_rows(sim, res):
+    r = res.response
+    row = {b.edge: i for i, b in enumerate(sim.graph.bends)}
+    y = sim.response_true[[row[tuple(e)] for e in r.edges]][:, r.frames]
+    yref = y + np.nanmean(r.Y - y, axis=1, keepdims=True)
+    return np.nanmean((r.Y - yref) ** 2, axis=1)
+
+
+@pytest.mark.parametrize("seed,sigma,drift,ratio", [(0, 1.0, 1.0, 3.0), (1, 2.0, 0.5, 1.5)])
+def test_noise_floor_matches_true_angle_noise(seed, sigma, drift, ratio):
+    base = NoiseConfig()
+    noise = replace(base, sigma_across_px=base.sigma_across_px * sigma, drift_px=base.drift_px * drift,
+                    along_ratio=ratio)
+    sim = simulate(SimulationConfig(seed=seed, n_frames=600, noise=noise))
+    res = analyze(sim.tracks, sim.graph, preset="default", n_boot=0)
+    nf = noise_floor_of(res)
+    true = _true_rows(sim, res)
+    assert abs(nf.rms_deg / np.sqrt(true.mean()) - 1) < 0.25
+    assert nf.valid.mean() > 0.8  # simulated segments do not stretch
+    assert abs(nf.across_over_along * ratio ** 2 - 1) < 0.5  # q found from the raw tracks' 4th differences
+    assert nf.white_deg2.mean() <= nf.variance_deg2.mean()  # the white part is (about) a lower bound
+
+
+def test_stretching_segments_are_not_taken_for_noise():
+    """Segments that stretch with the motion (an out-of-plane swing) leave a *bounded* noise floor."""
+    sim = simulate(SimulationConfig(seed=2, n_frames=600))
+    xy = sim.tracks.xy.copy()
+    root = xy[0:1]
+    scale = 1.0 + 0.08 * np.sin(2 * np.pi * np.arange(xy.shape[1]) / 90.0)  # branch foreshortens and recovers
+    xy = root + (xy - root) * scale[None, :, None]
+    tracks = replace(sim.tracks, xy=xy)
+    res = analyze(tracks, sim.graph, preset="default", n_boot=0)
+    nf = noise_floor_of(res)
+    # a uniform foreshortening cancels in the stretch-bends: the estimate stays near the clean one
+    clean = noise_floor_of(analyze(sim.tracks, sim.graph, preset="default", n_boot=0))
+    assert nf.rms_deg < 1.3 * clean.rms_deg
+
+
+def test_stretch_bends_cancel_uniform_scaling():
+    rng = np.random.default_rng(0)
+    xy = np.cumsum(rng.normal(0, 10, (5, 1, 2)), axis=0) * np.ones((1, 50, 1))
+    xy = xy * (1 + 0.1 * np.sin(np.arange(50) / 5))[None, :, None]
+    edges = [(i, i + 1) for i in range(4)]
+    lengths = {e: float(np.linalg.norm(xy[e[1], 0] - xy[e[0], 0]) / (1 + 0.1 * np.sin(0))) for e in edges}
+    D = stretch_bends(xy, range(5), [(0, 1, 2), (1, 2, 3), (2, 3, 4)], lengths)
+    assert np.nanmax(np.abs(D)) < 0.02  # relative-stretch differences cancel a common scale (to ~ its spread)
+
+
+def test_across_along_ratio_from_white_noise():
+    rng = np.random.default_rng(1)
+    F = 2000
+    t = np.arange(F)
+    tangent = np.tile([[1.0, 0.0]], (6, 1))
+    xy = np.zeros((6, F, 2))
+    xy[..., 0] = 5 * np.sin(2 * np.pi * t / 120)[None] + rng.normal(0, 0.9, (6, F))  # along
+    xy[..., 1] = 20 * np.sin(2 * np.pi * t / 90)[None] + rng.normal(0, 0.3, (6, F))  # across
+    assert abs(across_along_ratio(xy, tangent) / (0.3 / 0.9) ** 2 - 1) < 0.15
+
+
+def test_smoother_gain_is_a_share():
+    g = smoother_white_gain(0, 1.0, 0.0, 0.0)
+    assert g == pytest.approx(1.0)
+    g2 = smoother_white_gain(0, 1.0, 0.35, 8.0)
+    assert 0 < g2 < 0.5
+    assert smoother_white_gain(5, 1.0, 0.35, 8.0) < g2
+
+
+def _floor(var, n_eff=200.0):
+    E = len(var)
+    var = np.asarray(var, float)
+    return NoiseFloor(variance_deg2=var, inextensible_deg2=var, white_deg2=0.1 * var, valid=np.ones(E, bool),
+                      across_over_along=1.0, smoother_gain=0.2, series_deg=np.zeros((E, 10)),
+                      n_eff=np.full(E, n_eff), coherent_share=np.zeros(E))
+
+
+def test_budget_pure_noise_is_consistent_with_zero():
+    rng = np.random.default_rng(3)
+    E, T = 10, 1500
+    k = np.exp(rng.normal(0, 0.4, E))
+    z = np.convolve(rng.normal(0, 1, T + 40), np.ones(20) / 4, "same")[20:-20]
+    Y = k[:, None] * z[None] + rng.normal(0, 1.0, (E, T))
+    from rce_gtsam.model import ResponseModel
+    fit = ResponseModel().fit(Y)
+    b = variance_budget(Y, fit.residuals, fit.n_params, _floor(np.ones(E)), base_kappa=fit.kappa)
+    assert b.status == "noise", b.as_dict()
+    assert abs(b.unexplained) < 2 * b.unexplained_se
+    assert b.total == pytest.approx(np.mean(Y ** 2))
+
+
+def test_budget_flags_structure_beyond_noise():
+    rng = np.random.default_rng(4)
+    E, T = 10, 1500
+    k = np.exp(rng.normal(0, 0.4, E))
+    z = np.convolve(rng.normal(0, 1, T + 40), np.ones(20) / 4, "same")[20:-20]
+    w = np.convolve(rng.normal(0, 1, T + 40), np.ones(20) / 4, "same")[20:-20]
+    mu = rng.normal(0, 1, E)
+    Y = k[:, None] * z[None] + mu[:, None] * w[None] + rng.normal(0, 0.5, (E, T))  # an unmodelled second mode
+    from rce_gtsam.model import ResponseModel
+    fit = ResponseModel().fit(Y)
+    b = variance_budget(Y, fit.residuals, fit.n_params, _floor(np.full(E, 0.25)), base_kappa=fit.kappa)
+    assert b.status == "misses"
+    assert b.unexplained > 5 * b.unexplained_se
+
+
+def test_diagnosis_json_carries_the_budget(tmp_path):
+    from rce_gtsam.diagnosis_io import diagnose_result, diagnosis_json
+    sim = simulate(SimulationConfig(seed=0, n_frames=400))
+    res = analyze(sim.tracks, sim.graph, preset="default", n_boot=0)
+    d = diagnose_result(res, effects=("offset",), n_folds=4)
+    data = json.loads(json.dumps(diagnosis_json(d, res)))
+    b = data["budget"]
+    assert set(b) >= {"total", "rank1", "effects", "noise_floor", "unexplained"}
+    assert len(data["budget_per_segment"]) == res.response.Y.shape[0]
+    assert data["status"] in {"adequate", "effect", "misses", "inconclusive"}
+    assert "[[Variance budget]]" in d.report()
+    parts = b["rank1"] + sum(b["effects"].values()) + b["noise_floor"] + b["unexplained"]
+    assert parts == pytest.approx(b["total"], rel=0.05)
