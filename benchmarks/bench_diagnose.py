@@ -122,7 +122,7 @@ def main() -> int:
     for eff in a.effects.split(","):
         hidden = None if eff == "none" else eff
         for mult in (mults if hidden is not None else [1.0]):
-            okf, orcf, ok, orc, conf, imp_v, imp_h, ceil, kb, ka, ts, tps, tru, nsr = 0, 0, 0, [], [], [], [], [], [], [], [], []
+            okf, orcf, ok, orc, conf, imp_v, imp_h, ceil, kb, ka, ts, tps, tru, nsr = 0, 0, 0, 0, 0, [], [], [], [], [], [], [], [], []
             for sd in range(a.first_seed, a.first_seed + a.seeds):
                 Y, W, s, k, y, tp, labels = case(hidden, sd, a.frames, a.matrices, mult)
                 t = time.perf_counter()

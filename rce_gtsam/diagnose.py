@@ -670,8 +670,10 @@ def explain(diag: Diagnosis) -> str:
         worst = sorted(b.per_segment, key=lambda r: -(r["unexplained"] or 0.0))[:3]
         where = ", ".join(f"{r['segment']} ({r['unexplained']:.2g} deg^2)" for r in worst if (r["unexplained"] or 0) > 0)
         if b.status == "noise":
-            return (head + " That is consistent with zero: what the rank-1 model leaves is tracking noise, and the model"
-                    " is adequate for these data." + closest)
+            upper = share(b.unexplained + 2 * b.unexplained_se)
+            return (head + f" That is consistent with zero: what the rank-1 model leaves is at the tracking-noise level,"
+                    f" and the model is adequate for these data — but with this record the unexplained share could still"
+                    f" be as large as {max(upper, 0):.0f}% (2 SE); a longer recording narrows that." + closest)
         if b.status == "misses":
             return (head + " That is significantly more than noise, and no candidate effect in the library explains it:"
                     f" the model misses real structure, most in segments {where or 'none singled out'}."
