@@ -16,6 +16,12 @@ sentence and :meth:`Effect.parameters`, implement :meth:`Effect.init` and :meth:
 override exactly one of the contribution hooks (``apply``/``apply_T`` for an operator on z, ``output``
 for a pointwise map of kappa*x, ``additive`` for a term added to the prediction). The model composes
 effects by chaining operators, applying the (single) output map and summing additive terms.
+
+What an effect may use while it fits is public: the :class:`~rce_gtsam.model.view.FitView` it is handed
+(prediction, partial targets, ``index_of(self)`` for its own slot) and the solver steps of
+:mod:`rce_gtsam.model.steps` (``sse_after_z`` for a grid start, ``profiled_sse`` to profile z out of a
+parameter, ``z_step``). The model never imports this package, so effects depend on the engine and not the
+other way round.
 """
 
 from __future__ import annotations

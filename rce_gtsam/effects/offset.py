@@ -46,7 +46,7 @@ class Offset(Effect):
     def update(self, state, view, frozen):
         if frozen:
             return state
-        i = _index(self, view)
+        i = view.index_of(self)
         target = view.partial_target(i) if i is not None else view.Y0 - view.predict()
         W = view.W
         t = view.tt[None, :]
@@ -69,9 +69,3 @@ class Offset(Effect):
         return {"rms_offset_deg": float(np.sqrt(np.mean(p["c"] ** 2))),
                 "rms_creep_deg": float(np.sqrt(np.mean(p["d"] ** 2)))}
 
-
-def _index(effect, view):
-    for i, e in enumerate(view.effects):
-        if e is effect:
-            return i
-    return None
