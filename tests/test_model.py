@@ -94,3 +94,20 @@ def test_bad_input_is_an_input_error():
     Y[1] = np.nan
     with pytest.raises(InputError, match="row 1"):
         ResponseModel().fit(Y)
+
+
+def test_correlated_config_runs_the_generalised_least_squares_fit():
+    from rce_gtsam.compliance import frame_precisions
+
+    Y, s, k, z, _ = synth(None, seed=5, T=200)
+    E, T = Y.shape
+    rng = np.random.default_rng(5)
+    A = rng.normal(0, 0.3, (T, E, E))
+    C = A @ np.transpose(A, (0, 2, 1)) + np.eye(E)[None] * 0.5  # (T, E, E) SPD covariances, deg^2
+    P = frame_precisions(C, np.isfinite(Y))
+    cfg = replace(get_preset("default").compliance, correlated=True)
+    ref = fit_rank1(Y, cfg, precision=P)
+    fit = ResponseModel(config=cfg).fit(Y, root_distance=s, precision=P)
+    np.testing.assert_array_equal(fit.kappa, ref.kappa * ref.direction)
+    with pytest.raises(ValueError, match="precision"):
+        ResponseModel(config=cfg).fit(Y, root_distance=s)
