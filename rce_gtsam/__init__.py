@@ -7,8 +7,7 @@ from .errors import InputError, RceError
 from .graph import Bend, BranchGraph, load_graph
 from .presets import PRESETS, Preset, get_preset
 from .tracks import Tracks, load_tracks
-
-__version__ = "0.1.0"
+from .version import __version__
 
 
 def analyze(*args, **kwargs):

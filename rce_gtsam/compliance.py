@@ -81,8 +81,9 @@ class BootstrapCI:
         return self.samples.shape[0]
 
 
-def _initial_z(Y: np.ndarray, W: np.ndarray) -> np.ndarray:
-    """Per-frame median over observed edges (mean as fallback), batched: Y, W (B, E, T) -> (B, T)."""
+def initial_z(Y: np.ndarray, W: np.ndarray) -> np.ndarray:
+    """Starting excitation of every fit: the per-frame median over observed edges (mean as fallback; 1 for
+    data without any excitation), batched: Y, W (B, E, T) -> (B, T) degrees."""
     masked = np.where(W, Y, np.nan)
     with warnings.catch_warnings():  # frames with no observed edge give NaN ("all-NaN slice"), set to 0 below
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -145,10 +146,10 @@ def _precision_shrinkage(terms: _PrecisionTerms, zm, k_hat, num, den, n, tau):
     lag = (_matvec(terms.YY1, mm) - k * (_matvec(terms.Ylead, zm[:, :-1] * mm) + _matvec(terms.Ylag, zm[:, 1:] * mm))
            + k2 * _matvec(terms.pair, zm[:, 1:] * zm[:, :-1] * mm))
     rho = np.clip(lag / np.maximum(sumsq, 1e-300), 0.0, 0.99)
-    return _log_normal_shrinkage(sigma2 / np.maximum(den, EPS), rho, k_hat, tau)
+    return log_normal_shrinkage(sigma2 / np.maximum(den, EPS), rho, k_hat, tau)
 
 
-def _log_normal_shrinkage(var_k_white, rho, k_hat, tau):
+def log_normal_shrinkage(var_k_white, rho, k_hat, tau):
     """tau^2 / (tau^2 + se^2(log kappa_hat)): se^2(kappa_hat) = ``var_k_white`` (its variance for
     independent frames) * (1 + rho) / (1 - rho) (AR(1) effective sample size), and the delta method
     se(log kappa_hat) = se(kappa_hat) / |kappa_hat|."""
@@ -157,17 +158,19 @@ def _log_normal_shrinkage(var_k_white, rho, k_hat, tau):
     return tau * tau / (tau * tau + se2_log)
 
 
-def _shrink_and_normalise(k_hat, shrink, n, signed: bool):
-    """The kappa step's end, shared by both fits: log|kappa| = shrink * log|kappa_hat| (kappa = 1 for an
-    edge without usable frames), then geometric-mean normalisation over edges with |kappa| > EPS.
-    Returns (kappa (B, E), big: the edges with |kappa| > EPS)."""
+def shrink_and_normalise(k_hat, shrink, n, signed: bool):
+    """The kappa step's end, shared by every fit (the two rank-1 solvers here and the extended model's
+    block-coordinate loop, :func:`rce_gtsam.model.steps.kappa_step`): log|kappa| = shrink * log|kappa_hat|
+    (kappa = 1 for an edge without usable frames), then geometric-mean normalisation over edges with
+    |kappa| > EPS. All arrays (B, E). Returns (kappa (B, E), big: the edges with |kappa| > EPS, gm (B,):
+    the geometric mean divided out)."""
     sign = np.where(k_hat < 0, -1.0, 1.0) if signed else np.ones_like(k_hat)
     mag = np.maximum(np.abs(k_hat) if signed else k_hat, EPS)
     k_new = np.where(n > 0, sign * np.exp(shrink * np.log(mag)), 1.0)
     big = np.abs(k_new) > EPS
     logs = np.where(big, np.log(np.maximum(np.abs(k_new), EPS)), 0.0)
     gm = np.exp(logs.sum(axis=1) / np.maximum(big.sum(axis=1), 1))
-    return np.where(big, k_new / gm[:, None], k_new), big
+    return np.where(big, k_new / gm[:, None], k_new), big, gm
 
 
 def _log_change(k_new, k_old):
@@ -187,7 +190,7 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
     Wf = W.astype(float) if weights is None else np.where(W, weights, 0.0)
     B, E, T = Y.shape
     lam = float(config.prior_strength)
-    z = _initial_z(Y, W)
+    z = initial_z(Y, W)
     kappa = np.ones((B, E))
     active = np.ones(B, dtype=bool)
     iterations = np.zeros(B, dtype=int)
@@ -219,7 +222,7 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
                                           float(config.prior_sd_log))
         else:
             shrink = n / (n + lam)
-        k_new, big = _shrink_and_normalise(k_hat, shrink, n, signed)
+        k_new, big, _ = shrink_and_normalise(k_hat, shrink, n, signed)
         # z step over edges observed at t with |kappa| > EPS
         mk = big.astype(float)
         znum = _matvec_t(WYa, k_new * mk)
@@ -299,7 +302,7 @@ def _gls_shrinkage(P, Y0, W, z, k_hat, A_inv_diag, tau):
     sigma2 = np.maximum(chi2, 0.0) / dof
     lag = np.sum(R[:, :, 1:] * R[:, :, :-1], axis=2)
     rho = np.clip(lag / np.maximum(np.sum(R * R, axis=2), 1e-300), 0.0, 0.99)
-    return _log_normal_shrinkage(A_inv_diag * sigma2[:, None], rho, k_hat, tau)
+    return log_normal_shrinkage(A_inv_diag * sigma2[:, None], rho, k_hat, tau)
 
 
 def fit_rank1_gls_batch(Y: np.ndarray, config: ComplianceConfig, precision: np.ndarray):
@@ -324,7 +327,7 @@ def fit_rank1_gls_batch(Y: np.ndarray, config: ComplianceConfig, precision: np.n
     Pflat = P.reshape(P.shape[:-2] + (E * E,))  # (..., T, E*E)
     PY = _apply_precision(P, np.transpose(Y0, (0, 2, 1)))  # (B, T, E): P_t y_t, fixed over iterations
     lam, tau = float(config.prior_strength), float(config.prior_sd_log)
-    z = _initial_z(Y, W)
+    z = initial_z(Y, W)
     kappa = np.ones((B, E))
     n_used = np.zeros((B, E))
     shrink = np.ones((B, E))
@@ -349,7 +352,7 @@ def fit_rank1_gls_batch(Y: np.ndarray, config: ComplianceConfig, precision: np.n
             s = _gls_shrinkage(Pa, Y0a, Wa, zm, k_hat, A_inv_diag, tau)
         else:
             s = n / (n + lam)
-        k_new, big = _shrink_and_normalise(k_hat, s, n, signed=True)
+        k_new, big, _ = shrink_and_normalise(k_hat, s, n, signed=True)
         km = k_new * big
         kPk = np.matmul(Pfa, (km[:, :, None] * km[:, None, :]).reshape(a.size, E * E, 1))[..., 0]  # (b, T)
         kPy = np.einsum("be,bte->bt", km, PYa)
@@ -533,14 +536,29 @@ def _phase_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, fit: Rank
     factor = small_sample_factor(n_eff)
     # deviations from the resamples' own median: data made from an already shrunk kappa_hat and shrunk
     # again sit further toward 1; that offset is the estimator's, not kappa's, uncertainty
-    dev = np.log(np.maximum(samples, EPS))
-    dev -= np.median(dev, axis=0)
-    # a shrunk estimate s log kappa_hat varies s times as much as log kappa_hat, while the posterior of the
-    # log-normal prior it comes from has sqrt(s) times its spread: widen by 1 / sqrt(s) (1 for well-measured
-    # edges; a stiff edge buried in noise is pulled toward 1 and gets the prior's width)
-    post = 1.0 / np.sqrt(np.clip(fit.shrinkage, 1e-6, 1.0))
-    samples = np.maximum(fit.kappa, EPS) * np.exp(factor * post * dev)
-    low, high = np.percentile(samples, [2.5, 97.5], axis=0)
+    low, high, samples = interval_about(fit.kappa, samples, factor * posterior_widening(fit.shrinkage))
     return BootstrapCI(low=low, high=high, samples=samples, block_length=0, seed=config.seed,
                        method="phase", effective_samples=n_eff, width_factor=factor)
+
+
+def posterior_widening(shrinkage: np.ndarray) -> np.ndarray:
+    """(E,) 1 / sqrt(s_e) for edges shrunk by s_e: a shrunk estimate s log kappa_hat varies s times as much as
+    log kappa_hat, while the posterior of the log-normal prior it comes from has sqrt(s) times its spread
+    (1 for well-measured edges; a stiff edge buried in noise is pulled toward 1 and gets the prior's width)."""
+    return 1.0 / np.sqrt(np.clip(shrinkage, 1e-6, 1.0))
+
+
+def interval_about(kappa_hat: np.ndarray, samples: np.ndarray, scale) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """95 % interval of kappa from resampled estimates, placed about the estimate ``kappa_hat`` (E,).
+
+    Each edge's resampled log-kappa deviations from the resamples' own median (data made from an already
+    shrunk kappa_hat and shrunk again sit further toward 1: that offset is the estimator's, not kappa's,
+    uncertainty) are multiplied by ``scale`` (scalar or (E,)) and put around kappa_hat. The median deviation
+    is 0, so the interval always contains kappa_hat. Returns (low (E,), high (E,), the placed samples
+    (n_boot, E))."""
+    dev = np.log(np.maximum(samples, EPS))
+    dev -= np.median(dev, axis=0)
+    placed = np.maximum(kappa_hat, EPS) * np.exp(scale * dev)
+    low, high = np.percentile(placed, [2.5, 97.5], axis=0)
+    return low, high, placed
 

@@ -52,7 +52,8 @@ from .diagnosis.budget import VarianceBudget, variance_budget
 from .diagnosis.noise_floor import NoiseFloor
 from .diagnosis.statistics import ResidualContext
 from .diagnosis.sysid import ResidualAnalysis, residual_analysis
-from .model import ModelFit, ResponseModel, validate_inputs
+from .model import ModelFit, ResponseModel, render_fit_report, validate_inputs
+from .presets import ComplianceConfig
 
 BLOCK_LENGTH = 25  # frames: the moving-block bootstrap's block length (reference §2.9)
 FULL_ITER = 25  # block-coordinate sweeps of a candidate's fit on all frames (from the baseline fit)
@@ -277,8 +278,8 @@ def heldout_errors(model: ResponseModel, full: ModelFit, Y, W, s, blocks, halves
         st0 = {eff.name: _blank_latents(st, lo, hi) for eff, st in zip(full.model.effects, full.states)}
         # the same zero-mean prior on z as for the held-out estimate below, from the full fit: frames of the
         # left-out window that training data still touch weakly (through a lag) must not blow up
-        tr = model._fit(Ytr, Wtr, s, start=(full.kappa.copy(), z0, st0), max_iter=cv_iter, refit_shared=False,
-                        z_ridge=full_ridge)
+        tr = model.solve(Ytr, Wtr, s, start=(full.kappa.copy(), z0, st0), max_iter=cv_iter, refit_shared=False,
+                         z_ridge=full_ridge)
         free = np.zeros(T, bool)
         free[lo:hi] = True
         # prior on the held-out z: zero mean, the training z's variance; precision in weighted-SSE units
@@ -298,8 +299,8 @@ def heldout_errors(model: ResponseModel, full: ModelFit, Y, W, s, blocks, halves
             Yte[np.ix_(A, np.arange(lo, hi))] = Y[np.ix_(A, np.arange(lo, hi))]
             Wte = np.where(np.isfinite(Yte), W, 0.0)
             st = {eff.name: s_ for eff, s_ in zip(model.effects, tr.states)}
-            est = model._fit(Yte, Wte, s, start=(tr.kappa.copy(), tr.z.copy(), st), frozen=True, free=free,
-                             max_iter=cv_iter, z_ridge=z_ridge)
+            est = model.solve(Yte, Wte, s, start=(tr.kappa.copy(), tr.z.copy(), st), frozen=True, free=free,
+                              max_iter=cv_iter, z_ridge=z_ridge)
             pred = est.predict()[np.ix_(B, np.arange(a, b))]
             y = Y[np.ix_(B, np.arange(a, b))]
             ok = np.isfinite(y)
@@ -372,7 +373,7 @@ def worst_edges_and_frames(fit: ModelFit, labels, block_length: int, frames=None
 def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8, seed: int = 0,
              block_length: int = BLOCK_LENGTH, prior_strength: float = 12.0, response: str = "signed",
              alpha: float = 0.05, edge_labels=None, frames=None, edge_nodes=None,
-             noise_floor: NoiseFloor | None = None) -> Diagnosis:
+             config: ComplianceConfig | None = None, noise_floor: NoiseFloor | None = None) -> Diagnosis:
     """Diagnose which physical effect the rank-1 model misses.
 
     Y: (E, T) bend response in degrees (NaN = missing/outlier); weights: (E, T) >= 0 or None;
@@ -384,13 +385,18 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8
     settings (ComplianceConfig); alpha: family-wise significance level of the verdict; edge_nodes: per row,
     the tracked node ids its bend angle is computed from (default: parsed from ``"joint->child"`` edge
     labels, else rows are taken as a chain in root-distance order) — held-out edge sets never share one.
+    config: the whole compliance config of the core model (the analysis preset's: the baseline is then the
+    fit ``rce analyze`` reports); without it, ``prior_strength`` and ``response`` with count shrinkage.
     """
     Y, W, s = validate_inputs(Y, weights, root_distance)
     E, T = Y.shape
     labels = list(edge_labels) if edge_labels is not None else [str(i) for i in range(E)]
     cands = _resolve_effects(effects, E)
-    base_model = ResponseModel(prior_strength=prior_strength, response=response)
-    base = base_model._fit(Y, W, s)
+    if config is None:
+        config = ComplianceConfig(response=response, prior_strength=prior_strength, n_iter=300, tol=1e-5)
+    prior_strength, response = config.prior_strength, config.response
+    base_model = ResponseModel(config=config)
+    base = base_model.solve(Y, W, s)
     blocks = fold_blocks(T, n_folds, block_length)
     shared = shared_node_matrix(s, edge_nodes if edge_nodes is not None else edge_nodes_from_labels(labels))
     split = node_disjoint_split(s, shared, seed)
@@ -404,8 +410,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8
         model = base_model + eff
         # iteration caps: the full fit (the only place shared parameters are fitted) starts from the
         # converged baseline; fold refits start from the full fit, so a few block sweeps suffice there
-        fulls.append((eff, model, model._fit(Y, W, s, start=(base.kappa.copy(), base.z.copy(), {}),
-                                             max_iter=FULL_ITER)))
+        fulls.append((eff, model, model.solve(Y, W, s, start=(base.kappa.copy(), base.z.copy(), {}),
+                                              max_iter=FULL_ITER)))
     memory = max([0.0] + [e.memory_frames(st) for _, _, f in fulls for e, st in zip(f.model.effects, f.states)])
     gap = max(int(block_length), int(math.ceil(memory)))
     b_sse, b_cnt, b_sse_t, b_cnt_t = heldout_errors(base_model, base, Y, W, s, blocks, halves, gap, per_frame=True)
@@ -709,47 +715,6 @@ def explain(diag: Diagnosis) -> str:
         lines.append("Also supported (partly mimicking the same misfit, or further effects): " + ", ".join(others)
                      + "; refit with the verdict effect added and diagnose again to separate them.")
     return " ".join(lines)
-
-
-def render_fit_report(fit: ModelFit, edge_labels=None, max_rows: int = 40) -> str:
-    """lmfit-style report of one fit: model, statistics, variables with standard errors."""
-    E = len(fit.kappa)
-    labels = list(edge_labels) if edge_labels is not None else [str(i) for i in range(E)]
-    out = ["[[Model]]", f"    {fit.model.name}"]
-    for eff in fit.model.effects:
-        out.append(f"    {eff.name}: {eff.equation}")
-    out += ["[[Fit Statistics]]",
-            f"    # iterations       = {fit.iterations} ({'converged' if fit.converged else 'NOT converged'})",
-            f"    # data points      = {fit.n_obs}",
-            f"    # variables        = {fit.n_params}",
-            f"    weighted SSE       = {fit.wsse:.6g}",
-            f"    RMSE               = {fit.rmse:.4f} deg",
-            f"    R-squared          = {fit.r_squared:.4f}",
-            f"    Akaike info crit   = {fit.aic:.2f}",
-            f"    Bayesian info crit = {fit.bic:.2f}",
-            f"    residual lag-1 autocorrelation = {fit.residual_autocorrelation():.3f}",
-            "[[Variables]]  (standard errors conditional on z, inflated for residual autocorrelation)"]
-    rows = []
-    for key, pv in fit.params.items():
-        name = key
-        if key.startswith("kappa["):
-            i = int(key[6:-1])
-            name = f"kappa[{labels[i]}]"
-        elif key.endswith("]"):
-            base, idx = key[:-1].split("[")
-            name = f"{base}[{labels[int(idx)]}]"
-        pct = f" ({100 * pv.stderr / abs(pv.value):.1f}%)" if pv.value and np.isfinite(pv.stderr) else ""
-        rows.append(f"    {name:<28} {pv.value: .5g} +/- {pv.stderr:.2g} {pv.unit}{pct}")
-    eff_rows = [r for r in rows if not r.strip().startswith("kappa")]
-    k_rows = [r for r in rows if r.strip().startswith("kappa")]
-    shown = eff_rows[:max_rows] + k_rows[:max_rows]
-    out += shown
-    if len(eff_rows) + len(k_rows) > len(shown):
-        out.append(f"    ... ({len(eff_rows) + len(k_rows) - len(shown)} more)")
-    for eff, st in zip(fit.model.effects, fit.states):
-        for k_, v in eff.describe(st).items():
-            out.append(f"    {eff.name}.{k_:<20} = {v:.4g}")
-    return "\n".join(out)
 
 
 def render_diagnosis_report(diag: Diagnosis) -> str:

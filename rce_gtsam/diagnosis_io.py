@@ -58,8 +58,8 @@ def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = N
 
     Runs :func:`rce_gtsam.diagnose.diagnose` on ``result.response`` (Y in degrees, inverse-variance
     weights when the preset's compliance fit is weighted, normalised root distance, edge labels
-    ``"joint->child"``, video frame of each column) with the preset's block length, shrinkage and response
-    convention. ``effects``: candidate names (``"a,b"`` or a sequence; default all five); ``seed``: seed of
+    ``"joint->child"``, video frame of each column) with the preset's block length and whole compliance config (so the
+    baseline is the rank-1 fit ``rce analyze`` reports). ``effects``: candidate names (``"a,b"`` or a sequence; default all five); ``seed``: seed of
     the stratified edge split; ``n_folds``: cross-validation blocks (default: diagnose's 8).
     Returns a :class:`~rce_gtsam.diagnose.Diagnosis`.
     """
@@ -71,7 +71,7 @@ def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = N
     kw = {} if n_folds is None else {"n_folds": int(n_folds)}
     return diagnose(resp.Y, weights=resp.weights if cfg.weighted else None, root_distance=resp.root_distance,
                     effects=list(names) if names is not None else None, seed=int(seed),
-                    block_length=cfg.block_length, prior_strength=cfg.prior_strength, response=cfg.response,
+                    block_length=cfg.block_length, config=cfg,
                     edge_labels=[f"{j}->{c}" for j, c in resp.edges], frames=resp.frames,
                     edge_nodes=[result.bending.bends[k].nodes for k in resp.bend_rows],
                     noise_floor=noise_floor_of(result), **kw)

@@ -15,10 +15,11 @@ from pathlib import Path
 import numpy as np
 
 from .bending import BendingResult, compute_bending
-from .compliance import BootstrapCI, Rank1Fit, bootstrap_kappa, fit_rank1, frame_precisions
+from .compliance import BootstrapCI, Rank1Fit, bootstrap_kappa, frame_precisions
 from .extended_fit import ExtendedBootstrapInfo, ExtendedFit, bootstrap_extended, fit_extended
 from .geometry import Geometry, compute_geometry, edge_lengths
 from .graph import BranchGraph, load_graph
+from .model import ResponseModel
 from .presets import Preset, get_preset
 from .smooth import SmoothedTracks, smooth_tracks
 from .tracks import Tracks, load_tracks
@@ -276,8 +277,9 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     boot_info = None
     if effects:
         fit = fit_extended(response.Y, effects, preset.compliance, weights, response.root_distance)
-    else:
-        fit = fit_rank1(response.Y, preset.compliance, weights, precision)
+    else:  # the rank-1 fit is the response model without effects (the diagnosis baseline is the same fit)
+        fit = ResponseModel(config=preset.compliance).fit(response.Y, weights, response.root_distance,
+                                                          precision=precision).core
     timings["fit"] = time.perf_counter() - t
     t = time.perf_counter()
     if effects:

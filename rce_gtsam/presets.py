@@ -7,6 +7,7 @@ same code path — a preset only changes numbers and switches, never which funct
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -101,6 +102,21 @@ class ComplianceConfig:
     block_length: int = 25
     bootstrap: Literal["block", "phase"] = "block"
     seed: int = 0
+
+    def __post_init__(self):
+        """Reject a value no fit can use (ValueError naming the field), before any work."""
+        choices = {"response": ("abs", "signed"), "shrinkage": ("count", "precision"), "bootstrap": ("block", "phase")}
+        for name, allowed in choices.items():
+            if getattr(self, name) not in allowed:
+                raise ValueError(f"compliance.{name} must be one of {list(allowed)}, got {getattr(self, name)!r}")
+        bounds = {"prior_strength": (0, True), "prior_sd_log": (0, False), "n_iter": (1, True), "tol": (0, False),
+                  "n_boot": (0, True), "block_length": (1, True), "seed": (0, True)}  # (lower, inclusive)
+        for name, (low, inclusive) in bounds.items():
+            value = getattr(self, name)
+            number = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+            if not (number and (value >= low if inclusive else value > low)):
+                raise ValueError(f"compliance.{name} must be a finite number {'>=' if inclusive else '>'} {low}, "
+                                 f"got {value!r}")
 
 
 @dataclass(frozen=True)

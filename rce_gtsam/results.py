@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from . import __version__
+from .version import __version__
 from .jsonutil import jsonable as _jsonable
 
 

@@ -85,7 +85,7 @@ class Step(Effect):
     def update(self, state, view, frozen):
         if frozen:
             return state
-        i = next((k for k, e in enumerate(view.effects) if e is self), None)
+        i = view.index_of(self)
         target = view.partial_target(i) if i is not None else view.Y0 - view.predict()
         R = np.where(view.W > 0, target, np.nan)  # what this term must explain
         best = None

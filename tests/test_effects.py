@@ -96,7 +96,7 @@ def test_a_long_tip_lag_is_within_reach_of_the_default_delay():
 
 def test_delay_z_step_is_the_exact_least_squares_solution():
     """The banded sparse z solve equals a dense least-squares solve of the same step."""
-    from rce_gtsam.model import _operator_z_solve
+    from rce_gtsam.model import operator_z_solve
     Y, s, k, z = _delay_data(E=5, T=80)
     rng = np.random.default_rng(3)
     W = (rng.uniform(size=Y.shape) > 0.1).astype(float)
@@ -105,7 +105,7 @@ def test_delay_z_step_is_the_exact_least_squares_solution():
                 [{"params": {"tau": np.array(4.3)}, "latents": {}}])
     C = np.broadcast_to(k[:, None], Y.shape)
     r = Y * W
-    dz = _operator_z_solve(v, C, r, np.ones(80, bool))
+    dz = operator_z_solve(v, C, r, np.ones(80, bool))
     L = eff.sparse_operator(v.states[0], v).toarray()  # (E*T, T)
     sw = np.sqrt(W.ravel())
     ref, *_ = np.linalg.lstsq(sw[:, None] * C.ravel()[:, None] * L, sw * r.ravel(), rcond=None)
@@ -139,7 +139,7 @@ def test_second_mode_is_found_against_correlated_node_noise():
 
     sim = simulate(SimulationConfig(effects=("second_mode",), seed=0, n_frames=900))
     r = analyze(sim.tracks, sim.graph, preset="default", n_boot=0).response
-    fit = (ResponseModel(response="signed") + effects.SecondMode())._fit(r.Y, r.weights, r.root_distance)
+    fit = (ResponseModel(response="signed") + effects.SecondMode()).fit(r.Y, r.weights, r.root_distance)
     w = fit.states[0]["latents"]["w"]
     w_true = np.asarray(sim.effect_params["second_mode"]["w"])[r.frames]
     assert abs(np.corrcoef(w, w_true)[0, 1]) > 0.8

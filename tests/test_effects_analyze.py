@@ -50,14 +50,30 @@ def test_offset_effect_lowers_fit_error_and_kappa_error(offset_sim, tmp_path, ca
     ok = ext.dropna(subset=["kappa"])
     assert np.isfinite(ok[["kappa_ci_low", "kappa_ci_high"]].to_numpy()).all()
     assert (ok["kappa_ci_low"] <= ok["kappa_ci_high"]).all()
+    # the intervals of the extended model contain its estimates (they are placed about them)
+    assert ((ok["kappa_ci_low"] <= ok["kappa"]) & (ok["kappa"] <= ok["kappa_ci_high"])).all()
     rep = json.loads((tmp_path / "ext" / "report.json").read_text())
     eff = rep["effects"]
     assert eff["names"] == ["offset"] and eff["model"] == "rank1 + offset"
     assert eff["fit"]["rmse_deg"] < eff["fit"]["baseline_rank1_rmse_deg"]
     c0 = eff["parameters"]["offset"]["c[0]"]
     assert c0["unit"] == "deg" and c0["stderr"] > 0
-    assert eff["bootstrap"]["n_boot"] == 40 and "multiplicities" in eff["bootstrap"]["scheme"]
+    assert eff["bootstrap"]["n_boot"] == 40 and "phase-randomised" in eff["bootstrap"]["scheme"]
     assert "effects" not in json.loads((tmp_path / "plain" / "report.json").read_text())
+
+
+def test_extended_model_starts_from_the_analysis_fit_and_its_cis_contain_the_estimates(offset_sim):
+    """One engine: the extended model's starting (rank-1) fit is the plain analysis' fit, under both presets;
+    the paper preset's block bootstrap (frame multiplicities) also gives intervals about the estimate."""
+    args = (offset_sim / "tracks.csv", offset_sim / "graph.json")
+    for preset in ("default", "paper"):
+        plain = rce_gtsam.analyze(*args, preset=preset, n_boot=0)
+        ext = rce_gtsam.analyze(*args, preset=preset, n_boot=30, effects=("offset",))
+        plain_rmse = float(np.sqrt(np.nanmean((plain.response.Y - plain.fit.predict()) ** 2)))
+        assert ext.fit.baseline_rmse_deg == pytest.approx(plain_rmse, rel=1e-12)
+        k = ext.fit.kappa
+        assert ((ext.ci.low <= k) & (k <= ext.ci.high)).all(), (preset, ext.ci.low, k, ext.ci.high)
+    assert "multiplicities" in ext.effects_report()["bootstrap"]["scheme"]
 
 
 def test_extended_fit_keeps_the_rank1_interface(chain):

@@ -1,3 +1,5 @@
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -5,18 +7,62 @@ from rce_gtsam import effects
 from rce_gtsam.compliance import fit_rank1
 from rce_gtsam.errors import InputError
 from rce_gtsam.model import ResponseModel
-from rce_gtsam.presets import ComplianceConfig
+from rce_gtsam.presets import ComplianceConfig, get_preset
 
 from _effect_data import synth
 
 
-def test_baseline_matches_published_rank1_fit():
+@pytest.mark.parametrize("preset", ["paper", "default"])
+def test_model_without_effects_is_the_rank1_fit(preset):
+    """One engine: ResponseModel with no effect runs the rank-1 solver with the whole config (shrinkage,
+    prior_sd_log, n_iter, tol, weights), so its kappa is the analysis' kappa exactly."""
     Y, s, k, z, _ = synth(None, seed=3)
-    cfg = ComplianceConfig(response="signed", n_iter=500, tol=1e-8)
+    cfg = get_preset(preset).compliance
+    if cfg.response == "abs":
+        Y = np.abs(Y)
+    w = np.random.default_rng(0).uniform(0.5, 2.0, Y.shape)
+    ref = fit_rank1(Y, cfg, w)
+    fit = ResponseModel(config=cfg).fit(Y, weights=w, root_distance=s)
+    np.testing.assert_array_equal(fit.kappa, ref.kappa * ref.direction)
+    np.testing.assert_array_equal(fit.z, ref.z)
+    np.testing.assert_array_equal(fit.shrinkage, ref.shrinkage)
+    assert fit.core is not None and fit.iterations == ref.iterations
+
+
+@pytest.mark.parametrize("shrinkage", ["count", "precision"])
+def test_block_coordinate_loop_converges_to_the_rank1_fit(shrinkage):
+    """The effects' loop (forced here by a warm start) takes the rank-1 solver's kappa step: with no effect
+    it converges to the same kappa, under either shrinkage of log kappa."""
+    from rce_gtsam.compliance import initial_z
+    from rce_gtsam.model import validate_inputs
+
+    Y, s, k, z, _ = synth(None, seed=4)
+    cfg = ComplianceConfig(response="signed", shrinkage=shrinkage, n_iter=2000, tol=1e-11)
     ref = fit_rank1(Y, cfg)
-    fit = ResponseModel(prior_strength=cfg.prior_strength, tol=1e-8, max_iter=500).fit(Y, root_distance=s)
-    np.testing.assert_allclose(np.abs(fit.kappa), ref.kappa, rtol=1e-4)
-    assert np.isclose(np.exp(np.mean(np.log(np.abs(fit.kappa)))), 1.0)
+    Yv, W, sv = validate_inputs(Y, None, s)
+    start = (np.ones(len(s)), initial_z(Yv[None], (W > 0)[None])[0], {})
+    loop = ResponseModel(config=cfg).solve(Yv, W, sv, start=start)
+    assert loop.core is None and loop.converged
+    np.testing.assert_allclose(loop.kappa, ref.kappa * ref.direction, rtol=1e-6)
+    np.testing.assert_allclose(loop.shrinkage, ref.shrinkage, rtol=1e-6)
+
+
+def test_model_takes_and_validates_the_whole_config():
+    cfg = ComplianceConfig(response="signed", shrinkage="precision", prior_sd_log=0.5, n_iter=7, tol=1e-3)
+    m = ResponseModel(config=cfg) + effects.Offset()
+    assert m.config == cfg and m.without_effects().config == cfg
+    assert ResponseModel(config=cfg, max_iter=9).config.n_iter == 9
+    assert ResponseModel().config == get_preset("default").compliance
+    with pytest.raises(ValueError, match="compliance.tol"):
+        ResponseModel(config=cfg, tol=0.0)
+    with pytest.raises(ValueError, match="prior_sd_log"):
+        ComplianceConfig(prior_sd_log=-1.0)
+    with pytest.raises(TypeError):
+        ResponseModel(config={"response": "signed"})
+    with pytest.raises(TypeError):
+        ResponseModel() + object()
+    with pytest.raises(ValueError, match="correlated"):
+        ResponseModel([effects.Offset()], replace(cfg, correlated=True))
 
 
 def test_composition_and_immutability():
@@ -48,3 +94,20 @@ def test_bad_input_is_an_input_error():
     Y[1] = np.nan
     with pytest.raises(InputError, match="row 1"):
         ResponseModel().fit(Y)
+
+
+def test_correlated_config_runs_the_generalised_least_squares_fit():
+    from rce_gtsam.compliance import frame_precisions
+
+    Y, s, k, z, _ = synth(None, seed=5, T=200)
+    E, T = Y.shape
+    rng = np.random.default_rng(5)
+    A = rng.normal(0, 0.3, (T, E, E))
+    C = A @ np.transpose(A, (0, 2, 1)) + np.eye(E)[None] * 0.5  # (T, E, E) SPD covariances, deg^2
+    P = frame_precisions(C, np.isfinite(Y))
+    cfg = replace(get_preset("default").compliance, correlated=True)
+    ref = fit_rank1(Y, cfg, precision=P)
+    fit = ResponseModel(config=cfg).fit(Y, root_distance=s, precision=P)
+    np.testing.assert_array_equal(fit.kappa, ref.kappa * ref.direction)
+    with pytest.raises(ValueError, match="precision"):
+        ResponseModel(config=cfg).fit(Y, root_distance=s)

@@ -161,7 +161,7 @@ def budget_of(result, z_crit: float = 2.0) -> VarianceBudget:
     from .noise_floor import noise_floor_of
 
     r, cfg = result.response, result.preset.compliance
-    fit = ResponseModel(prior_strength=cfg.prior_strength, response=cfg.response).fit(
-        r.Y, weights=r.weights if cfg.weighted else None, root_distance=r.root_distance)
+    fit = ResponseModel(config=cfg).fit(r.Y, weights=r.weights if cfg.weighted else None,
+                                        root_distance=r.root_distance)
     return variance_budget(r.Y, fit.residuals, fit.n_params, noise_floor_of(result),
                            labels=[f"{j}->{c}" for j, c in r.edges], z_crit=z_crit, base_kappa=fit.kappa)

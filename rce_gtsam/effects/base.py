@@ -20,6 +20,12 @@ For the diagnosis, give it :meth:`Effect.evidence` (its residual signature with 
 diagnosis, ``analyze(effects=...)``, the CLI). The model composes effects by chaining operators, applying
 the (single) output map and summing additive terms. ``tests/test_effect_conformance.py`` checks every
 registered effect against this protocol.
+
+What an effect may use while it fits is public: the :class:`~rce_gtsam.model.view.FitView` it is handed
+(prediction, partial targets, ``index_of(self)`` for its own slot) and the solver steps of
+:mod:`rce_gtsam.model.steps` (``sse_after_z`` for a grid start, ``profiled_sse`` to profile z out of a
+parameter, ``z_step``). The model never imports this package, so effects depend on the engine and not the
+other way round.
 """
 
 from __future__ import annotations

@@ -16,8 +16,8 @@ from scipy.optimize import minimize_scalar
 import math
 
 from ..diagnosis.statistics import per_edge_regression, slope_vs
+from ..model.steps import profiled_sse, sse_after_z
 from .base import Effect, Parameter, scalar
-from .offset import _index
 
 
 class Delay(Effect):
@@ -95,7 +95,7 @@ class Delay(Effect):
         best, best_err = 0.0, np.inf
         for tau in grid:
             st = {"params": {"tau": np.array(tau)}, "latents": {}}
-            err = _sse_after_z(view, i, st)
+            err = sse_after_z(view, i, st)
             if err < best_err:
                 best, best_err = tau, err
         return {"params": {"tau": np.array(best)}, "latents": {}}
@@ -103,7 +103,7 @@ class Delay(Effect):
     def update(self, state, view, frozen):
         if frozen:
             return state
-        i = _index(self, view)
+        i = view.index_of(self)
         t0 = scalar(state["params"]["tau"])
         lo, hi = max(-self.max_lag, t0 - 3.0), min(self.max_lag, t0 + 3.0)
 
@@ -147,24 +147,3 @@ class Delay(Effect):
                 f"grows with root distance at {statistics.get('lag_slope_frames', 0):.2f} frames per branch length "
                 f"(t = {statistics.get('lag_slope_t', 0):.1f}).")
 
-
-
-def _sse_after_z(view, index, state) -> float:
-    """Weighted SSE of the model with effect ``index`` in ``state`` after one exact z step (grid search)."""
-    from ..model import FitView
-    states = list(view.states) + [state]
-    model = getattr(view, "full_model", view.model)
-    sub = model._replace(model.effects[: index + 1])
-    v = FitView(sub, view.Y0, view.W, view.s, view.free, view.kappa.copy(), view.z.copy(), states)
-    sub._z_step(v)
-    return v.wsse()
-
-
-def profiled_sse(view, index, state) -> float:
-    """Weighted SSE with effect ``index`` in ``state`` after an exact z step (kappa and others fixed)."""
-    from ..model import FitView
-    states = list(view.states)
-    states[index] = state
-    v = FitView(view.model, view.Y0, view.W, view.s, view.free, view.kappa.copy(), view.z.copy(), states)
-    view.model._z_step(v)
-    return v.wsse()

@@ -21,9 +21,8 @@ from scipy.optimize import least_squares
 import math
 
 from ..diagnosis.statistics import per_edge_regression, slope_vs
+from ..model.steps import sse_after_z
 from .base import Effect, Parameter, scalar
-from .delay import _sse_after_z
-from .offset import _index
 
 OMEGA_MIN, OMEGA_MAX = 0.05, 2 * np.pi  # rad/frame: a period of ~125 frames .. 1 frame (quasi-static)
 ZETA_MIN, ZETA_MAX = 0.03, 2.0
@@ -148,7 +147,7 @@ class Dynamics(Effect):
                 cands.append((min(wt * ratio, OMEGA_MAX), wt, 0.2))
         for wr, wt, zt in cands:
             st = self._state((np.log(wr), np.log(wt), zt))
-            err = _sse_after_z(view, i, st)
+            err = sse_after_z(view, i, st)
             if err < best_err:
                 best, best_err = st, err
         return best
@@ -156,7 +155,7 @@ class Dynamics(Effect):
     def update(self, state, view, frozen):
         if frozen:
             return state
-        i = _index(self, view)
+        i = view.index_of(self)
         p = state["params"]
         lo = [np.log(OMEGA_MIN), np.log(OMEGA_MIN), ZETA_MIN]
         hi = [np.log(OMEGA_MAX), np.log(OMEGA_MAX), ZETA_MAX]

@@ -15,9 +15,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..model.steps import sse_after_z
 from .base import Effect, Parameter, scalar
-from .delay import _sse_after_z
-from .offset import _index
 
 
 class Nonlinear(Effect):
@@ -70,7 +69,7 @@ class Nonlinear(Effect):
         best, best_err = 0.0, np.inf
         for c in grid:
             st = {"params": {"c": np.array(c)}, "latents": {}}
-            err = _sse_after_z(view, i, st)
+            err = sse_after_z(view, i, st)
             if err < best_err:
                 best, best_err = c, err
         return {"params": {"c": np.array(best)}, "latents": {}, "scale": q}
@@ -78,7 +77,7 @@ class Nonlinear(Effect):
     def update(self, state, view, frozen):
         if frozen:
             return state
-        i = _index(self, view)
+        i = view.index_of(self)
         q = state.get("scale", 1.0)
         unit = 1.0 / q ** 2  # optimise c in units of 1/q^2 so the problem is well scaled
         lo = 0.0 if self.form == "saturation" else -np.inf

@@ -50,7 +50,7 @@ class Offset(Effect):
     def update(self, state, view, frozen):
         if frozen:
             return state
-        i = _index(self, view)
+        i = view.index_of(self)
         target = view.partial_target(i) if i is not None else view.Y0 - view.predict()
         W = view.W
         t = view.tt[None, :]
@@ -102,10 +102,3 @@ class Offset(Effect):
                 f"{statistics.get('rms_trend_deg', 0):.2f} deg over the record (max |t| "
                 f"{statistics.get('max_abs_trend_t', 0):.1f}).")
 
-
-
-def _index(effect, view):
-    for i, e in enumerate(view.effects):
-        if e is effect:
-            return i
-    return None

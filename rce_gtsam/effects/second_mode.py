@@ -22,7 +22,6 @@ from functools import lru_cache
 import numpy as np
 
 from .base import Effect, Parameter
-from .offset import _index
 
 
 class SecondMode(Effect):
@@ -46,7 +45,7 @@ class SecondMode(Effect):
         return ("w",)
 
     def init(self, view) -> dict:
-        i = _index(self, view)
+        i = view.index_of(self)
         R = view.Y0 - view.predict() if i is None else view.partial_target(i)
         W = view.W
         corr = noise_correlation(np.where(W > 0, R, np.nan))
@@ -68,7 +67,7 @@ class SecondMode(Effect):
         return state["params"]["mu"][:, None] * state["latents"]["w"][None, :]
 
     def update(self, state, view, frozen):
-        i = _index(self, view)
+        i = view.index_of(self)
         R = view.partial_target(i)
         return self._als(state, R, view.W, view.free, frozen)
 

@@ -9,13 +9,12 @@ from __future__ import annotations
 
 import rerun.blueprint as rrb
 
-from .scene import AnalysisView
+from .scene import AnalysisView, worst_edges
 
 
 def build_blueprint(view: AnalysisView, diagnosis=None, video: bool = False, n_edges: int = 3) -> rrb.Blueprint:
     """Blueprint for a recording of ``view`` (and ``diagnosis``). ``n_edges``: how many of the worst-fitted
     edges the bending and residual plots show first (every edge is in the recording)."""
-    from .rerun_log import worst_edges
     worst = [view.edge_name(e) for e in worst_edges(view, n_edges)]
     image = rrb.Spatial2DView(origin="image", name="Video, tracks and skeletons" if video else "Tracks and skeletons")
     series = rrb.Vertical(

@@ -23,22 +23,14 @@ diagnosis carries the extended model's prediction.
 
 from __future__ import annotations
 
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 
+from .style import mpl_style as _style
+from .style import save_png as _save
 from .style import (EXCITATION_COLOR, FIG_WIDTH_IN, RAW_COLOR, RC, RESIDUAL_CMAP, SMOOTHED_COLOR,
                     ZONE_COLORS, robust_abs_max)
-
-
-@contextmanager
-def _style():
-    import matplotlib
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
-    with plt.rc_context(RC):
-        yield plt
 
 
 def _zone_legend(ax, zones, loc="upper left", ncol=1):
@@ -244,7 +236,7 @@ def fig_residuals(result):
 
 def fig_bending_fit(result, n: int = 3):
     """Observed bending (with +-2 sigma band) against the rank-1 prediction for the worst-fitted edges."""
-    from .rerun_log import worst_edges
+    from .scene import worst_edges
     from .scene import AnalysisView
     view = AnalysisView.from_result(result)
     worst = worst_edges(view, n)
@@ -269,14 +261,6 @@ def fig_bending_fit(result, n: int = 3):
         axes[-1, 0].set_xlabel("frame")
         axes[-1, 0].set_xlim(view.frames.min(), view.frames.max())
     return fig
-
-
-def _save(fig, path: Path) -> Path:
-    import matplotlib.pyplot as plt
-    # savefig runs outside the rc_context the figure was built in, so pass the output settings here
-    fig.savefig(path, dpi=RC["savefig.dpi"], bbox_inches="tight", pad_inches=RC["savefig.pad_inches"])
-    plt.close(fig)
-    return path
 
 
 def write_figures(result, out_dir: str | Path, diagnosis=None, fps: float | None = None) -> dict[str, Path]:

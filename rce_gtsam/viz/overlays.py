@@ -14,8 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .figures import _save, _style
 from .style import KAPPA_CMAP, MISSING_COLOR, UNCERTAINTY_CMAP
+from .style import mpl_style as _style
+from .style import save_png as _save
 
 BACKGROUND_RGB = (236, 236, 232)  # neutral light grey when there is no video frame
 MARGIN_PX = 40  # crop margin around the skeleton, pixels of the original image

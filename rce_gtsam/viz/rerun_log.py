@@ -213,15 +213,6 @@ def summary_markdown(view: AnalysisView) -> str:
     return "\n".join(lines) + "\n"
 
 
-def worst_edges(view: AnalysisView, k: int = 3) -> list[tuple[int, int]]:
-    """The ``k`` edges with the largest residual RMS (ties: closer to the tip first)."""
-    res = view.residual
-    with np.errstate(invalid="ignore"):
-        rms = np.sqrt(np.nanmean(res ** 2, axis=1)) if res.size else np.array([])
-    order = sorted(range(len(view.edges)), key=lambda i: (-np.nan_to_num(rms[i], nan=-1), -view.root_distance_px[i]))
-    return [view.edges[i] for i in order[:k]]
-
-
 def save_recording(result, path: str | Path, video_path: str | Path | None = None, diagnosis=None,
                    fps: float | None = None) -> Path:
     """Write one ``.rrd`` with the analysis (and the diagnosis, if given) and a default blueprint.

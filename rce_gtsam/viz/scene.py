@@ -264,3 +264,12 @@ def covariance_ellipses(cov: np.ndarray, centers: np.ndarray, n_sigma: float = 2
     bad = ~np.isfinite(cov).all(axis=(-1, -2)) | ~np.isfinite(centers).all(axis=-1)
     pts[bad] = np.nan
     return pts
+
+
+def worst_edges(view: AnalysisView, k: int = 3) -> list[tuple[int, int]]:
+    """The ``k`` edges with the largest residual RMS (ties: closer to the tip first)."""
+    res = view.residual
+    with np.errstate(invalid="ignore"):
+        rms = np.sqrt(np.nanmean(res ** 2, axis=1)) if res.size else np.array([])
+    order = sorted(range(len(view.edges)), key=lambda i: (-np.nan_to_num(rms[i], nan=-1), -view.root_distance_px[i]))
+    return [view.edges[i] for i in order[:k]]

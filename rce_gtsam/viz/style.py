@@ -6,6 +6,9 @@ published figures (reference pipeline doc section 5), so figures can be compared
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+from pathlib import Path
+
 import numpy as np
 
 ZONE_COLORS = {"proximal": "#2166ac", "mid": "#4dac26", "distal": "#d7191c", "root": "#777777"}
@@ -63,3 +66,22 @@ def robust_abs_max(values: np.ndarray, q: float = 99.0) -> float:
         return 1.0
     m = float(np.percentile(v, q))
     return m if m > 0 else float(v.max() or 1.0)
+
+
+@contextmanager
+def mpl_style():
+    """Context: matplotlib (Agg backend) with the shared rc settings :data:`RC`; yields pyplot."""
+    import matplotlib
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+    with plt.rc_context(RC):
+        yield plt
+
+
+def save_png(fig, path: Path) -> Path:
+    """Save ``fig`` to ``path`` with the shared output settings and close it; returns ``path``."""
+    import matplotlib.pyplot as plt
+    # savefig runs outside the rc_context the figure was built in, so pass the output settings here
+    fig.savefig(path, dpi=RC["savefig.dpi"], bbox_inches="tight", pad_inches=RC["savefig.pad_inches"])
+    plt.close(fig)
+    return path
