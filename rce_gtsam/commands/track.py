@@ -1,4 +1,4 @@
-"""``rce track VIDEO ANNOTATIONS --out TRACKS.csv`` and ``rce annotate --polyline ...``."""
+"""``rce track VIDEO ANNOTATIONS --out TRACKS.csv``."""
 
 from __future__ import annotations
 
@@ -25,17 +25,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="track only the first N frames")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run_track)
-
-    a = sub.add_parser("annotate", help="place N evenly spaced nodes along a polyline; write annotations + graph",
-                       description="Place N nodes evenly (by arc length) along a polyline from the branch base "
-                                   "(first vertex, the graph root) to the tip, and write the annotations JSON "
-                                   "and a chain graph JSON for `rce track` / `rce analyze`.")
-    a.add_argument("--polyline", required=True, metavar="x1,y1,x2,y2,...",
-                   help="vertices in first-frame pixels, base first")
-    a.add_argument("--nodes", type=int, required=True, metavar="N", help="number of nodes (>= 2)")
-    a.add_argument("--out-annotations", type=Path, required=True, help="annotations JSON to write")
-    a.add_argument("--out-graph", type=Path, required=True, help="graph JSON to write")
-    a.set_defaults(func=run_annotate)
 
 
 def run_track(args: argparse.Namespace) -> int:
@@ -78,11 +67,3 @@ def _median(x):
     import numpy as np
     return np.median(x) if x.size else float("nan")
 
-
-def run_annotate(args: argparse.Namespace) -> int:
-    from ..track import parse_polyline, place_nodes_along_polyline, write_annotation_files
-
-    points, graph = place_nodes_along_polyline(parse_polyline(args.polyline), args.nodes)
-    write_annotation_files(points, graph, args.out_annotations, args.out_graph)
-    print(f"placed {len(points)} nodes; wrote {args.out_annotations} and {args.out_graph}")
-    return 0
