@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from .live_args import add_live_arguments, live_from_args
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("track", help="track the annotated nodes through a video (mp4 or RealSense .bag/.db3)",
@@ -24,6 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(see tools/export_tapir_onnx.py); default: the OpenCV tracker")
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="track only the first N frames")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_live_arguments(p)
     p.set_defaults(func=run_track)
 
 
@@ -38,8 +41,12 @@ def run_track(args: argparse.Namespace) -> int:
     tracker = make_tracker(args.model)
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
-        result = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress)
+        live = start_live(args, src, f"tracking {args.video}")
+        result = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress,
+                                     on_frame=live.frame if live else None)
     result.write_csv(args.out)
+    if live:
+        live.close()
     vis = result.visible
     print(f"tracked {result.n_points} points over {result.n_frames} frames with {result.info.get('tracker')}; "
           f"visible {100 * vis.mean():.1f}% of point-frames, median sigma "
@@ -48,8 +55,17 @@ def run_track(args: argparse.Namespace) -> int:
     return 0
 
 
-def track_with_progress(tracker, src, points, graph, max_frames: int | None, show: bool = True):
-    """Run ``tracker`` over the frame source ``src`` with a tqdm progress bar on stderr (frames)."""
+def start_live(args: argparse.Namespace, src, title: str):
+    """The live viewer stream of ``--spawn`` / ``--connect`` (None without them), with the video sent."""
+    live = live_from_args(args, title)
+    if live is not None and Path(src.path).suffix.lower() not in (".bag", ".db3"):  # RealSense: points only
+        live.video(src.path, src.n_frames, src.fps)
+    return live
+
+
+def track_with_progress(tracker, src, points, graph, max_frames: int | None, show: bool = True, on_frame=None):
+    """Run ``tracker`` over the frame source ``src`` with a tqdm progress bar on stderr (frames);
+    ``on_frame(index, xy, visible)`` gets each frame's result (live streaming)."""
     bar = None
     if show:
         from tqdm import tqdm
@@ -57,7 +73,7 @@ def track_with_progress(tracker, src, points, graph, max_frames: int | None, sho
         bar = tqdm(total=total, unit="frame", desc="tracking", file=sys.stderr, leave=False)
     try:
         return tracker.track(src, points, graph=graph, max_frames=max_frames,
-                             progress=bar.update if bar else None)
+                             progress=bar.update if bar else None, on_frame=on_frame)
     finally:
         if bar:
             bar.close()

@@ -45,5 +45,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"streaming {args.dir} into a Rerun viewer")
         return 0
     path = save_recording(view, args.rrd or (args.dir / "recording.rrd"), video_path=args.video, diagnosis=diagnosis)
-    print(f"wrote {path} (open it with: rerun {path})")
+    from ..viewer import open_command
+    print(f"wrote {path} (open it with: {open_command(path)})")
     return 0
