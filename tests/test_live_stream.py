@@ -126,3 +126,15 @@ def test_connect_to_nothing_is_one_line_before_any_work(small_video, tmp_path, c
     assert len(err.strip().splitlines()) == 1 and not (tmp_path / "t.csv").exists()
     assert main(["track", str(d / "video.mp4"), str(d / "annotations.json"), "--out", str(tmp_path / "t.csv"),
                  "--connect", "not an address"]) == 2
+
+
+def test_viewer_is_the_one_beside_this_python():
+    import shlex
+    import sys
+
+    from rce_gtsam.viewer import open_command, viewer_executable
+    here = Path(sys.executable).parent / "rerun"
+    if not here.is_file():
+        pytest.skip("rerun-sdk's viewer is not installed beside this interpreter")
+    assert viewer_executable() == str(here)
+    assert shlex.split(open_command("out/x.rrd")) == [str(here), "out/x.rrd"]
