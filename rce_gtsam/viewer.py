@@ -38,3 +38,15 @@ def viewer_or_name() -> str:
         return viewer_executable()
     except MissingDependencyError:
         return "rerun"
+
+
+def require_display(option: str = "--spawn") -> None:
+    """Raise :class:`InputError` (one line, before any work) when a native viewer window cannot open here:
+    on Linux, neither ``DISPLAY`` nor ``WAYLAND_DISPLAY`` is set (the spawned viewer would exit and the
+    stream would wait for it)."""
+    import os
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        from .errors import InputError
+        raise InputError(option, "no display to open a Rerun viewer on (neither DISPLAY nor WAYLAND_DISPLAY is "
+                                 "set); save a recording (--rerun / --rrd) and open it where there is a screen, "
+                                 "or stream to a viewer elsewhere with --connect HOST:PORT")

@@ -10,6 +10,7 @@ from __future__ import annotations
 import signal
 import socket
 import subprocess
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -130,7 +131,6 @@ def test_connect_to_nothing_is_one_line_before_any_work(small_video, tmp_path, c
 
 def test_viewer_is_the_one_beside_this_python():
     import shlex
-    import sys
 
     from rce_gtsam.viewer import open_command, viewer_executable
     here = Path(sys.executable).parent / "rerun"
@@ -138,3 +138,16 @@ def test_viewer_is_the_one_beside_this_python():
         pytest.skip("rerun-sdk's viewer is not installed beside this interpreter")
     assert viewer_executable() == str(here)
     assert shlex.split(open_command("out/x.rrd")) == [str(here), "out/x.rrd"]
+
+
+def test_spawn_without_a_display_is_one_line_before_any_work(small_video, tmp_path, capsys, monkeypatch):
+    if not sys.platform.startswith("linux"):
+        pytest.skip("the display check is for Linux")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    d = small_video
+    rc = main(["track", str(d / "video.mp4"), str(d / "annotations.json"), "--out", str(tmp_path / "t.csv"),
+               "--no-progress", "--spawn"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--spawn: no display to open a Rerun viewer on" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "t.csv").exists()

@@ -22,5 +22,8 @@ def live_from_args(args: argparse.Namespace, title: str):
     Call it before any slow work: a wrong address is an input error."""
     if not (args.spawn or args.connect):
         return None
+    if args.spawn:
+        from ..viewer import require_display
+        require_display()
     from ..viz.live import LiveStream
     return LiveStream(title, spawn=args.spawn, connect=args.connect)
