@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEMO   := out/demo
 
-.PHONY: demo test setup bench regression clean
+.PHONY: demo test setup system-deps bench regression clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -13,14 +13,19 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test,realsense]'
 	touch $(STAMP)
 
-setup: $(STAMP)
+setup: system-deps $(STAMP)
 
-test: $(STAMP)
+# System packages (libusb for pyrealsense2, chromium + its driver for the browser test): installed with
+# apt-get when run as root, otherwise one line saying which command installs them.
+system-deps:
+	@PYTHON=$(PYTHON) bash tools/system_deps.sh
+
+test: system-deps $(STAMP)
 	$(BIN)/python -m pytest -q
 
 # The main job on data the project makes: simulate a wind-excited branch with a hidden propagation
 # delay and render it as video, then track -> analyze -> diagnose it, with figures and a Rerun recording.
-demo: $(STAMP)
+demo: system-deps $(STAMP)
 	rm -rf $(DEMO)
 	$(BIN)/rce simulate --seed 0 --frames 450 --effect delay --video --out $(DEMO)/simulation
 	$(BIN)/rce run $(DEMO)/simulation/video.mp4 $(DEMO)/simulation/annotations.json \

@@ -19,6 +19,7 @@ COMMAND_MODULES = (
     "rce_gtsam.commands.analyze",
     "rce_gtsam.commands.diagnose",
     "rce_gtsam.commands.track",
+    "rce_gtsam.commands.annotate",
     "rce_gtsam.commands.simulate",
     "rce_gtsam.commands.run",
     "rce_gtsam.commands.view",

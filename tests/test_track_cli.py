@@ -61,5 +61,19 @@ def test_rce_annotate(tmp_path):
     pts = np.array(json.loads(a.read_text())["points"])
     np.testing.assert_allclose(pts[:, 1], [100, 80, 60, 40, 20])
     assert load_graph(g).nodes == (0, 1, 2, 3, 4)
-    with pytest.raises(SystemExit):
-        main(["annotate", "--nodes", "3"])
+    assert main(["annotate", "--nodes", "3"]) == 2  # the polyline mode needs all four options
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--polyline", "10,100,10,20", "--nodes", "2"], "--nodes: must be >= 3"),
+    (["--polyline", "-10,100,10,20", "--nodes", "4"], "--polyline: vertex 0 (x=-10, y=100) is outside the image"),
+    (["--polyline", "10,-5.5,10,20", "--nodes", "4"], "--polyline: vertex 0 (x=10, y=-5.5) is outside the image"),
+    ([], "give a VIDEO to annotate in the browser"),
+])
+def test_rce_annotate_bad_input_is_one_line(tmp_path, capsys, argv, message):
+    a, g = tmp_path / "a.json", tmp_path / "g.json"
+    outs = ["--out-annotations", str(a), "--out-graph", str(g)] if argv else []
+    assert main(["annotate", *argv, *outs]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not a.exists() and not g.exists()

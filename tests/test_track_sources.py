@@ -41,7 +41,9 @@ def test_missing_and_unreadable_video(tmp_path):
 
 
 def test_realsense_db3_round_trip(tmp_path):
-    pytest.importorskip("pyrealsense2", reason="pyrealsense2 cannot import (needs apt libusb-1.0-0)")
+    # exc_type=ImportError: a missing libusb-1.0.so.0 is an ImportError, not ModuleNotFoundError
+    pytest.importorskip("pyrealsense2", exc_type=ImportError,
+                        reason="pyrealsense2 cannot import (needs apt libusb-1.0-0; `make test` installs it as root)")
     rng = np.random.default_rng(3)
     frames = [rng.integers(0, 256, (48, 64, 3), dtype=np.uint8) for _ in range(7)]
     path = record_realsense(tmp_path / "rec.db3", frames, fps=30)

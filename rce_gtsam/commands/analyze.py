@@ -58,7 +58,8 @@ def save_recording(args, result, video=None, diagnosis=None) -> None:
         return
     from ..viz.rerun_log import save_recording as _save
     path = _save(result, args.rerun, video_path=video, diagnosis=diagnosis)
-    print(f"wrote Rerun recording {path} (open it with: rerun {path})")
+    from ..viewer import open_command
+    print(f"wrote Rerun recording {path} (open it with: {open_command(path)})")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -56,7 +56,8 @@ def run(args: argparse.Namespace) -> int:
     if args.figures is not None:
         print(f"wrote figures to {args.figures}/")
     if args.rerun is not None:
-        print(f"wrote Rerun recording {args.rerun} (open it with: rerun {args.rerun})")
+        from ..viewer import open_command
+        print(f"wrote Rerun recording {args.rerun} (open it with: {open_command(args.rerun)})")
     return 0
 
 

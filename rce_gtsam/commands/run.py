@@ -7,6 +7,7 @@ import json
 import time
 from pathlib import Path
 
+from .live_args import add_live_arguments
 from .preset_args import add_preset_arguments, preset_from_args
 
 
@@ -31,6 +32,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd", help="also save a Rerun recording")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_live_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -40,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
     from ..pipeline import analyze
     from ..track import load_annotations, make_tracker, open_video
     from ..tracks import tracks_from_table
-    from .track import track_with_progress
+    from .track import start_live, track_with_progress
 
     args.effects = parse_effect_names(args.effects)  # fail on a bad name before tracking
     preset = preset_from_args(args)
@@ -50,17 +52,24 @@ def run(args: argparse.Namespace) -> int:
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
         _check_graph_matches_points(graph, points, args)
-        tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress)
+        live = start_live(args, src, f"rce run {args.video}")
+        tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress,
+                                      on_frame=live.frame if live else None)
     t_track = time.perf_counter() - t0
     table = tracked.to_frame()
     tracks = tracks_from_table(table, graph, source=f"tracks of {args.video}")
     result = analyze(tracks, graph, preset=preset, seed=args.seed, n_boot=args.bootstrap)
     result.timings_s["track"] = t_track
     result.inputs.update(video=str(args.video), annotations=str(args.annotations), graph=str(args.graph))
+    if live:
+        live.analysis(result)
 
     from ..diagnosis_io import diagnose_result, diagnosis_for_viz, diagnosis_json
     diagnosis = diagnose_result(result, effects=args.effects, seed=args.seed if args.seed is not None else 0)
     view = diagnosis_for_viz(diagnosis, result)
+    if live:
+        live.diagnosis(view)
+        live.close()
 
     def write_tracks(_result, tmp: Path) -> dict:
         table.to_csv(tmp / "tracks.csv", index=False)

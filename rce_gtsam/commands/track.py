@@ -1,10 +1,12 @@
-"""``rce track VIDEO ANNOTATIONS --out TRACKS.csv`` and ``rce annotate --polyline ...``."""
+"""``rce track VIDEO ANNOTATIONS --out TRACKS.csv``."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 from pathlib import Path
+
+from .live_args import add_live_arguments, live_from_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -24,18 +26,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(see tools/export_tapir_onnx.py); default: the OpenCV tracker")
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="track only the first N frames")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_live_arguments(p)
     p.set_defaults(func=run_track)
-
-    a = sub.add_parser("annotate", help="place N evenly spaced nodes along a polyline; write annotations + graph",
-                       description="Place N nodes evenly (by arc length) along a polyline from the branch base "
-                                   "(first vertex, the graph root) to the tip, and write the annotations JSON "
-                                   "and a chain graph JSON for `rce track` / `rce analyze`.")
-    a.add_argument("--polyline", required=True, metavar="x1,y1,x2,y2,...",
-                   help="vertices in first-frame pixels, base first")
-    a.add_argument("--nodes", type=int, required=True, metavar="N", help="number of nodes (>= 2)")
-    a.add_argument("--out-annotations", type=Path, required=True, help="annotations JSON to write")
-    a.add_argument("--out-graph", type=Path, required=True, help="graph JSON to write")
-    a.set_defaults(func=run_annotate)
 
 
 def run_track(args: argparse.Namespace) -> int:
@@ -49,8 +41,12 @@ def run_track(args: argparse.Namespace) -> int:
     tracker = make_tracker(args.model)
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
-        result = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress)
+        live = start_live(args, src, f"tracking {args.video}")
+        result = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress,
+                                     on_frame=live.frame if live else None)
     result.write_csv(args.out)
+    if live:
+        live.close()
     vis = result.visible
     print(f"tracked {result.n_points} points over {result.n_frames} frames with {result.info.get('tracker')}; "
           f"visible {100 * vis.mean():.1f}% of point-frames, median sigma "
@@ -59,8 +55,17 @@ def run_track(args: argparse.Namespace) -> int:
     return 0
 
 
-def track_with_progress(tracker, src, points, graph, max_frames: int | None, show: bool = True):
-    """Run ``tracker`` over the frame source ``src`` with a tqdm progress bar on stderr (frames)."""
+def start_live(args: argparse.Namespace, src, title: str):
+    """The live viewer stream of ``--spawn`` / ``--connect`` (None without them), with the video sent."""
+    live = live_from_args(args, title)
+    if live is not None and Path(src.path).suffix.lower() not in (".bag", ".db3"):  # RealSense: points only
+        live.video(src.path, src.n_frames, src.fps)
+    return live
+
+
+def track_with_progress(tracker, src, points, graph, max_frames: int | None, show: bool = True, on_frame=None):
+    """Run ``tracker`` over the frame source ``src`` with a tqdm progress bar on stderr (frames);
+    ``on_frame(index, xy, visible)`` gets each frame's result (live streaming)."""
     bar = None
     if show:
         from tqdm import tqdm
@@ -68,7 +73,7 @@ def track_with_progress(tracker, src, points, graph, max_frames: int | None, sho
         bar = tqdm(total=total, unit="frame", desc="tracking", file=sys.stderr, leave=False)
     try:
         return tracker.track(src, points, graph=graph, max_frames=max_frames,
-                             progress=bar.update if bar else None)
+                             progress=bar.update if bar else None, on_frame=on_frame)
     finally:
         if bar:
             bar.close()
@@ -78,11 +83,3 @@ def _median(x):
     import numpy as np
     return np.median(x) if x.size else float("nan")
 
-
-def run_annotate(args: argparse.Namespace) -> int:
-    from ..track import parse_polyline, place_nodes_along_polyline, write_annotation_files
-
-    points, graph = place_nodes_along_polyline(parse_polyline(args.polyline), args.nodes)
-    write_annotation_files(points, graph, args.out_annotations, args.out_graph)
-    print(f"placed {len(points)} nodes; wrote {args.out_annotations} and {args.out_graph}")
-    return 0

@@ -32,6 +32,9 @@ def run(args: argparse.Namespace) -> int:
     from ..viz.rerun_log import save_recording, spawn_viewer
     from ..viz.scene import AnalysisView
 
+    if args.spawn:
+        from ..viewer import require_display
+        require_display()
     view = AnalysisView.from_folder(args.dir, tracks=args.tracks)
     diag_path = args.diagnosis or (args.dir / "diagnosis.json")
     diagnosis = None
@@ -45,5 +48,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"streaming {args.dir} into a Rerun viewer")
         return 0
     path = save_recording(view, args.rrd or (args.dir / "recording.rrd"), video_path=args.video, diagnosis=diagnosis)
-    print(f"wrote {path} (open it with: rerun {path})")
+    from ..viewer import open_command
+    print(f"wrote {path} (open it with: {open_command(path)})")
     return 0

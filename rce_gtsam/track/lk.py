@@ -612,11 +612,13 @@ class LKTracker:
 
     # -- main loop ------------------------------------------------------------------------------
     def track(self, source: FrameSource, query_points, graph: BranchGraph | None = None,
-              max_frames: int | None = None, progress: Callable[[int], object] | None = None) -> TrackResult:
+              max_frames: int | None = None, progress: Callable[[int], object] | None = None,
+              on_frame: Callable[[int, np.ndarray, np.ndarray], object] | None = None) -> TrackResult:
         """Track ``query_points`` (P, 2) original pixels on the first frame of ``source``.
 
         ``graph`` (node id = annotation index) enables rotation-compensated templates, graph-based
-        prediction of lost nodes and segment-length checks. ``progress(1)`` is called per frame.
+        prediction of lost nodes and segment-length checks. ``progress(1)`` is called per frame, and
+        ``on_frame(index, xy (P, 2) px, visible (P,))`` with that frame's result (live viewers).
         """
         cfg = self.config
         q0 = np.asarray(query_points, dtype=float)
@@ -784,6 +786,8 @@ class LKTracker:
             n_done += 1
             if progress is not None:
                 progress(1)
+            if on_frame is not None:
+                on_frame(n_done - 1, est.copy(), vis.copy())
         if n_done == 0:
             raise InputError(src_name, "the video has no frames")
         info = {"tracker": "lk-anchored", "patch_radius_px": h, "branch_halfwidth_px": self.branch_halfwidth_px, "frames": n_done,

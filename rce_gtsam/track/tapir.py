@@ -182,11 +182,13 @@ class TapirOnnxTracker:
 
     # -- main -----------------------------------------------------------------------------------
     def track(self, source: FrameSource, query_points, graph=None, max_frames: int | None = None,
-              progress: Callable[[int], object] | None = None) -> TrackResult:
+              progress: Callable[[int], object] | None = None,
+              on_frame: Callable[[int, np.ndarray, np.ndarray], object] | None = None) -> TrackResult:
         """Track ``query_points`` (P, 2) original pixels given on the first frame of ``source``.
 
         ``graph`` is accepted for signature compatibility and not used (TAPIR tracks points independently).
-        ``progress(1)`` is called after every frame (``tqdm.update`` fits).
+        ``progress(1)`` is called after every frame (``tqdm.update`` fits), and
+        ``on_frame(index, xy (P, 2) px, visible (P,))`` with that frame's result (live viewers).
         """
         q = np.asarray(query_points, dtype=float)
         if q.ndim != 2 or q.shape[1] != 2 or len(q) == 0:
@@ -247,6 +249,8 @@ class TapirOnnxTracker:
             n_done += 1
             if progress is not None:
                 progress(1)
+            if on_frame is not None:
+                on_frame(n_done - 1, fx.copy(), fv.copy())
         if n_done == 0:
             raise InputError(getattr(source, "path", "<video>"), "the video has no frames")
         total = time.perf_counter() - t0

@@ -246,10 +246,13 @@ def save_recording(result, path: str | Path, video_path: str | Path | None = Non
 
 def spawn_viewer(result, video_path=None, diagnosis=None, fps=None) -> None:
     """Open a native Rerun viewer and stream the analysis (and diagnosis) into it."""
+    from ..viewer import viewer_executable
     from .blueprint import build_blueprint
     view = _as_view(result)
     rec = rr.RecordingStream(APP_ID)
-    rec.spawn(default_blueprint=build_blueprint(view, diagnosis, video=video_path is not None))
+    # the viewer of this environment (.venv/bin/rerun), which need not be on PATH
+    rr.spawn(recording=rec, executable_path=viewer_executable(),
+             default_blueprint=build_blueprint(view, diagnosis, video=video_path is not None))
     log_analysis(view, rec, video_path=video_path, fps=fps)
     if diagnosis is not None:
         log_diagnosis(diagnosis, rec, view=view)

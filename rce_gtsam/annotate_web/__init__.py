@@ -1,0 +1,10 @@
+"""Click-to-annotate in the browser: the page and local server behind ``rce annotate VIDEO``.
+
+:mod:`.snap` moves a click onto the centre line of the stem under it; :mod:`.server` serves the page
+(``static/``: HTML, JS, CSS shipped as package data) and writes ``annotations.json`` and ``graph.json``.
+"""
+
+from .server import AnnotationServer, AnnotationSession, make_server
+from .snap import RidgeSnapper, SnapResult
+
+__all__ = ["AnnotationServer", "AnnotationSession", "RidgeSnapper", "SnapResult", "make_server"]
