@@ -261,8 +261,6 @@ def estimate_noise_floor(raw_xy: np.ndarray, smoothed_xy: np.ndarray, node_ids, 
 
 def noise_floor_of(result) -> NoiseFloor:
     """:func:`estimate_noise_floor` of an :class:`~rce_gtsam.pipeline.AnalysisResult` (its response rows)."""
-    from ..pipeline import observed_positions  # a function, imported late: pipeline imports diagnosis users
-
     r = result.response
     sm = result.preset.smoother
     w_m = sm.measurement_weight
@@ -274,6 +272,8 @@ def noise_floor_of(result) -> NoiseFloor:
     raw_angle = result.raw_bending.angle_deg[r.bend_rows]
     nodes = [frozenset((b.grandparent, b.joint, b.child)) for b in bends]
     shared = np.array([[bool(a & b) for b in nodes] for a in nodes])
-    return estimate_noise_floor(result.tracks.xy, observed_positions(result.smoothed), result.tracks.node_ids,
+    smoothed_xy = result.smoothed.tracks.xy.copy()
+    smoothed_xy[~result.smoothed.observed] = np.nan  # the frames a tracker saw, as the bends use them
+    return estimate_noise_floor(result.tracks.xy, smoothed_xy, result.tracks.node_ids,
                                 result.graph.edges, [(b.grandparent, b.joint, b.child) for b in bends],
                                 r.Y, r.frames, raw_angle, gain, shared=shared)
