@@ -20,6 +20,7 @@ from .extended_fit import ExtendedBootstrapInfo, ExtendedFit, bootstrap_extended
 from .geometry import Geometry, compute_geometry, edge_lengths
 from .graph import BranchGraph, load_graph
 from .model import ResponseModel
+from .model.time_split import TimeSplitCheck, time_split_check, widen
 from .presets import Preset, get_preset
 from .smooth import SmoothedTracks, smooth_tracks
 from .tracks import Tracks, load_tracks
@@ -185,6 +186,7 @@ class AnalysisResult:
     inputs: dict[str, str] = field(default_factory=dict)
     effects: tuple[str, ...] = ()
     effects_bootstrap: ExtendedBootstrapInfo | None = None
+    time_split: TimeSplitCheck | None = None  # batch-means check that widened the CIs (None: off)
 
     @property
     def kappa(self) -> dict[tuple[int, int], float]:
@@ -286,9 +288,14 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
         ci, boot_info = bootstrap_extended(fit, preset.compliance)
     else:
         ci = bootstrap_kappa(response.Y, preset.compliance, weights, fit=fit, precision=precision)
+    time_split = None
+    if preset.compliance.time_split_blocks and not effects and ci is not None and preset.compliance.n_boot > 0:
+        time_split = time_split_check(response.Y, weights, preset.compliance, fit.kappa, ci.low, ci.high,
+                                      preset.compliance.time_split_blocks)
+        ci = widen(ci, fit.kappa, time_split.inflation)
     timings["bootstrap"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     return AnalysisResult(graph=graph, tracks=tracks, preset=preset, smoothed=smoothed, geometry=geometry,
                           bending=bending, raw_bending=raw_bending, response=response, fit=fit, ci=ci,
                           smoothing=smoothing, timings_s=timings, inputs=inputs, effects=tuple(effects),
-                          effects_bootstrap=boot_info)
+                          effects_bootstrap=boot_info, time_split=time_split)

@@ -88,6 +88,8 @@ class ComplianceConfig:
         (:func:`~rce_gtsam.compliance.small_sample_factor`). Needs the signed response. The effects
         fit (``rce analyze --effects``) always resamples blocks.
     n_boot, block_length: bootstrap resamples and block length (frames); seed: RNG seed.
+    time_split_blocks: K > 1 widens the intervals by how much kappa varies between K disjoint blocks of
+        frames beyond what they allow (batch means, :mod:`rce_gtsam.model.time_split`); 0 = off (paper).
     """
 
     response: Literal["abs", "signed"] = "abs"
@@ -102,6 +104,7 @@ class ComplianceConfig:
     block_length: int = 25
     bootstrap: Literal["block", "phase"] = "block"
     seed: int = 0
+    time_split_blocks: int = 0
 
     def __post_init__(self):
         """Reject a value no fit can use (ValueError naming the field), before any work."""
@@ -117,6 +120,9 @@ class ComplianceConfig:
             if not (number and (value >= low if inclusive else value > low)):
                 raise ValueError(f"compliance.{name} must be a finite number {'>=' if inclusive else '>'} {low}, "
                                  f"got {value!r}")
+        if not (isinstance(self.time_split_blocks, int) and (self.time_split_blocks == 0 or self.time_split_blocks >= 2)):
+            raise ValueError(f"compliance.time_split_blocks must be 0 (off) or an integer >= 2, "
+                             f"got {self.time_split_blocks!r}")
 
 
 @dataclass(frozen=True)
@@ -182,7 +188,8 @@ DEFAULT = Preset(
     smoother=SmootherConfig(presmooth_window=1, velocity_weight=0.0, acceleration_weight=20.0,
                             edge_weight=0.0),
     bending=BendingConfig(signed=True, rest="median"),
-    compliance=ComplianceConfig(response="signed", shrinkage="precision", weighted=True, bootstrap="phase"),
+    compliance=ComplianceConfig(response="signed", shrinkage="precision", weighted=True, bootstrap="phase",
+                                time_split_blocks=4),
 )
 
 PRESETS: dict[str, Preset] = {p.name: p for p in (PAPER, DEFAULT)}

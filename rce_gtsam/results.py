@@ -117,7 +117,9 @@ def report_dict(result) -> dict:
             "bootstrap": None if ci is None else {"n_boot": ci.n_boot, "block_length": ci.block_length,
                                                   "seed": ci.seed, "method": ci.method,
                                                   "effective_samples": ci.effective_samples,
-                                                  "width_factor": ci.width_factor},
+                                                  "width_factor": ci.width_factor,
+                                                  "time_split": (result.time_split.as_dict()
+                                                                 if getattr(result, "time_split", None) else None)},
         },
         "smoothing_metrics": result.smoothing.as_dict(),
         "excitation_rms_deg": float(np.sqrt(np.mean(fit.z**2))),
