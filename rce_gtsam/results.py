@@ -5,8 +5,9 @@ Output folder (all CSV, one header row):
 * ``compliance_summary.csv`` — one row per edge, ordered by root distance: parent, child, depth, zone,
   root_distance_px, rest_length_px, kappa, kappa_ci_low, kappa_ci_high, uncertainty (U_e = CI width /
   kappa), direction (+1/-1, sign of the fitted gain), relative_stiffness (1/kappa), n_frames (frames
-  with a usable bend response), fit_rmse_deg, fit_r2, bend_rms_deg (filtered RMS of delta). The root
-  edge has no bend, so its kappa columns are empty.
+  with a usable bend response), fit_rmse_deg, fit_r2, bend_rms_deg (filtered RMS of delta), bend_snr
+  (bending variance / its noise floor) and quality (``ok`` or the reasons kappa should not be trusted,
+  :mod:`rce_gtsam.quality`). The root edge has no bend, so its kappa columns are empty.
 * ``excitation.csv`` — frame, z (degrees).
 * ``bending.csv`` — grandparent, joint, child, frame, angle_deg, delta_deg, inlier (0/1), angle_var_deg2.
 * ``smoothed_tracks.csv`` — point_id, frame, x, y (pixels, every frame), observed (0/1), cov_xx,
@@ -30,6 +31,7 @@ import pandas as pd
 
 from . import __version__
 from .jsonutil import jsonable as _jsonable
+from .quality import assess_quality, quality_report
 
 
 def compliance_summary(result) -> pd.DataFrame:
@@ -39,6 +41,7 @@ def compliance_summary(result) -> pd.DataFrame:
     pred = fit.predict()
     bend_rms = dict(zip([b.edge for b in result.bending.bends], result.smoothing.bend_rms_smoothed_deg))
     U = result.uncertainty
+    quality = assess_quality(result)
     records = []
     for e in sorted(g.edges, key=lambda e: (geo.root_distance_px[e[1]], e[0], e[1])):
         p, c = e
@@ -48,7 +51,7 @@ def compliance_summary(result) -> pd.DataFrame:
         if i is None:
             rec.update(kappa=np.nan, kappa_ci_low=np.nan, kappa_ci_high=np.nan, uncertainty=np.nan,
                        direction=np.nan, relative_stiffness=np.nan, n_frames=0, fit_rmse_deg=np.nan,
-                       fit_r2=np.nan, bend_rms_deg=np.nan)
+                       fit_r2=np.nan, bend_rms_deg=np.nan, bend_snr=np.nan, quality="")
         else:
             y = resp.Y[i]
             ok = np.isfinite(y)
@@ -66,6 +69,8 @@ def compliance_summary(result) -> pd.DataFrame:
                 fit_rmse_deg=float(np.sqrt(np.mean(res**2))) if ok.any() else np.nan,
                 fit_r2=float(1 - np.sum(res**2) / ss_tot) if ss_tot > 1e-6 else np.nan,
                 bend_rms_deg=float(bend_rms[e]),
+                bend_snr=quality[e].snr,
+                quality=quality[e].quality,
             )
         records.append(rec)
     return pd.DataFrame.from_records(records)
@@ -122,6 +127,7 @@ def report_dict(result) -> dict:
         "smoothing_metrics": result.smoothing.as_dict(),
         "excitation_rms_deg": float(np.sqrt(np.mean(fit.z**2))),
         "timings_s": result.timings_s,
+        "quality": quality_report(result),
         **({"effects": result.effects_report()} if getattr(result, "effects", None) else {}),
     })
 

@@ -42,10 +42,14 @@ def run(args: argparse.Namespace) -> int:
     from ..tracks import tracks_from_table
     from .track import track_with_progress
 
+    from ..validate import check_command_options, check_graph_has_bend
+
+    check_command_options(args)
     args.effects = parse_effect_names(args.effects)  # fail on a bad name before tracking
     preset = preset_from_args(args)
     t0 = time.perf_counter()
     graph = load_graph(args.graph)
+    check_graph_has_bend(graph)
     tracker = make_tracker(args.model)
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
@@ -67,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
         (tmp / "diagnosis.json").write_text(json.dumps(diagnosis_json(diagnosis, result), indent=1) + "\n")
         return {}
 
-    from .analyze import extra_writers, format_summary, save_recording
+    from .analyze import extra_writers, format_summary, quality_exit_code, save_recording
     files = result.write(args.out, extra_writers=[write_tracks, *extra_writers(args, video=args.video,
                                                                                 diagnosis=view)])
     save_recording(args, result, video=args.video, diagnosis=view)
@@ -75,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
     print()
     print(diagnosis.report())
     print(f"\nwrote {len(files)} files to {args.out}/")
-    return 0
+    return quality_exit_code(result, "run")
 
 
 def _check_graph_matches_points(graph, points, args) -> None:

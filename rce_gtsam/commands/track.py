@@ -43,8 +43,11 @@ def run_track(args: argparse.Namespace) -> int:
     from ..graph import load_graph
     from ..track import load_annotations, make_tracker, open_video
 
+    from ..validate import check_output_file
+
     if args.max_frames is not None and args.max_frames < 1:
         raise InputError("--max-frames", f"must be >= 1, got {args.max_frames}")
+    check_output_file(args.out, "--out")
     graph = load_graph(args.graph) if args.graph else None
     tracker = make_tracker(args.model)
     with open_video(args.video) as src:
@@ -81,7 +84,11 @@ def _median(x):
 
 def run_annotate(args: argparse.Namespace) -> int:
     from ..track import parse_polyline, place_nodes_along_polyline, write_annotation_files
+    from ..validate import check_distinct_outputs, check_output_file
 
+    check_output_file(args.out_annotations, "--out-annotations")
+    check_output_file(args.out_graph, "--out-graph")
+    check_distinct_outputs(("--out-annotations", args.out_annotations), ("--out-graph", args.out_graph))
     points, graph = place_nodes_along_polyline(parse_polyline(args.polyline), args.nodes)
     write_annotation_files(points, graph, args.out_annotations, args.out_graph)
     print(f"placed {len(points)} nodes; wrote {args.out_annotations} and {args.out_graph}")
