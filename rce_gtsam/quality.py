@@ -2,6 +2,8 @@
 
 Each segment (bend row of the response) gets the reasons that apply, in this order, joined by ``+``:
 
+* ``off_structure`` — (``rce run``) one of the bend's nodes was annotated where the first frames show no
+  image structure or no change (:mod:`rce_gtsam.track.checks`): it is probably not on the branch.
 * ``tracking_lost`` — one of the bend's three nodes was observed in fewer than ``1 - LOST_SHARE`` (half)
   of the frames: the smoother interpolated it for most of the clip.
 * ``low_support`` — fewer usable (inlier, finite) frames than ``MIN_BLOCKS`` block lengths
@@ -43,7 +45,11 @@ ALPHA = 0.01
 #: z of the prior's two-sided 95 % interval (wide_ci).
 Z95 = 1.959964
 
-REASONS = ("tracking_lost", "low_support", "single_bend", "no_signal", "poor_fit", "wide_ci")
+#: ``AnalysisResult.inputs`` key of the comma-separated node ids whose annotation is not on a textured,
+#: moving structure (``rce run``'s check before tracking, :mod:`rce_gtsam.track.checks`).
+OFF_STRUCTURE_KEY = "off_structure_nodes"
+
+REASONS = ("off_structure", "tracking_lost", "low_support", "single_bend", "no_signal", "poor_fit", "wide_ci")
 
 
 @dataclass(frozen=True)
@@ -73,15 +79,22 @@ class SegmentQuality:
         return not self.reasons
 
 
-def _robust_diff_variance(a: np.ndarray) -> float:
-    """White-noise variance of an angle series (degrees) from its frame-to-frame differences (MAD, / 2),
-    NaN-aware (a difference across a gap is dropped) and wrapped to +-180 degrees."""
+def _raw_noise(a: np.ndarray) -> tuple[float, float]:
+    """(variance deg^2, lag-1 autocorrelation) of the tracking noise in an angle series (degrees), from its
+    frame-to-frame differences (sway is slow, tracker noise is not): robust variance of the differences
+    (MAD; wrapped to +-180 deg; a difference across a gap is dropped) / (2 (1 - rho1)), with rho1 from the
+    correlation of consecutive differences (-1/2 for white noise). NaN if fewer than 3 differences."""
     d = (np.diff(a) + 180.0) % 360.0 - 180.0
-    d = d[np.isfinite(d)]
-    if d.size < 3:
-        return float("nan")
-    mad = 1.482602 * np.median(np.abs(d - np.median(d)))
-    return float(mad**2 / 2.0)
+    pair = np.isfinite(d[1:]) & np.isfinite(d[:-1])
+    d_ok = d[np.isfinite(d)]
+    if d_ok.size < 3:
+        return float("nan"), 0.0
+    mad = 1.482602 * np.median(np.abs(d_ok - np.median(d_ok)))
+    rho1 = 0.0
+    if pair.sum() >= 3 and np.std(d[1:][pair]) > 0 and np.std(d[:-1][pair]) > 0:
+        c = float(np.corrcoef(d[1:][pair], d[:-1][pair])[0, 1])
+        rho1 = float(np.clip((1 + 2 * c) / (2 + 2 * c), 0.0, 0.9)) if c > -0.5 else 0.0
+    return float(mad**2 / (2.0 * (1.0 - rho1))), rho1
 
 
 def _raw_angle_variance(xy: np.ndarray, sigma2: np.ndarray, rows) -> np.ndarray:
@@ -90,25 +103,6 @@ def _raw_angle_variance(xy: np.ndarray, sigma2: np.ndarray, rows) -> np.ndarray:
     g = angle_gradient(*(xy[i] for i in rows))  # (F, 6) rad / px
     var = sum(sigma2[i] * (g[:, 2 * a] ** 2 + g[:, 2 * a + 1] ** 2) for a, i in enumerate(rows))
     return var * np.degrees(1.0) ** 2
-
-
-def _correlation_time(series: np.ndarray, use: np.ndarray) -> float:
-    """Integrated autocorrelation time (frames) of a series over its usable frames: 1 + 2 sum rho_k, summed
-    while rho_k > 0 (the initial positive sequence), gaps left as gaps. Under "no signal" the series is
-    smoothed noise, so n / this is the effective sample size of its variance."""
-    x = np.where(use, series, np.nan)
-    x = x - np.nanmean(x) if use.any() else x
-    var = np.nanmean(x**2) if use.any() else 0.0
-    if not var > 0:
-        return 1.0
-    tau = 1.0
-    for lag in range(1, max(2, use.sum() // 4)):
-        prod = x[lag:] * x[:-lag]
-        rho = np.nanmean(prod) / var if np.isfinite(prod).any() else 0.0
-        if not rho > 0:
-            break
-        tau += 2 * rho
-    return float(tau)
 
 
 def _r2(y: np.ndarray, pred: np.ndarray) -> float:
@@ -135,6 +129,7 @@ def assess_quality(result) -> dict[tuple[int, int], SegmentQuality]:
     else:
         sigma2 = np.full(tracks.observed.shape, 1.0 / preset.smoother.measurement_weight)
     pred = result.fit.predict()
+    off = {int(n) for n in str(result.inputs.get(OFF_STRUCTURE_KEY, "")).split(",") if n.strip()}
     n_segments = len(resp.edges)
     out = {}
     for i, edge in enumerate(resp.edges):
@@ -145,7 +140,7 @@ def assess_quality(result) -> dict[tuple[int, int], SegmentQuality]:
         n = int(use.sum())
         d = bending.delta_deg[k][use]
         var = float(np.var(d)) if n >= 2 else 0.0
-        raw_white = _robust_diff_variance(_turning(raw_xy, rows))
+        raw_noise, rho1 = _raw_noise(_turning(raw_xy, rows))
         reduction = float("nan")
         if bending.variance_deg2 is not None and n:
             v_raw = _raw_angle_variance(raw_xy, sigma2, rows)[use]
@@ -155,16 +150,18 @@ def assess_quality(result) -> dict[tuple[int, int], SegmentQuality]:
                 reduction = float(np.mean(v_s[good]) / np.mean(v_raw[good]))
         if not np.isfinite(reduction):  # no propagated variances: the raw noise is the (conservative) floor
             reduction = 1.0
-        noise = raw_white * reduction if np.isfinite(raw_white) else float("nan")
+        noise = raw_noise * reduction if np.isfinite(raw_noise) else float("nan")
         if var <= 1e-12:
             snr = 0.0
         elif not noise > 0:
             snr = float("inf") if noise == 0 else float("nan")
         else:
             snr = var / noise
-        n_eff = max(n / _correlation_time(bending.delta_deg[k], use), 1.0)
+        # white noise through a linear smoother of unit DC gain: correlation time = 1 / variance reduction;
+        # an AR(1) input multiplies it by (1 + rho1) / (1 - rho1)
+        n_eff = max(n * min(reduction, 1.0) * (1 - rho1) / (1 + rho1), 1.0)
         threshold = float(chi2.ppf(1 - ALPHA, n_eff) / n_eff)
-        reasons = []
+        reasons = ["off_structure"] if off & set(bend.nodes) else []
         node_vis = float(min(visible[r] for r in rows))
         if node_vis < 1 - LOST_SHARE:
             reasons.append("tracking_lost")

@@ -14,7 +14,9 @@ Output folder (all CSV, one header row):
   cov_xy, cov_yy (marginal covariance, px^2).
 * ``report.json`` — inputs, preset, convergence, smoothing metrics, timings.
 
-The folder is written through a temporary sibling directory, so a failure leaves no half-written files.
+The folder is written through a temporary sibling directory that replaces the previous folder by renames
+(files of the previous folder that this run does not write are carried over), so a failure or an
+interruption leaves the previous results as they were and no half-written files.
 """
 
 from __future__ import annotations
@@ -152,15 +154,43 @@ def write_outputs(result, out_dir: str | Path, extra_writers=()) -> dict[str, Pa
         for writer in extra_writers:
             writer(result, tmp)
         written = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
-        if not out_dir.exists():
-            os.replace(tmp, out_dir)
-        else:
-            for rel in written:
-                dest = out_dir / rel
-                dest.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(tmp / rel, dest)
-            shutil.rmtree(tmp, ignore_errors=True)
+        if out_dir.exists():
+            _keep_other_files(out_dir, tmp, set(written))
+        swap_folder(tmp, out_dir)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return {str(rel): out_dir / rel for rel in written}
+
+
+def _keep_other_files(old: Path, new: Path, replaced: set[Path]) -> None:
+    """Carry the files of ``old`` that this run does not rewrite (a recording, notes) into ``new``: hard
+    links where the file system allows, copies elsewhere."""
+    for p in old.rglob("*"):
+        rel = p.relative_to(old)
+        if not p.is_file() or rel in replaced:
+            continue
+        (new / rel).parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.link(p, new / rel)
+        except OSError:
+            shutil.copy2(p, new / rel)
+
+
+def swap_folder(tmp: Path, out_dir: Path) -> None:
+    """Put the finished folder ``tmp`` at ``out_dir`` with renames only: the previous ``out_dir`` is moved
+    aside, ``tmp`` moved in, the old one deleted. An interruption before the swap leaves the previous
+    folder untouched; between the two renames (microseconds) it sits complete beside it as
+    ``.NAME.old-*``."""
+    if not out_dir.exists():
+        os.replace(tmp, out_dir)
+        return
+    aside = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old-", dir=out_dir.parent))
+    aside.rmdir()
+    os.replace(out_dir, aside)
+    try:
+        os.replace(tmp, out_dir)
+    except BaseException:
+        os.replace(aside, out_dir)
+        raise
+    shutil.rmtree(aside, ignore_errors=True)

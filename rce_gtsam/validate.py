@@ -16,13 +16,12 @@ so ``rce`` prints one line and exits with code 2 before it smooths, tracks or bo
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 from .errors import InputError
 
-#: The shortest clip, in units of the preset's bootstrap block length (frames): below two blocks there is
-#: no independent pair of correlation lengths to estimate kappa or resample from.
-MIN_BLOCKS = 2
+from .quality import MIN_BLOCKS  # the shortest clip, in block lengths (frames)
 
 
 def _first_existing(path: Path) -> Path:
@@ -32,12 +31,22 @@ def _first_existing(path: Path) -> Path:
     return p
 
 
+def _writable(folder: Path) -> bool:
+    """Whether a file can really be created in ``folder`` (a probe file, deleted at once: permission bits
+    say nothing for root or on a read-only mount)."""
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            return True
+    except OSError:
+        return False
+
+
 def _check_parent_chain(path: Path, option: str) -> None:
     """The nearest existing ancestor of ``path`` must be a writable folder."""
     anchor = _first_existing(path.parent if path.parent != Path("") else Path("."))
     if not anchor.is_dir():
         raise InputError(option, f"{path}: {anchor} is a file, so nothing can be created under it")
-    if not os.access(anchor, os.W_OK | os.X_OK):
+    if not _writable(anchor):
         raise InputError(option, f"{path}: the folder {anchor} is not writable")
 
 
@@ -51,7 +60,7 @@ def check_output_dir(path: Path | str | None, option: str = "--out") -> None:
     if path.exists():
         if not path.is_dir():
             raise InputError(option, f"{path} is an existing file, not a folder; choose a folder path")
-        if not os.access(path, os.W_OK | os.X_OK):
+        if not _writable(path):
             raise InputError(option, f"the folder {path} is not writable")
     _check_parent_chain(path.absolute(), option)
 
@@ -110,12 +119,16 @@ def check_tracks_span(table, source: str | Path, block_length: int) -> None:
                                  f"counted from the first frame of the clip, and no rows are invented for "
                                  f"frames 0..{first - 1}; renumber the frames (frame - {first}) or export the "
                                  f"tracks from the start of the video", "column 'frame'")
-    n = last + 1
+    check_clip_length(last + 1, source, block_length, "column 'frame'")
+
+
+def check_clip_length(n: int | None, source, block_length: int, where: str | None = None) -> None:
+    """A clip of ``n`` frames (None: unknown, not checked) is long enough to estimate kappa."""
     need = MIN_BLOCKS * int(block_length)
-    if n < need:
-        raise InputError(source, f"the tracks span only {n} frames; kappa needs at least {need} "
+    if n is not None and n < need:
+        raise InputError(source, f"the clip spans only {n} frames; kappa needs at least {need} "
                                  f"({MIN_BLOCKS} blocks of the preset's {block_length}-frame correlation length, "
-                                 "compliance.block_length)", "column 'frame'")
+                                 "compliance.block_length)", where)
 
 
 def check_graph_has_bend(graph) -> None:

@@ -40,9 +40,10 @@ def run(args: argparse.Namespace) -> int:
     from ..pipeline import analyze
     from ..track import load_annotations, make_tracker, open_video
     from ..tracks import tracks_from_table
-    from .track import track_with_progress
+    from .track import print_visibility, track_with_progress, warn_annotations
 
-    from ..validate import check_command_options, check_graph_has_bend
+    from ..quality import OFF_STRUCTURE_KEY
+    from ..validate import check_clip_length, check_command_options, check_graph_has_bend
 
     check_command_options(args)
     args.effects = parse_effect_names(args.effects)  # fail on a bad name before tracking
@@ -54,13 +55,20 @@ def run(args: argparse.Namespace) -> int:
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
         _check_graph_matches_points(graph, points, args)
+        n_clip = min(x for x in (src.n_frames, args.max_frames) if x is not None) \
+            if (src.n_frames, args.max_frames) != (None, None) else None
+        check_clip_length(n_clip, args.video, preset.compliance.block_length)
+        off_structure = warn_annotations(args.video, points, graph)
         tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress)
     t_track = time.perf_counter() - t0
+    print_visibility(tracked.visible)
     table = tracked.to_frame()
     tracks = tracks_from_table(table, graph, source=f"tracks of {args.video}")
     result = analyze(tracks, graph, preset=preset, seed=args.seed, n_boot=args.bootstrap)
     result.timings_s["track"] = t_track
     result.inputs.update(video=str(args.video), annotations=str(args.annotations), graph=str(args.graph))
+    if off_structure:
+        result.inputs[OFF_STRUCTURE_KEY] = ",".join(map(str, off_structure))
 
     from ..diagnosis_io import diagnose_result, diagnosis_for_viz, diagnosis_json
     diagnosis = diagnose_result(result, effects=args.effects, seed=args.seed if args.seed is not None else 0)

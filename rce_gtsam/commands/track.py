@@ -52,14 +52,37 @@ def run_track(args: argparse.Namespace) -> int:
     tracker = make_tracker(args.model)
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
+        warn_annotations(args.video, points, graph)
         result = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress)
     result.write_csv(args.out)
     vis = result.visible
     print(f"tracked {result.n_points} points over {result.n_frames} frames with {result.info.get('tracker')}; "
           f"visible {100 * vis.mean():.1f}% of point-frames, median sigma "
           f"{float(_median(result.sigma_px[vis])):.2f} px")
+    print_visibility(vis)
     print(f"wrote {args.out}")
     return 0
+
+
+def warn_annotations(video, points, graph) -> list[int]:
+    """Print (stderr) a warning for each annotated point not on a textured, moving structure; returns the ids
+    of those with no image structure at all."""
+    from ..track.checks import annotation_warnings, probe_frames
+
+    flagged, notes = annotation_warnings(probe_frames(video), points, root=graph.root if graph else None)
+    for line in [*flagged.values(), *notes.values()]:
+        print(line, file=sys.stderr)
+    return sorted(flagged)
+
+
+def print_visibility(visible) -> None:
+    """The per-node visible share, and a warning (stderr) for each node lost in most frames."""
+    from ..track.checks import visibility_lines
+
+    head, *warnings = visibility_lines(visible)
+    print(head)
+    for line in warnings:
+        print(line, file=sys.stderr)
 
 
 def track_with_progress(tracker, src, points, graph, max_frames: int | None, show: bool = True):
