@@ -56,11 +56,13 @@ def write_tracks(path: Path, df: pd.DataFrame) -> Path:
     return path
 
 
-def build(work: Path) -> dict:
-    """The base simulation and the derived input files."""
+def build(work: Path, video: bool = True) -> dict:
+    """The base simulation and the derived input files (``video=False``: no rendering, for the cases that
+    need no video)."""
     sim = work / "sim"
-    if not (sim / "video.mp4").exists():
-        code, _, err = _run(["simulate", "--seed", "3", "--frames", "200", "--nodes", "6", "--video", "--out", str(sim)])
+    if not (sim / "tracks.csv").exists() or (video and not (sim / "video.mp4").exists()):
+        code, _, err = _run(["simulate", "--seed", "3", "--frames", "200", "--nodes", "6", "--out", str(sim),
+                             *(["--video"] if video else [])])
         assert code == 0, err
     t = pd.read_csv(sim / "tracks.csv")
     g = json.loads((sim / "graph.json").read_text())
@@ -103,7 +105,7 @@ def build(work: Path) -> dict:
     f["outside_ann"] = work / "outside.json"
     (work / "few_ann.json").write_text(json.dumps({"points": ann[:3]}))
     f["few_ann"] = work / "few_ann.json"
-    (work / "trunc.mp4").write_bytes(f["video"].read_bytes()[:20000])
+    (work / "trunc.mp4").write_bytes(f["video"].read_bytes()[:20000] if video else b"\0" * 20000)
     f["trunc"] = work / "trunc.mp4"
     (work / "a_file").write_text("not a folder\n")
     f["file"] = work / "a_file"

@@ -96,7 +96,8 @@ class SmoothingMetrics:
 
     @staticmethod
     def _reduction(raw, smoothed) -> float:
-        return float(100.0 * (1.0 - np.nanmean(smoothed) / np.nanmean(raw)))
+        with np.errstate(divide="ignore", invalid="ignore"):  # static tracks: both means are 0
+            return float(100.0 * (1.0 - np.nanmean(smoothed) / np.nanmean(raw)))
 
     def as_dict(self) -> dict:
         return {

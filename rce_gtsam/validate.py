@@ -139,6 +139,26 @@ def check_graph_has_bend(graph) -> None:
                                        "needed; kappa is measured from bends")
 
 
+def check_bends_observed(table, graph, source, block_length: int) -> None:
+    """At least one bend must have its three nodes observed together in ``MIN_BLOCKS * block_length`` frames
+    (otherwise every kappa would rest on too few frames, or on none)."""
+    if "visible" in table.columns:
+        table = table[table["visible"] == 1]
+    frames = {n: set(g) for n, g in table.groupby("point_id")["frame"]}
+    need = MIN_BLOCKS * int(block_length)
+    best, best_bend = -1, None
+    for bend in graph.bends:
+        common = len(set.intersection(*(frames.get(n, set()) for n in bend.nodes)))
+        if common > best:
+            best, best_bend = common, bend
+        if common >= need:
+            return
+    if best_bend is not None:
+        raise InputError(source, f"no bend has its three nodes observed together in {need} frames (the best, "
+                                 f"{'-'.join(map(str, best_bend.nodes))}, in {best}); kappa needs at least {need} "
+                                 f"({MIN_BLOCKS} blocks of compliance.block_length)")
+
+
 def check_folds(folds: int, n_frames: int, block_length: int) -> None:
     """``--folds K``: 2 <= K <= n_frames // block_length (test blocks of at least one block length)."""
     top = max(2, n_frames // max(int(block_length), 1))
@@ -156,6 +176,7 @@ def check_analysis_inputs(tracks_path: Path, graph_path: Path, preset) -> None:
     tracks_from_table(table, graph, source=str(tracks_path))
     check_graph_has_bend(graph)
     check_tracks_span(table, tracks_path, preset.compliance.block_length)
+    check_bends_observed(table, graph, tracks_path, preset.compliance.block_length)
     return graph, table
 
 

@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     from .track import print_visibility, track_with_progress, warn_annotations
 
     from ..quality import OFF_STRUCTURE_KEY
-    from ..validate import check_clip_length, check_command_options, check_graph_has_bend
+    from ..validate import check_bends_observed, check_clip_length, check_command_options, check_graph_has_bend
 
     check_command_options(args)
     args.effects = parse_effect_names(args.effects)  # fail on a bad name before tracking
@@ -64,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
     print_visibility(tracked.visible)
     table = tracked.to_frame()
     tracks = tracks_from_table(table, graph, source=f"tracks of {args.video}")
+    check_bends_observed(table, graph, f"tracks of {args.video}", preset.compliance.block_length)
     result = analyze(tracks, graph, preset=preset, seed=args.seed, n_boot=args.bootstrap)
     result.timings_s["track"] = t_track
     result.inputs.update(video=str(args.video), annotations=str(args.annotations), graph=str(args.graph))
