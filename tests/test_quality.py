@@ -87,7 +87,7 @@ def test_bad_inputs_table_has_no_traceback(tmp_path):
     spec.loader.exec_module(mod)
     files = mod.build(tmp_path, video=False)
     fast = [c for c in mod.cases(files, tmp_path) if not any(a.endswith(".mp4") for a in c[1])]  # no video
-    assert len(fast) >= 40
+    assert len(mod.cases(files, tmp_path)) == 63 and len(fast) >= 40  # README: 63 cases
     for name, argv, expected in fast:
         code, out, err = mod._run(argv)
         assert code != "TRACEBACK", f"{name}: {err}"
