@@ -30,7 +30,7 @@ from rce_gtsam.cli import main as rce
 FAST = ["--bootstrap", "40", "--no-figures"]
 
 
-def _run(argv: list[str]) -> tuple[int | str, str, str]:
+def run_cli(argv: list[str]) -> tuple[int | str, str, str]:
     out, err = io.StringIO(), io.StringIO()
     try:
         with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
@@ -61,7 +61,7 @@ def build(work: Path, video: bool = True) -> dict:
     need no video)."""
     sim = work / "sim"
     if not (sim / "tracks.csv").exists() or (video and not (sim / "video.mp4").exists()):
-        code, _, err = _run(["simulate", "--seed", "3", "--frames", "200", "--nodes", "6", "--out", str(sim),
+        code, _, err = run_cli(["simulate", "--seed", "3", "--frames", "200", "--nodes", "6", "--out", str(sim),
                              *(["--video"] if video else [])])
         assert code == 0, err
     t = pd.read_csv(sim / "tracks.csv")
@@ -220,7 +220,7 @@ def run_table(work: Path) -> tuple[list, list]:
     rows, bad = [], []
     try:
         for name, argv, expected in cases(files, work):
-            code, out, err = _run(argv)
+            code, out, err = run_cli(argv)
             msg = _message(code, out, err) if code != "TRACEBACK" else err.strip().splitlines()[-1]
             rows.append((name, expected, code, msg))
             ok = code in expected if isinstance(expected, set) else code == expected

@@ -89,7 +89,7 @@ def test_bad_inputs_table_has_no_traceback(tmp_path):
     fast = [c for c in mod.cases(files, tmp_path) if not any(a.endswith(".mp4") for a in c[1])]  # no video
     assert len(mod.cases(files, tmp_path)) == 63 and len(fast) >= 40  # README: 63 cases
     for name, argv, expected in fast:
-        code, out, err = mod._run(argv)
+        code, out, err = mod.run_cli(argv)
         assert code != "TRACEBACK", f"{name}: {err}"
         assert code in expected if isinstance(expected, set) else code == expected, f"{name}: {code} {err}"
         if code == 2:
