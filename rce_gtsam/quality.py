@@ -201,12 +201,12 @@ def verdict_line(qualities: dict) -> str | None:
         return None
     n = len(qualities)
     counts = {r: sum(r in q.reasons for q in qualities.values()) for r in REASONS}
-    if n and counts["no_signal"] == n:
-        head = "no motion above the noise floor in any segment"
-    elif n and counts["single_bend"] == n:
+    if n and counts["single_bend"] == n:
         head = "the graph has a single bend, so kappa is 1 by its normalisation and nothing was estimated"
     elif n and counts["low_support"] == n:
         head = "no segment has enough usable frames"
+    elif n and counts["no_signal"] == n:
+        head = "no motion above the noise floor in any segment"
     else:
         head = "no segment's kappa passes the quality checks"
     detail = ", ".join(f"{r} {c}" for r, c in counts.items() if c)
