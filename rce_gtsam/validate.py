@@ -6,9 +6,8 @@ so ``rce`` prints one line and exits with code 2 before it smooths, tracks or bo
 * :func:`check_output_dir` / :func:`check_output_file` — an output location must be creatable and
   writable: not a file where a folder is wanted (or the reverse), not under a file, not in a read-only folder.
 * :func:`check_seed`, :func:`check_count` — integer options in range (never silently coerced).
-* :func:`check_tracks_span` — the tracks' frame labels: the first frame must be 0 (frame labels are
-  video frame indices; rows are never invented for frames before the first one) and the clip must be
-  long enough for the preset's correlation length.
+* :func:`check_tracks_span` — the clip must be long enough for the preset's correlation length (the
+  first frame must be 0: :func:`rce_gtsam.tracks.read_tracks_table` refuses others, naming the row).
 * :func:`check_graph_has_bend` — a graph with no (grandparent, joint, child) triplet has nothing to fit.
 * :func:`check_folds` — ``diagnose --folds K``: 2 <= K <= frames // block length.
 """
@@ -107,19 +106,9 @@ def check_count(value: int | None, option: str, minimum: int, maximum: int | Non
 
 
 def check_tracks_span(table, source: str | Path, block_length: int) -> None:
-    """Frame labels of a validated tracks table (:func:`rce_gtsam.tracks.read_tracks_table`).
-
-    The first frame must be 0: frame labels are video frame indices, and the analysis would otherwise
-    have to invent rows for every frame before the first one. The clip must span at least
-    ``MIN_BLOCKS * block_length`` frames.
-    """
-    first, last = int(table["frame"].min()), int(table["frame"].max())
-    if first != 0:
-        raise InputError(source, f"the first frame is {first}, not 0: frame labels are video frame indices "
-                                 f"counted from the first frame of the clip, and no rows are invented for "
-                                 f"frames 0..{first - 1}; renumber the frames (frame - {first}) or export the "
-                                 f"tracks from the start of the video", "column 'frame'")
-    check_clip_length(last + 1, source, block_length, "column 'frame'")
+    """A validated tracks table (:func:`rce_gtsam.tracks.read_tracks_table`, which also refuses a first
+    frame other than 0) must span at least ``MIN_BLOCKS * block_length`` frames."""
+    check_clip_length(int(table["frame"].max()) + 1, source, block_length, "column 'frame'")
 
 
 def check_clip_length(n: int | None, source, block_length: int, where: str | None = None) -> None:
