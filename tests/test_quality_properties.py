@@ -82,7 +82,7 @@ def _write(case, folder: Path) -> tuple[Path, Path]:
     return tracks, graph
 
 
-@settings(max_examples=20, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(case=cases())
 def test_malformed_or_static_input_never_crashes_or_claims_a_trustworthy_kappa(case):
     with tempfile.TemporaryDirectory() as tmp:
