@@ -98,19 +98,22 @@ class SmoothingMetrics:
 
     @staticmethod
     def _reduction(raw, smoothed) -> float:
-        return float(100.0 * (1.0 - np.nanmean(smoothed) / np.nanmean(raw)))
+        with np.errstate(divide="ignore", invalid="ignore"):  # static tracks: both means are 0
+            return float(100.0 * (1.0 - np.nanmean(smoothed) / np.nanmean(raw)))
 
     def as_dict(self) -> dict:
-        return {
-            "mean_bend_rms_raw_deg": float(np.nanmean(self.bend_rms_raw_deg)),
-            "mean_bend_rms_smoothed_deg": float(np.nanmean(self.bend_rms_smoothed_deg)),
-            "bend_rms_reduction_pct": self._reduction(self.bend_rms_raw_deg, self.bend_rms_smoothed_deg),
-            "mean_edge_length_cv_raw": float(np.nanmean(self.edge_cv_raw)),
-            "mean_edge_length_cv_smoothed": float(np.nanmean(self.edge_cv_smoothed)),
-            "edge_length_cv_reduction_pct": self._reduction(self.edge_cv_raw, self.edge_cv_smoothed),
-            "n_bends": int(self.bend_rms_raw_deg.size),
-            "n_edges": int(self.edge_cv_raw.size),
-        }
+        with warnings.catch_warnings():  # every bend an outlier: NaN means, said by the quality verdicts
+            warnings.simplefilter("ignore", RuntimeWarning)
+            return {
+                "mean_bend_rms_raw_deg": float(np.nanmean(self.bend_rms_raw_deg)),
+                "mean_bend_rms_smoothed_deg": float(np.nanmean(self.bend_rms_smoothed_deg)),
+                "bend_rms_reduction_pct": self._reduction(self.bend_rms_raw_deg, self.bend_rms_smoothed_deg),
+                "mean_edge_length_cv_raw": float(np.nanmean(self.edge_cv_raw)),
+                "mean_edge_length_cv_smoothed": float(np.nanmean(self.edge_cv_smoothed)),
+                "edge_length_cv_reduction_pct": self._reduction(self.edge_cv_raw, self.edge_cv_smoothed),
+                "n_bends": int(self.bend_rms_raw_deg.size),
+                "n_edges": int(self.edge_cv_raw.size),
+            }
 
 
 def observed_positions(smoothed: SmoothedTracks) -> np.ndarray:

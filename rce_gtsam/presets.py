@@ -12,6 +12,26 @@ from dataclasses import dataclass, field, replace
 from typing import Literal
 
 
+#: The largest factor weight a setting may take (1/px^2): beyond it the smoother's information matrix loses
+#: double precision (its condition number grows with the ratio of the weights), and a factor's sigma
+#: would be below 1e-4 px.
+MAX_WEIGHT = 1e8
+
+
+def _check(config, rules) -> None:
+    """Validate a config on construction: ``rules`` maps field -> (test, requirement text)."""
+    import math
+
+    for name, (test, need) in rules.items():
+        v = getattr(config, name)
+        if isinstance(v, float) and not math.isfinite(v) or not test(v):
+            raise ValueError(f"{type(config).__name__}.{name} = {v!r}: must be {need}")
+
+
+def _weight(v) -> bool:
+    return 0.0 <= v <= MAX_WEIGHT
+
+
 @dataclass(frozen=True)
 class SmootherConfig:
     """Factor-graph smoother settings.
@@ -42,6 +62,17 @@ class SmootherConfig:
     robust_k: float = 1.345
     marginals: bool = True
 
+    def __post_init__(self):
+        _check(self, {
+            "presmooth_window": (lambda v: v >= 0, ">= 0 frames (<= 1 disables the moving average)"),
+            "measurement_weight": (lambda v: 0 < v <= MAX_WEIGHT, f"> 0 and <= {MAX_WEIGHT:g} (1/px^2)"),
+            "velocity_weight": (_weight, f"between 0 and {MAX_WEIGHT:g} (1/px^2)"),
+            "acceleration_weight": (_weight, f"between 0 and {MAX_WEIGHT:g} (1/px^2)"),
+            "edge_weight": (_weight, f"between 0 and {MAX_WEIGHT:g} (1/px^2)"),
+            "along_across_ratio": (lambda v: 1e-3 <= v <= 1e3, "between 1e-3 and 1e3"),
+            "robust_k": (lambda v: v > 0, "> 0 (sigmas)"),
+        })
+
 
 @dataclass(frozen=True)
 class BendingConfig:
@@ -57,6 +88,9 @@ class BendingConfig:
     signed: bool = False
     rest: Literal["first", "median"] = "first"
     mad_threshold: float = 3.5
+
+    def __post_init__(self):
+        _check(self, {"mad_threshold": (lambda v: v >= 0, ">= 0 (a modified z-score)")})
 
 
 @dataclass(frozen=True)
@@ -123,6 +157,17 @@ class ComplianceConfig:
         if not (isinstance(self.time_split_blocks, int) and (self.time_split_blocks == 0 or self.time_split_blocks >= 2)):
             raise ValueError(f"compliance.time_split_blocks must be 0 (off) or an integer >= 2, "
                              f"got {self.time_split_blocks!r}")
+
+    def __post_init__(self):
+        _check(self, {
+            "prior_strength": (lambda v: v >= 0, ">= 0 (frames)"),
+            "prior_sd_log": (lambda v: v > 0, "> 0"),
+            "n_iter": (lambda v: v >= 1, ">= 1"),
+            "tol": (lambda v: v > 0, "> 0"),
+            "n_boot": (lambda v: v >= 0, ">= 0 (0 disables the bootstrap)"),
+            "block_length": (lambda v: v >= 1, ">= 1 frame"),
+            "seed": (lambda v: 0 <= v < 2**63, "between 0 and 2**63 - 1"),
+        })
 
 
 @dataclass(frozen=True)

@@ -5,15 +5,18 @@ Output folder (all CSV, one header row):
 * ``compliance_summary.csv`` — one row per edge, ordered by root distance: parent, child, depth, zone,
   root_distance_px, rest_length_px, kappa, kappa_ci_low, kappa_ci_high, uncertainty (U_e = CI width /
   kappa), direction (+1/-1, sign of the fitted gain), relative_stiffness (1/kappa), n_frames (frames
-  with a usable bend response), fit_rmse_deg, fit_r2, bend_rms_deg (filtered RMS of delta). The root
-  edge has no bend, so its kappa columns are empty.
+  with a usable bend response), fit_rmse_deg, fit_r2, bend_rms_deg (filtered RMS of delta), bend_snr
+  (bending variance / its noise floor) and quality (``ok`` or the reasons kappa should not be trusted,
+  :mod:`rce_gtsam.quality`). The root edge has no bend, so its kappa columns are empty.
 * ``excitation.csv`` — frame, z (degrees).
 * ``bending.csv`` — grandparent, joint, child, frame, angle_deg, delta_deg, inlier (0/1), angle_var_deg2.
 * ``smoothed_tracks.csv`` — point_id, frame, x, y (pixels, every frame), observed (0/1), cov_xx,
   cov_xy, cov_yy (marginal covariance, px^2).
 * ``report.json`` — inputs, preset, convergence, smoothing metrics, timings.
 
-The folder is written through a temporary sibling directory, so a failure leaves no half-written files.
+The folder is written through a temporary sibling directory that replaces the previous folder by renames
+(files of the previous folder that this run does not write are carried over), so a failure or an
+interruption leaves the previous results as they were and no half-written files.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ import pandas as pd
 
 from .version import __version__
 from .jsonutil import jsonable as _jsonable
+from .quality import assess_quality, quality_report
 
 
 def compliance_summary(result) -> pd.DataFrame:
@@ -39,6 +43,7 @@ def compliance_summary(result) -> pd.DataFrame:
     pred = fit.predict()
     bend_rms = dict(zip([b.edge for b in result.bending.bends], result.smoothing.bend_rms_smoothed_deg))
     U = result.uncertainty
+    quality = assess_quality(result)
     records = []
     for e in sorted(g.edges, key=lambda e: (geo.root_distance_px[e[1]], e[0], e[1])):
         p, c = e
@@ -48,7 +53,7 @@ def compliance_summary(result) -> pd.DataFrame:
         if i is None:
             rec.update(kappa=np.nan, kappa_ci_low=np.nan, kappa_ci_high=np.nan, uncertainty=np.nan,
                        direction=np.nan, relative_stiffness=np.nan, n_frames=0, fit_rmse_deg=np.nan,
-                       fit_r2=np.nan, bend_rms_deg=np.nan)
+                       fit_r2=np.nan, bend_rms_deg=np.nan, bend_snr=np.nan, quality="")
         else:
             y = resp.Y[i]
             ok = np.isfinite(y)
@@ -66,6 +71,8 @@ def compliance_summary(result) -> pd.DataFrame:
                 fit_rmse_deg=float(np.sqrt(np.mean(res**2))) if ok.any() else np.nan,
                 fit_r2=float(1 - np.sum(res**2) / ss_tot) if ss_tot > 1e-6 else np.nan,
                 bend_rms_deg=float(bend_rms[e]),
+                bend_snr=quality[e].snr,
+                quality=quality[e].quality,
             )
         records.append(rec)
     return pd.DataFrame.from_records(records)
@@ -124,6 +131,7 @@ def report_dict(result) -> dict:
         "smoothing_metrics": result.smoothing.as_dict(),
         "excitation_rms_deg": float(np.sqrt(np.mean(fit.z**2))),
         "timings_s": result.timings_s,
+        "quality": quality_report(result),
         **({"effects": result.effects_report()} if getattr(result, "effects", None) else {}),
     })
 
@@ -148,15 +156,43 @@ def write_outputs(result, out_dir: str | Path, extra_writers=()) -> dict[str, Pa
         for writer in extra_writers:
             writer(result, tmp)
         written = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
-        if not out_dir.exists():
-            os.replace(tmp, out_dir)
-        else:
-            for rel in written:
-                dest = out_dir / rel
-                dest.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(tmp / rel, dest)
-            shutil.rmtree(tmp, ignore_errors=True)
+        if out_dir.exists():
+            _keep_other_files(out_dir, tmp, set(written))
+        swap_folder(tmp, out_dir)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return {str(rel): out_dir / rel for rel in written}
+
+
+def _keep_other_files(old: Path, new: Path, replaced: set[Path]) -> None:
+    """Carry the files of ``old`` that this run does not rewrite (a recording, notes) into ``new``: hard
+    links where the file system allows, copies elsewhere."""
+    for p in old.rglob("*"):
+        rel = p.relative_to(old)
+        if not p.is_file() or rel in replaced:
+            continue
+        (new / rel).parent.mkdir(parents=True, exist_ok=True)
+        try:
+            os.link(p, new / rel)
+        except OSError:
+            shutil.copy2(p, new / rel)
+
+
+def swap_folder(tmp: Path, out_dir: Path) -> None:
+    """Put the finished folder ``tmp`` at ``out_dir`` with renames only: the previous ``out_dir`` is moved
+    aside, ``tmp`` moved in, the old one deleted. An interruption before the swap leaves the previous
+    folder untouched; between the two renames (microseconds) it sits complete beside it as
+    ``.NAME.old-*``."""
+    if not out_dir.exists():
+        os.replace(tmp, out_dir)
+        return
+    aside = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old-", dir=out_dir.parent))
+    aside.rmdir()
+    os.replace(out_dir, aside)
+    try:
+        os.replace(tmp, out_dir)
+    except BaseException:
+        os.replace(aside, out_dir)
+        raise
+    shutil.rmtree(aside, ignore_errors=True)

@@ -142,6 +142,12 @@ def read_tracks_table(path: str | Path) -> pd.DataFrame:
                 r = int(np.flatnonzero(values <= 0)[0])
                 _fail(path, f"sigma_px must be > 0 pixels, got {df[col].iloc[r]!r}", r)
             out[col] = values
+    first = int(out["frame"].min())
+    if first != 0:
+        r = int(np.argmin(out["frame"].to_numpy()))
+        _fail(path, f"the first frame is {first}, not 0: frame labels are video frame indices counted from the "
+                    f"first frame of the clip, and no rows are invented for frames 0..{first - 1}; renumber the "
+                    f"frames (frame - {first}) or export the tracks from the start of the video", r)
     dup = out.duplicated(["point_id", "frame"], keep="first")
     if dup.any():
         r = int(np.flatnonzero(dup.to_numpy())[0])

@@ -51,6 +51,7 @@ CASES = {
                            "tracks", "only 1 frame"),
     "bad visible flag": (dict(header="point_id,frame,x,y,visible", rows=[r + ",2" for r in good_rows()]),
                          "tracks", "'visible' must be 0 or 1"),
+    "frames not starting at 0": (dict(rows=good_rows(frames=range(1000, 1005))), "tracks", "the first frame is 1000"),
     "non-positive sigma": (dict(header="point_id,frame,x,y,sigma_px", rows=[r + ",0" for r in good_rows()]),
                            "tracks", "sigma_px must be > 0"),
 }

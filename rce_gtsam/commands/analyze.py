@@ -19,7 +19,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=None, help="bootstrap RNG seed (default: the preset's, 0)")
     p.add_argument("--bootstrap", type=int, default=None, metavar="N",
                    help="bootstrap resamples (default: the preset's, 250; 0 disables CIs)")
-    p.add_argument("--effects", default="", metavar="A,B",
+    p.add_argument("--effects", default=None, metavar="A,B",
                    help="add physical effect terms to the rank-1 model and report kappa (with bootstrap CIs) "
                         "from the extended model: comma-separated from delay, dynamics, second_mode, offset, "
                         "nonlinear (see `rce diagnose` for which one your data need)")
@@ -67,15 +67,32 @@ def run(args: argparse.Namespace) -> int:
 
     from ..diagnosis_io import parse_effect_names
 
+    from ..validate import check_analysis_inputs, check_command_options
+
+    check_command_options(args)
     effects = parse_effect_names(args.effects) or ()  # fail on a bad name before the (slow) analysis
     preset = preset_from_args(args)
+    check_analysis_inputs(args.tracks, args.graph, preset)
     result = analyze(args.tracks, args.graph, preset=preset, seed=args.seed, n_boot=args.bootstrap,
                      effects=effects)
     files = result.write(args.out, extra_writers=extra_writers(args))
     save_recording(args, result)
     print(format_summary(result))
     print(f"wrote {len(files)} files to {args.out}/: {', '.join(sorted(files))}")
-    return 0
+    return quality_exit_code(result, "analyze")
+
+
+def quality_exit_code(result, command: str) -> int:
+    """0, or 3 with one line on stderr when no segment's kappa passes the quality checks."""
+    import sys
+
+    from ..quality import assess_quality, verdict_line
+
+    line = verdict_line(assess_quality(result))
+    if line is None:
+        return 0
+    print(f"rce {command}: {line}", file=sys.stderr)
+    return 3
 
 
 def format_summary(result) -> str:
@@ -92,14 +109,17 @@ def format_summary(result) -> str:
         _fit_line(result),
         *_effects_lines(result),
         "",
-        f"{'edge':>10} {'zone':>8} {'kappa':>7} {'95% CI':>17} {'U_e':>6}",
+        f"{'edge':>10} {'zone':>8} {'kappa':>7} {'95% CI':>17} {'U_e':>6} {'R2':>6}  quality",
     ]
     for r in df.itertuples():
         if r.kappa != r.kappa:  # NaN: the root edge
             lines.append(f"{r.parent:>4}->{r.child:<5} {r.zone:>8} {'(root edge: no bend)':>31}")
             continue
         lines.append(f"{r.parent:>4}->{r.child:<5} {r.zone:>8} {r.kappa:7.3f} [{r.kappa_ci_low:6.3f}, "
-                     f"{r.kappa_ci_high:6.3f}] {r.uncertainty:6.3f}")
+                     f"{r.kappa_ci_high:6.3f}] {r.uncertainty:6.3f} {r.fit_r2:6.2f}  {r.quality}")
+    n_ok = int((df["quality"] == "ok").sum())
+    lines.append(f"quality: {n_ok} of {int(df['kappa'].notna().sum())} segments ok (reasons: see README, "
+                 "'Quality of each kappa')")
     tot = result.timings_s.get("total", float("nan"))
     lines.append(f"\ntotal {tot:.2f} s (" + ", ".join(f"{k} {v:.2f}" for k, v in result.timings_s.items()
                                                      if k != "total") + ")")

@@ -58,7 +58,11 @@ def run(args: argparse.Namespace) -> int:
 def _run_polyline(args: argparse.Namespace) -> int:
     from ..errors import InputError
     from ..track import parse_polyline, place_nodes_along_polyline, write_annotation_files
+    from ..validate import check_distinct_outputs, check_output_file
 
+    check_output_file(args.out_annotations, "--out-annotations")
+    check_output_file(args.out_graph, "--out-graph")
+    check_distinct_outputs(("--out-annotations", args.out_annotations), ("--out-graph", args.out_graph))
     if args.nodes < 3:
         raise InputError("--nodes", f"must be >= 3 (a bend needs a node with a parent and a child), got {args.nodes}")
     poly = parse_polyline(args.polyline)

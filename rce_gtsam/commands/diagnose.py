@@ -36,10 +36,15 @@ def run(args: argparse.Namespace) -> int:
     from ..errors import InputError
     from ..pipeline import analyze
 
+    from ..validate import check_analysis_inputs, check_command_options, check_folds
+
+    check_command_options(args, out_dir_option=None)
     names = parse_effect_names(args.effects)  # fail on a bad name before the (slow) analysis
     preset = preset_from_args(args)
     if args.folds < 2:
         raise InputError("--folds", f"need at least 2 cross-validation blocks, got {args.folds}")
+    _, table = check_analysis_inputs(args.tracks, args.graph, preset)
+    check_folds(args.folds, int(table["frame"].max()) + 1, preset.compliance.block_length)
     result = analyze(args.tracks, args.graph, preset=preset, n_boot=0)
     diag = diagnose_result(result, effects=names, seed=args.seed, n_folds=args.folds)
     data = diagnosis_json(diag, result)

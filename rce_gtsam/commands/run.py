@@ -42,27 +42,40 @@ def run(args: argparse.Namespace) -> int:
     from ..pipeline import analyze
     from ..track import load_annotations, make_tracker, open_video
     from ..tracks import tracks_from_table
-    from .track import start_live, track_with_progress
+    from .track import print_visibility, start_live, track_with_progress, warn_annotations
 
+    from ..quality import OFF_STRUCTURE_KEY
+    from ..validate import check_bends_observed, check_clip_length, check_command_options, check_graph_has_bend
+
+    check_command_options(args)
     args.effects = parse_effect_names(args.effects)  # fail on a bad name before tracking
     preset = preset_from_args(args)
     t0 = time.perf_counter()
     graph = load_graph(args.graph)
+    check_graph_has_bend(graph)
     tracker = make_tracker(args.model)
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
         _check_graph_matches_points(graph, points, args)
+        n_clip = min(x for x in (src.n_frames, args.max_frames) if x is not None) \
+            if (src.n_frames, args.max_frames) != (None, None) else None
+        check_clip_length(n_clip, args.video, preset.compliance.block_length)
+        off_structure = warn_annotations(args.video, points, graph)
         live = start_live(args, src, f"rce run {args.video}")
         tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress,
                                       on_frame=live.frame if live else None)
     t_track = time.perf_counter() - t0
+    print_visibility(tracked.visible)
     table = tracked.to_frame()
     tracks = tracks_from_table(table, graph, source=f"tracks of {args.video}")
+    check_bends_observed(table, graph, f"tracks of {args.video}", preset.compliance.block_length)
     result = analyze(tracks, graph, preset=preset, seed=args.seed, n_boot=args.bootstrap)
     result.timings_s["track"] = t_track
     result.inputs.update(video=str(args.video), annotations=str(args.annotations), graph=str(args.graph))
     if live:
         live.analysis(result)
+    if off_structure:
+        result.inputs[OFF_STRUCTURE_KEY] = ",".join(map(str, off_structure))
 
     from ..diagnosis_io import diagnose_result, diagnosis_for_viz, diagnosis_json
     diagnosis = diagnose_result(result, effects=args.effects, seed=args.seed if args.seed is not None else 0)
@@ -76,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         (tmp / "diagnosis.json").write_text(json.dumps(diagnosis_json(diagnosis, result), indent=1) + "\n")
         return {}
 
-    from .analyze import extra_writers, format_summary, save_recording
+    from .analyze import extra_writers, format_summary, quality_exit_code, save_recording
     files = result.write(args.out, extra_writers=[write_tracks, *extra_writers(args, video=args.video,
                                                                                 diagnosis=view)])
     save_recording(args, result, video=args.video, diagnosis=view)
@@ -84,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
     print()
     print(diagnosis.report())
     print(f"\nwrote {len(files)} files to {args.out}/")
-    return 0
+    return quality_exit_code(result, "run")
 
 
 def _check_graph_matches_points(graph, points, args) -> None:

@@ -80,6 +80,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..validate import check_output_dir, check_seed
+
+    check_seed(args.seed)
+    check_output_dir(args.out)
+    effects = _effect_list(args.effect)
+    for name in (_strengths(args.strength) or {}):
+        if name not in effects:
+            raise InputError("--strength", f"{name}'s strength is set but the effect is not switched on; add "
+                                           f"--effect {name}")
     noise = NoiseConfig(enabled=not args.clean, emit_sigma=args.sigma)
     cfg = SimulationConfig(n_nodes=args.nodes, n_frames=args.frames, effects=_effect_list(args.effect),
                            effect_strength=_strengths(args.strength), noise=noise, seed=args.seed,

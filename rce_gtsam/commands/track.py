@@ -35,12 +35,16 @@ def run_track(args: argparse.Namespace) -> int:
     from ..graph import load_graph
     from ..track import load_annotations, make_tracker, open_video
 
+    from ..validate import check_output_file
+
     if args.max_frames is not None and args.max_frames < 1:
         raise InputError("--max-frames", f"must be >= 1, got {args.max_frames}")
+    check_output_file(args.out, "--out")
     graph = load_graph(args.graph) if args.graph else None
     tracker = make_tracker(args.model)
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
+        warn_annotations(args.video, points, graph)
         live = start_live(args, src, f"tracking {args.video}")
         result = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress,
                                      on_frame=live.frame if live else None)
@@ -51,6 +55,7 @@ def run_track(args: argparse.Namespace) -> int:
     print(f"tracked {result.n_points} points over {result.n_frames} frames with {result.info.get('tracker')}; "
           f"visible {100 * vis.mean():.1f}% of point-frames, median sigma "
           f"{float(_median(result.sigma_px[vis])):.2f} px")
+    print_visibility(vis)
     print(f"wrote {args.out}")
     return 0
 
@@ -61,6 +66,27 @@ def start_live(args: argparse.Namespace, src, title: str):
     if live is not None and Path(src.path).suffix.lower() not in (".bag", ".db3"):  # RealSense: points only
         live.video(src.path, src.n_frames, src.fps)
     return live
+
+
+def warn_annotations(video, points, graph) -> list[int]:
+    """Print (stderr) a warning for each annotated point not on a textured, moving structure; returns the ids
+    of those with no image structure at all."""
+    from ..track.checks import annotation_warnings, probe_frames
+
+    flagged, notes = annotation_warnings(probe_frames(video), points, root=graph.root if graph else None)
+    for line in [*flagged.values(), *notes.values()]:
+        print(line, file=sys.stderr)
+    return sorted(flagged)
+
+
+def print_visibility(visible) -> None:
+    """The per-node visible share, and a warning (stderr) for each node lost in most frames."""
+    from ..track.checks import visibility_lines
+
+    head, *warnings = visibility_lines(visible)
+    print(head)
+    for line in warnings:
+        print(line, file=sys.stderr)
 
 
 def track_with_progress(tracker, src, points, graph, max_frames: int | None, show: bool = True, on_frame=None):

@@ -32,6 +32,9 @@ def run(args: argparse.Namespace) -> int:
     from ..viz.rerun_log import save_recording, spawn_viewer
     from ..viz.scene import AnalysisView
 
+    from ..validate import check_output_file
+
+    check_output_file(args.rrd, "--rrd")
     if args.spawn:
         from ..viewer import require_display
         require_display()

@@ -13,6 +13,8 @@ time, so a long video is never held in memory. Images are ``(H, W, 3)`` ``uint8`
 
 from __future__ import annotations
 
+import contextlib
+import os
 from abc import ABC, abstractmethod
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
@@ -89,6 +91,24 @@ class ArraySource(FrameSource):
             yield Frame(i, np.asarray(im), i / self.fps)
 
 
+@contextlib.contextmanager
+def quiet_stderr():
+    """Silence the process's file descriptor 2 (C libraries such as FFmpeg write there directly) for the
+    duration of the block; Python's ``sys.stderr`` object is untouched."""
+    try:
+        saved = os.dup(2)
+    except OSError:  # no fd 2 (embedded interpreter): nothing to silence
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 2)
+            yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
 class VideoFileSource(FrameSource):
     """A video file decoded with OpenCV (``cv2.VideoCapture``), converted BGR -> RGB."""
 
@@ -97,11 +117,14 @@ class VideoFileSource(FrameSource):
 
         self.path = str(path)
         self._cv2 = cv2
-        self._cap = cv2.VideoCapture(self.path)
-        if not self._cap.isOpened():
+        with quiet_stderr():  # FFmpeg prints its own raw complaint ("moov atom not found") to fd 2
+            self._cap = cv2.VideoCapture(self.path)
+            opened = self._cap.isOpened()
+            ok, first = self._cap.read() if opened else (False, None)
+        if not opened:
             self._cap.release()
-            raise InputError(path, "OpenCV cannot open this file as a video (unknown container or codec)")
-        ok, first = self._cap.read()
+            raise InputError(path, "OpenCV cannot open this file as a video (unknown container or codec, "
+                                   "or a truncated or corrupt file)")
         if not ok or first is None:
             self._cap.release()
             raise InputError(path, "the video has no readable frames")

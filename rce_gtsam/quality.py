@@ -1,0 +1,231 @@
+"""A quality verdict on every kappa: ``ok``, or the reasons it should not be trusted.
+
+Each segment (bend row of the response) gets the reasons that apply, in this order, joined by ``+``:
+
+* ``off_structure`` — (``rce run``) one of the bend's nodes was annotated where the first frames show no
+  image structure or no change (:mod:`rce_gtsam.track.checks`): it is probably not on the branch.
+* ``tracking_lost`` — one of the bend's three nodes was observed in fewer than ``1 - LOST_SHARE`` (half)
+  of the frames: the smoother interpolated it for most of the clip.
+* ``low_support`` — fewer usable (inlier, finite) frames than ``MIN_BLOCKS`` block lengths
+  (2 x 25 = 50 frames at the presets' ``compliance.block_length``) or than ``SUPPORT_SHARE`` (half) of
+  the clip: an all-outlier bend lands here.
+* ``single_bend`` — the graph has one bend: kappa is 1 by its normalisation (geometric mean 1), nothing
+  was estimated.
+* ``no_signal`` — the segment's bending variance is not significantly above its noise floor. The noise
+  floor is the tracking noise of the raw bending angle, estimated from the data (robust variance of the
+  frame-to-frame differences of the unsmoothed angle, / 2: tracker noise is white-ish, sway is slow),
+  times the smoother's variance reduction for that segment from the noise model (propagated smoothed
+  angle variance / propagated raw angle variance, both from the node covariances). The test is
+  chi-square: variance / noise floor > chi2.ppf(1 - ALPHA, n_eff) / n_eff with n_eff = usable frames /
+  block length (the correlation length the preset assumes), ALPHA = 0.01.
+* ``poor_fit`` — R^2 < 0: the fitted kappa * z describes the segment's bending worse than its own mean.
+* ``wide_ci`` — the 95 % interval is at least as wide (in log kappa) as the shrinkage prior's own 95 %
+  interval, 2 x 1.96 x ``compliance.prior_sd_log``, or is not finite: the data did not narrow kappa.
+
+Slow tracker drift is not in the noise floor (it looks like slow sway); ``wide_ci`` and the residual
+figures are where it shows.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .bending import angle_gradient
+
+#: A node unseen in more than this share of the clip's frames is "lost" (tracking_lost; ``rce track`` warns).
+LOST_SHARE = 0.5
+#: Minimum usable frames, in block lengths (compliance.block_length).
+MIN_BLOCKS = 2
+#: Minimum share of the clip's frames with a usable bend.
+SUPPORT_SHARE = 0.5
+#: One-sided level of the no-signal chi-square test.
+ALPHA = 0.01
+#: z of the prior's two-sided 95 % interval (wide_ci).
+Z95 = 1.959964
+
+#: ``AnalysisResult.inputs`` key of the comma-separated node ids whose annotation is not on a textured,
+#: moving structure (``rce run``'s check before tracking, :mod:`rce_gtsam.track.checks`).
+OFF_STRUCTURE_KEY = "off_structure_nodes"
+
+REASONS = ("off_structure", "tracking_lost", "low_support", "single_bend", "no_signal", "poor_fit", "wide_ci")
+
+
+@dataclass(frozen=True)
+class SegmentQuality:
+    """The verdict on one segment's kappa and the numbers behind it.
+
+    bend_var_deg2: variance of the bending deviation over usable frames (deg^2); noise_var_deg2: its
+    noise floor (deg^2); snr: their ratio; snr_threshold: the ratio the chi-square test needs;
+    n_frames: usable frames; min_node_visible: smallest observed share of the bend's three nodes.
+    """
+
+    edge: tuple[int, int]
+    reasons: tuple[str, ...]
+    bend_var_deg2: float
+    noise_var_deg2: float
+    snr: float
+    snr_threshold: float
+    n_frames: int
+    min_node_visible: float
+
+    @property
+    def quality(self) -> str:
+        return "+".join(self.reasons) if self.reasons else "ok"
+
+    @property
+    def ok(self) -> bool:
+        return not self.reasons
+
+
+def _raw_noise(a: np.ndarray) -> tuple[float, float]:
+    """(variance deg^2, lag-1 autocorrelation) of the tracking noise in an angle series (degrees), from its
+    frame-to-frame differences (sway is slow, tracker noise is not): robust variance of the differences
+    (MAD; wrapped to +-180 deg; a difference across a gap is dropped) / (2 (1 - rho1)), with rho1 from the
+    correlation of consecutive differences (-1/2 for white noise). NaN if fewer than 3 differences."""
+    d = (np.diff(a) + 180.0) % 360.0 - 180.0
+    pair = np.isfinite(d[1:]) & np.isfinite(d[:-1])
+    d_ok = d[np.isfinite(d)]
+    if d_ok.size < 3:
+        return float("nan"), 0.0
+    mad = 1.482602 * np.median(np.abs(d_ok - np.median(d_ok)))
+    rho1 = 0.0
+    if pair.sum() >= 3 and np.std(d[1:][pair]) > 0 and np.std(d[:-1][pair]) > 0:
+        c = float(np.corrcoef(d[1:][pair], d[:-1][pair])[0, 1])
+        rho1 = float(np.clip((1 + 2 * c) / (2 + 2 * c), 0.0, 0.9)) if c > -0.5 else 0.0
+    return float(mad**2 / (2.0 * (1.0 - rho1))), rho1
+
+
+def _raw_angle_variance(xy: np.ndarray, sigma2: np.ndarray, rows) -> np.ndarray:
+    """(F,) first-order variance (deg^2) of the turning angle of the raw positions, nodes independent with
+    isotropic variances ``sigma2`` (N, F) px^2."""
+    g = angle_gradient(*(xy[i] for i in rows))  # (F, 6) rad / px
+    var = sum(sigma2[i] * (g[:, 2 * a] ** 2 + g[:, 2 * a + 1] ** 2) for a, i in enumerate(rows))
+    return var * np.degrees(1.0) ** 2
+
+
+def _r2(y: np.ndarray, pred: np.ndarray) -> float:
+    ok = np.isfinite(y) & np.isfinite(pred)
+    if ok.sum() < 2:
+        return float("nan")
+    ss_tot = float(np.sum((y[ok] - y[ok].mean()) ** 2))
+    return float(1 - np.sum((y[ok] - pred[ok]) ** 2) / ss_tot) if ss_tot > 1e-12 else float("nan")
+
+
+def assess_quality(result) -> dict[tuple[int, int], SegmentQuality]:
+    """The verdict on every segment of an :class:`~rce_gtsam.pipeline.AnalysisResult` (see module docstring)."""
+    from scipy.stats import chi2
+
+    resp, bending, preset = result.response, result.bending, result.preset
+    cfg = preset.compliance
+    tracks = result.tracks
+    n_clip = tracks.n_frames
+    visible = tracks.observed.mean(axis=1)
+    row = {int(n): i for i, n in enumerate(tracks.node_ids)}
+    raw_xy = tracks.xy
+    if tracks.sigma_px is not None:
+        sigma2 = tracks.sigma_px**2
+    else:
+        sigma2 = np.full(tracks.observed.shape, 1.0 / preset.smoother.measurement_weight)
+    pred = result.fit.predict()
+    off = {int(n) for n in str(result.inputs.get(OFF_STRUCTURE_KEY, "")).split(",") if n.strip()}
+    n_segments = len(resp.edges)
+    out = {}
+    for i, edge in enumerate(resp.edges):
+        k = int(resp.bend_rows[i])
+        bend = bending.bends[k]
+        rows = [row[n] for n in bend.nodes]
+        use = bending.inlier[k] & np.isfinite(bending.delta_deg[k])
+        n = int(use.sum())
+        d = bending.delta_deg[k][use]
+        var = float(np.var(d)) if n >= 2 else 0.0
+        raw_noise, rho1 = _raw_noise(_turning(raw_xy, rows))
+        reduction = float("nan")
+        if bending.variance_deg2 is not None and n:
+            v_raw = _raw_angle_variance(raw_xy, sigma2, rows)[use]
+            v_s = bending.variance_deg2[k][use]
+            good = np.isfinite(v_raw) & np.isfinite(v_s) & (v_raw > 0)
+            if good.any():
+                reduction = float(np.mean(v_s[good]) / np.mean(v_raw[good]))
+        if not np.isfinite(reduction):  # no propagated variances: the raw noise is the (conservative) floor
+            reduction = 1.0
+        noise = raw_noise * reduction if np.isfinite(raw_noise) else float("nan")
+        if var <= 1e-12:
+            snr = 0.0
+        elif not noise > 0:
+            snr = float("inf") if noise == 0 else float("nan")
+        else:
+            snr = var / noise
+        # white noise through a linear smoother of unit DC gain: correlation time = 1 / variance reduction;
+        # an AR(1) input multiplies it by (1 + rho1) / (1 - rho1)
+        n_eff = max(n * min(reduction, 1.0) * (1 - rho1) / (1 + rho1), 1.0)
+        threshold = float(chi2.ppf(1 - ALPHA, n_eff) / n_eff)
+        reasons = ["off_structure"] if off & set(bend.nodes) else []
+        node_vis = float(min(visible[r] for r in rows))
+        if node_vis < 1 - LOST_SHARE:
+            reasons.append("tracking_lost")
+        if n < MIN_BLOCKS * cfg.block_length or n < SUPPORT_SHARE * n_clip:
+            reasons.append("low_support")
+        if n_segments == 1:
+            reasons.append("single_bend")
+        if not snr > threshold:
+            reasons.append("no_signal")
+        if not _r2(resp.Y[i], pred[i]) >= 0:
+            reasons.append("poor_fit")
+        if _wide(result, i, cfg):
+            reasons.append("wide_ci")
+        out[edge] = SegmentQuality(edge=edge, reasons=tuple(reasons), bend_var_deg2=var, noise_var_deg2=noise,
+                                   snr=snr, snr_threshold=threshold, n_frames=n, min_node_visible=node_vis)
+    return out
+
+
+def _turning(xy: np.ndarray, rows) -> np.ndarray:
+    from .bending import bend_angles
+    return bend_angles(xy[rows[0]], xy[rows[1]], xy[rows[2]], True)
+
+
+def _wide(result, i: int, cfg) -> bool:
+    ci = result.ci
+    if ci is None:
+        return False  # no bootstrap: no interval to judge
+    lo, hi = float(ci.low[i]), float(ci.high[i])
+    if not (np.isfinite(lo) and np.isfinite(hi)) or lo <= 0:
+        return True
+    return bool(np.log(hi / lo) >= 2 * Z95 * cfg.prior_sd_log)
+
+
+def verdict_line(qualities: dict) -> str | None:
+    """None when at least one segment is ``ok``; otherwise one line saying why no kappa can be trusted."""
+    if any(q.ok for q in qualities.values()):
+        return None
+    n = len(qualities)
+    counts = {r: sum(r in q.reasons for q in qualities.values()) for r in REASONS}
+    if n and counts["single_bend"] == n:
+        head = "the graph has a single bend, so kappa is 1 by its normalisation and nothing was estimated"
+    elif n and counts["low_support"] == n:
+        head = "no segment has enough usable frames"
+    elif n and counts["no_signal"] == n:
+        head = "no motion above the noise floor in any segment"
+    else:
+        head = "no segment's kappa passes the quality checks"
+    detail = ", ".join(f"{r} {c}" for r, c in counts.items() if c)
+    return f"{head} ({detail} of {n} segments); the outputs are written for inspection"
+
+
+def quality_report(result, qualities: dict | None = None) -> dict:
+    """The ``quality`` section of report.json: the rules' constants and each segment's numbers."""
+    qualities = assess_quality(result) if qualities is None else qualities
+    cfg = result.preset.compliance
+    return {
+        "rules": {"lost_share": LOST_SHARE, "min_frames": MIN_BLOCKS * cfg.block_length,
+                  "support_share": SUPPORT_SHARE, "no_signal_alpha": ALPHA,
+                  "wide_ci_log_width": 2 * Z95 * cfg.prior_sd_log, "poor_fit_r2_below": 0.0},
+        "n_ok": sum(q.ok for q in qualities.values()),
+        "segments": {f"{j}->{c}": {"quality": q.quality, "bend_var_deg2": q.bend_var_deg2,
+                                   "noise_var_deg2": q.noise_var_deg2, "snr": q.snr,
+                                   "snr_threshold": q.snr_threshold, "n_frames": q.n_frames,
+                                   "min_node_visible": q.min_node_visible}
+                     for (j, c), q in qualities.items()},
+        "verdict": verdict_line(qualities),
+    }
