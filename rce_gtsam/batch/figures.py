@@ -66,6 +66,10 @@ def fig_kappa_by_zone(recordings: list[RecordingSummary]):
             ax.set_title(f"{zone}", color=ZONE_COLORS[zone])
         if vals.size:
             axes[0].set_ylim(max(vals.min() / 3, 1e-3), min(vals.max() * 3, 1e3))
+        from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+        axes[0].yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+        axes[0].yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+        axes[0].yaxis.set_minor_formatter(NullFormatter())
         axes[0].set_ylabel("relative compliance κ (log), 95 % CI")
         fig.suptitle("κ by zone across recordings", fontsize=9, fontweight="bold", x=0.01, ha="left")
     return fig

@@ -32,7 +32,9 @@ SUMMARY_CSV, SUMMARY_JSON, FIGURES_DIR, RECORDING_RRD = "summary.csv", "summary.
 @dataclass(frozen=True)
 class BatchResult:
     """What :func:`run` did. outcomes: per recording id (manifest order). summary: the ``summary.csv``
-    table. files: {name: path} of the batch-level outputs. wall_s: seconds for the whole call.
+    table. files: {name: path} of the batch-level outputs. wall_s: seconds for the whole call; timings_s:
+    its phases ("prepare": manifest and fingerprints, "cluster_start", "compute": from the first task
+    submitted to the last result, "summary": summary, figures and recording).
     cluster: how the work was run ({"kind": "none" | "client" | "scheduler" | "local", ...})."""
 
     out: Path
@@ -40,6 +42,7 @@ class BatchResult:
     summary: pd.DataFrame
     files: dict[str, Path] = field(default_factory=dict)
     wall_s: float = 0.0
+    timings_s: dict = field(default_factory=dict)
     cluster: dict = field(default_factory=dict)
 
     def count(self, status: str) -> int:
@@ -99,22 +102,31 @@ def run(manifest: str | Path | Manifest, out: str | Path, client=None, *, schedu
         bar = tqdm(total=len(m.recordings), initial=len(m.recordings) - len(todo), unit="recording",
                    desc="batch", file=sys.stderr, dynamic_ncols=True)
     cluster_info = {"kind": "none"}
+    timings = {"prepare": time.perf_counter() - t0}
     try:
         if todo:
-            cluster_info = _compute(todo, out, options, fps, outcomes, client, scheduler, workers, bar)
+            cluster_info = _compute(todo, out, options, fps, outcomes, client, scheduler, workers, bar, timings)
     finally:
         if bar is not None:
             bar.close()
     outcomes = {rec.id: outcomes[rec.id] for rec in m.recordings}
-    files, table = _write_summary(m, out, outcomes, options, recording,
-                                  {"cluster": cluster_info, "compute_wall_s": time.perf_counter() - t0})
+    t_summary = time.perf_counter()
+    key = _summary_key(m, outcomes, recording)
+    reused = _unchanged_summary(out, key, recording) if cluster_info["kind"] == "none" else None
+    if reused is not None:
+        files, table = reused
+    else:
+        files, table = _write_summary(m, out, outcomes, options, recording,
+                                      {"key": key, "cluster": cluster_info, "timings_s": timings})
+    timings["summary"] = time.perf_counter() - t_summary
     return BatchResult(out=out, outcomes=outcomes, summary=table, files=files, wall_s=time.perf_counter() - t0,
-                       cluster=cluster_info)
+                       cluster=cluster_info, timings_s=timings)
 
 
 def _compute(todo, out: Path, options: BatchOptions, fps: dict, outcomes: dict, client, scheduler, workers,
-             bar) -> dict:
+             bar, timings: dict) -> dict:
     """Submit ``todo`` to the cluster and fill ``outcomes`` as tasks finish. Returns the cluster info."""
+    t0 = time.perf_counter()
     from distributed import Client, LocalCluster, as_completed
 
     own_cluster = own_client = None
@@ -132,6 +144,8 @@ def _compute(todo, out: Path, options: BatchOptions, fps: dict, outcomes: dict, 
         client = own_client = Client(own_cluster)
         info = {"kind": "local", "workers": n, "threads_per_worker": 1}
     info["n_workers"] = len(client.scheduler_info().get("workers", {}))
+    timings["cluster_start"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
     try:
         futures = {client.submit(process_recording, rec, str(out), options, fps[rec.id], pure=False,
                                  key=f"rce-batch-{rec.id}-{fps[rec.id][:12]}"): rec for rec in todo}
@@ -148,12 +162,38 @@ def _compute(todo, out: Path, options: BatchOptions, fps: dict, outcomes: dict, 
                 bar.update(1)
                 if oc.status == "failed":
                     bar.write(f"{rec.id}: failed: {oc.error}", file=sys.stderr)
+        timings["compute"] = time.perf_counter() - t0
     finally:
         if own_client is not None:
             own_client.close()
         if own_cluster is not None:
             own_cluster.close()
     return info
+
+
+def _summary_key(m: Manifest, outcomes: dict, recording: bool) -> str:
+    """Hash of what the batch outputs show: the manifest's contents and every recording's fingerprint and
+    status. Equal keys: the stored summary, figures and recording are still right."""
+    import hashlib
+    import json
+
+    from .options import file_digest
+    blob = json.dumps({"manifest": file_digest(m.path), "recording": recording,
+                       "outcomes": [[o.id, o.fingerprint, o.status == "failed", o.error] for o in outcomes.values()]})
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def _unchanged_summary(out: Path, key: str, recording: bool):
+    """(files, table) of the stored batch outputs when they were written for ``key`` and all exist, else None."""
+    import json
+    try:
+        stored = json.loads((out / SUMMARY_JSON).read_text())["batch"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    files = {name: out / name for name in stored.get("files", [])}
+    if stored.get("key") != key or not files or not all(p.is_file() for p in files.values()):
+        return None
+    return files, pd.read_csv(out / SUMMARY_CSV)
 
 
 def _write_summary(m: Manifest, out: Path, outcomes: dict, options: BatchOptions, recording: bool,
@@ -180,6 +220,6 @@ def _write_summary(m: Manifest, out: Path, outcomes: dict, options: BatchOptions
         "options": {"preset": options.preset, "overrides": list(options.overrides), "seed": options.seed,
                     "n_boot": options.n_boot, "effects": options.effects, "figures": options.figures,
                     "max_frames": options.max_frames, "model": None if options.model is None else str(options.model)},
-        **batch})
+        **batch, "files": sorted([*files, SUMMARY_JSON])})
     files[SUMMARY_JSON] = write_json_atomic(doc, out / SUMMARY_JSON)
     return files, table

@@ -89,6 +89,9 @@ def summary_table(manifest: Manifest, recordings: list[RecordingSummary]) -> pd.
         frames.append(df)
     cols = ["id", *manifest.metadata_columns, *RECORDING_COLUMNS[1:], *seg_cols, "error"]
     table = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame(columns=cols)
+    ints = {c for r in recordings for c in r.segments.columns if pd.api.types.is_integer_dtype(r.segments[c])}
+    for c in ints:  # a failed recording's empty cells would turn integer columns (parent, child...) into floats
+        table[c] = table[c].astype("Int64")
     return table.reindex(columns=cols)
 
 
