@@ -67,6 +67,7 @@ def first_run(inputs, client, tmp_path_factory):
     return out, code
 
 
+@pytest.mark.slow  # a 2-worker LocalCluster and 7 recordings: about 30 s on an idle 2-core machine
 def test_summary_matches_each_recording_and_reports_the_broken_one(inputs, first_run, capsys):
     root, manifest, rows = inputs
     out, code = first_run
@@ -109,6 +110,7 @@ def test_summary_matches_each_recording_and_reports_the_broken_one(inputs, first
     assert not any(p.startswith("/plants/broken") for p in paths)
 
 
+@pytest.mark.slow
 def test_rerun_recomputes_nothing_and_a_changed_row_alone(inputs, first_run, client, tmp_path):
     root, manifest, rows = inputs
     out, _ = first_run
@@ -140,6 +142,7 @@ def _same_diagnosis(a: Path, b: Path):
         [c["heldout_rmse"] for c in db["candidates"]], rel=1e-9)
 
 
+@pytest.mark.slow
 def test_results_equal_running_each_recording_alone(inputs, first_run, tmp_path):
     root, manifest, rows = inputs
     out, _ = first_run

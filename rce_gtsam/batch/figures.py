@@ -70,7 +70,7 @@ def fig_kappa_by_zone(recordings: list[RecordingSummary]):
         axes[0].yaxis.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
         axes[0].yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
         axes[0].yaxis.set_minor_formatter(NullFormatter())
-        axes[0].set_ylabel("relative compliance κ (log), 95 % CI")
+        axes[0].set_ylabel("κ (log scale), 95 % CI")
         fig.suptitle("κ by zone across recordings", fontsize=9, fontweight="bold", x=0.01, ha="left")
     return fig
 
@@ -107,6 +107,9 @@ def fig_verdicts(recordings: list[RecordingSummary]):
         ax.set_xticks(x, [_label(r) for r in recordings], rotation=90, fontsize=6 if n > 10 else 7)
         ax.set_xlim(-0.7, n - 0.3)
         ax.set_ylabel("held-out RMSE (deg)")
+        top = np.nanmax(np.r_[base, after, 0.0])
+        if top > 0:
+            ax.set_ylim(0, top * 1.45)  # head-room for the legend
         ax.grid(axis="x", visible=False)
         ax.set_title("(b) Held-out error: baseline vs verdict")
         ax.legend(handles=[Patch(color="#bdbdbd", label="rank-1 baseline")]
