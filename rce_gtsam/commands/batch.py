@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from .preset_args import add_preset_arguments
+from .preset_args import add_preset_arguments, add_run_options
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -27,11 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help="worker processes of the LocalCluster, one thread each (default: one per core, "
                             "at most one per recording)")
     add_preset_arguments(p)
-    p.add_argument("--seed", type=int, default=None, help="bootstrap / cross-validation seed")
-    p.add_argument("--bootstrap", type=int, default=None, metavar="N", help="bootstrap resamples")
-    p.add_argument("--effects", default=None, metavar="A,B",
-                   help="diagnosis candidates, comma-separated (default: delay,dynamics,second_mode,offset,"
-                        "nonlinear)")
+    add_run_options(p)
     p.add_argument("--model", type=Path, default=None, metavar="DIR_OR_ONNX",
                    help="TAPIR ONNX export for video rows (default: the OpenCV tracker)")
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="track only the first N frames")
