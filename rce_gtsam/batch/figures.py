@@ -150,14 +150,18 @@ def fig_uncertainty(recordings: list[RecordingSummary]):
                 med = float(np.median(u[ok]))
                 ax.plot([i - 0.35, i + 0.35], [med, med], color="0.2", lw=1.2, zorder=4)
                 allu.append(u[ok])
+        title = "Relative uncertainty of κ per recording (bar: median)"
         if allu:
             u = np.concatenate(allu)
-            ax.set_ylim(0, min(float(u.max()) * 1.1, 4 * float(np.median(u)) + 1e-9))
+            cap = 4 * float(np.median(u)) + 1e-9  # one unstable segment must not flatten the rest
+            ax.set_ylim(0, min(float(u.max()) * 1.1, cap))
+            if u.max() > cap:
+                title += f"; {int((u > cap).sum())} segment(s) above {cap:.2g} not shown"
         ax.set_xticks(range(n), [_label(r) for r in recordings], rotation=90, fontsize=6 if n > 10 else 7)
         ax.set_xlim(-0.7, n - 0.3)
         ax.grid(axis="x", visible=False)
         ax.set_ylabel("U_e = CI width / κ")
-        ax.set_title("Relative uncertainty of κ per recording (bar: median; axis clipped at 4× the overall median)")
+        ax.set_title(title)
         from matplotlib.lines import Line2D
         ax.legend(handles=[Line2D([], [], marker="o", ls="", color=ZONE_COLORS[z], label=z, markersize=4)
                            for z in ZONES], loc="upper right", ncol=3)

@@ -112,7 +112,7 @@ def run(manifest: str | Path | Manifest, out: str | Path, client=None, *, schedu
     outcomes = {rec.id: outcomes[rec.id] for rec in m.recordings}
     t_summary = time.perf_counter()
     key = _summary_key(m, outcomes, recording)
-    reused = _unchanged_summary(out, key, recording) if cluster_info["kind"] == "none" else None
+    reused = _unchanged_summary(out, key) if cluster_info["kind"] == "none" else None
     if reused is not None:
         files, table = reused
     else:
@@ -183,7 +183,7 @@ def _summary_key(m: Manifest, outcomes: dict, recording: bool) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
-def _unchanged_summary(out: Path, key: str, recording: bool):
+def _unchanged_summary(out: Path, key: str):
     """(files, table) of the stored batch outputs when they were written for ``key`` and all exist, else None."""
     import json
     try:
