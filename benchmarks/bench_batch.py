@@ -80,7 +80,8 @@ class SeparateCluster:
         sfile = self.tmp / f"scheduler_{self.workers}.json"
         log = open(self.tmp / f"dask_{self.workers}.log", "w")
         self.procs.append(subprocess.Popen([dask, "scheduler", "--host", "127.0.0.1", "--port", "0",
-                                            "--no-dashboard", "--scheduler-file", str(sfile)],
+                                            "--no-dashboard", "--dashboard-address", "127.0.0.1:0",
+                                            "--scheduler-file", str(sfile)],
                                            stdout=log, stderr=subprocess.STDOUT))
         for _ in range(600):
             if sfile.is_file() and sfile.stat().st_size:

@@ -53,7 +53,7 @@ def inputs(tmp_path_factory):
 @pytest.fixture(scope="module")
 def client():
     from distributed import Client, LocalCluster
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
             Client(cluster) as c:
         yield c
 
@@ -111,7 +111,7 @@ def test_summary_matches_each_recording_and_reports_the_broken_one(inputs, first
 
 
 @pytest.mark.slow
-def test_rerun_recomputes_nothing_and_a_changed_row_alone(inputs, first_run, client, tmp_path):
+def test_rerun_recomputes_nothing_and_a_changed_row_alone(inputs, first_run, tmp_path):
     root, manifest, rows = inputs
     out, _ = first_run
     options = batch.BatchOptions(effects=("offset",), n_boot=20, seed=3, figures=False)
@@ -125,7 +125,8 @@ def test_rerun_recomputes_nothing_and_a_changed_row_alone(inputs, first_run, cli
     pd.testing.assert_frame_equal(pd.read_csv(out / "summary.csv"), before)
     changed = [dict(r, preset="paper") if r["id"] == "p2" else r for r in rows]
     m2 = _write_manifest(root / "manifest_changed.csv", changed)
-    third = batch.run(m2, out, client, options=options)
+    third = batch.run(m2, out, options=options, workers=1)  # the default path: a LocalCluster of its own
+    assert third.cluster["kind"] == "local" and third.cluster["n_workers"] == 1
     assert {k for k, o in third.outcomes.items() if o.status == "ok"} == {"p2"}
     assert set(third.summary[third.summary.id == "p2"].preset) == {"paper"}
 

@@ -140,7 +140,8 @@ def _compute(todo, out: Path, options: BatchOptions, fps: dict, outcomes: dict, 
         info = {"kind": "scheduler", "scheduler": scheduler}
     else:
         n = workers or default_workers(len(todo))
-        own_cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None)
+        # ":0": any free port for the scheduler's HTTP endpoint, so concurrent clusters do not fight over 8787
+        own_cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0")
         client = own_client = Client(own_cluster)
         info = {"kind": "local", "workers": n, "threads_per_worker": 1}
     info["n_workers"] = len(client.scheduler_info().get("workers", {}))
