@@ -164,6 +164,7 @@ def test_results_equal_running_each_recording_alone(inputs, first_run, tmp_path)
     ("id,tracks,graph,preset", "a,t.csv,g.json,fast", "row 2, column 'preset'", "unknown preset"),
     ("id,tracks,graph\na,t.csv,g.json", "a,t.csv,g.json", "row 3, column 'id'", "already used by row 2"),
     ("id,graph", "a,g.json", "row 1", "'video' nor a 'tracks'"),
+    ("id,tracks,graph,zone", "a,t.csv,g.json,north", "row 1", "'zone' would clash"),
 ])
 def test_bad_manifest_is_one_line_exit_2_before_any_work(tmp_path, capsys, header, row, where, words):
     (tmp_path / "t.csv").write_text("point_id,frame,x,y\n")
@@ -177,8 +178,11 @@ def test_bad_manifest_is_one_line_exit_2_before_any_work(tmp_path, capsys, heade
     assert not out.exists()
 
 
-def test_bad_option_is_exit_2(inputs, tmp_path, capsys):
-    _, manifest, _ = inputs
+def test_bad_option_is_exit_2(tmp_path, capsys):
+    (tmp_path / "t.csv").write_text("point_id,frame,x,y\n")
+    (tmp_path / "g.json").write_text("{}")
+    manifest = tmp_path / "m.csv"
+    manifest.write_text("id,tracks,graph\na,t.csv,g.json\n")
     assert main(["batch", str(manifest), "--out", str(tmp_path / "o"), "--set", "smoother.nope=1", "--quiet"]) == 2
     assert "nope" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()

@@ -28,6 +28,10 @@ from ..presets import PRESETS
 
 #: Columns with a meaning; every other column is metadata.
 PIPELINE_COLUMNS = ("id", "video", "annotations", "tracks", "graph", "preset")
+#: Column names of ``summary.csv`` that a metadata column may not take.
+SUMMARY_NAMES = ("status", "kind", "verdict", "error", "parent", "child", "depth", "zone", "root_distance_px",
+                 "rest_length_px", "kappa", "kappa_ci_low", "kappa_ci_high", "uncertainty", "quality", "direction",
+                 "relative_stiffness", "n_frames", "fit_rmse_deg", "fit_r2", "bend_rms_deg")
 _ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9._-]*")
 _RESERVED_IDS = {"summary.csv", "summary.json", "figures", "batch.rrd"}
 
@@ -100,6 +104,10 @@ def load_manifest(path: str | Path) -> Manifest:
     if len(rows) == 1:
         raise InputError(path, "the manifest has a header but no recordings")
     meta = tuple(c for c in header if c not in PIPELINE_COLUMNS)
+    clash = [c for c in meta if c in SUMMARY_NAMES]
+    if clash:
+        raise InputError(path, f"metadata column {clash[0]!r} would clash with a column of summary.csv; rename it "
+                               f"(taken: {', '.join(SUMMARY_NAMES)})", "row 1")
     base = path.parent
     recordings, seen = [], {}
     for k, raw in enumerate(rows[1:]):
