@@ -215,7 +215,7 @@ def _write_summary(m: Manifest, out: Path, outcomes: dict, options: BatchOptions
         files[RECORDING_RRD] = save_batch_recording(recs, out / RECORDING_RRD, figures=figs)
     counts = {s: sum(o.status == s for o in outcomes.values()) for s in ("ok", "skipped", "failed")}
     doc = summary_document(m, recs, {
-        "manifest": str(m.path), "out": str(out), "n_recordings": len(m.recordings),
+        "manifest": str(m.path.resolve()), "out": str(out.resolve()), "n_recordings": len(m.recordings),
         "n_computed": counts["ok"], "n_skipped": counts["skipped"], "n_failed": counts["failed"],
         "metadata_columns": list(m.metadata_columns),
         "options": {"preset": options.preset, "overrides": list(options.overrides), "seed": options.seed,

@@ -107,7 +107,7 @@ def summary_document(manifest: Manifest, recordings: list[RecordingSummary], bat
         docs.append({
             "id": r.id, "status": r.status, "kind": r.kind, "preset": r.preset, "metadata": r.metadata,
             "error": r.outcome.error, "error_kind": r.outcome.error_kind, "computed": r.outcome.status != "skipped",
-            "elapsed_s": r.outcome.elapsed_s, "worker": r.outcome.worker, "folder": str(r.folder),
+            "elapsed_s": r.outcome.elapsed_s, "worker": r.outcome.worker, "folder": str(r.folder.resolve()),
             "verdict": r.verdict, "explanation": d.get("explanation"),
             "heldout_rmse_deg": None if r.diagnosis is None else {
                 "baseline": (d.get("baseline") or {}).get("heldout_rmse"),
