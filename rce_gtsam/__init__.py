@@ -16,5 +16,13 @@ def analyze(*args, **kwargs):
     return _analyze(*args, **kwargs)
 
 
+def __getattr__(name):
+    # rce_gtsam.batch (Dask) is imported on first use, so `import rce_gtsam` stays light
+    if name == "batch":
+        import importlib
+        return importlib.import_module(".batch", __name__)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 __all__ = ["InputError", "RceError", "Bend", "BranchGraph", "load_graph", "Tracks", "load_tracks",
            "PRESETS", "Preset", "get_preset", "analyze", "__version__"]

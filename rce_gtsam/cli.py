@@ -23,6 +23,7 @@ COMMAND_MODULES = (
     "rce_gtsam.commands.simulate",
     "rce_gtsam.commands.run",
     "rce_gtsam.commands.view",
+    "rce_gtsam.commands.batch",
 )
 
 

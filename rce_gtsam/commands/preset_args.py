@@ -16,6 +16,15 @@ def add_preset_arguments(p: argparse.ArgumentParser) -> None:
                         "fields are documented in rce_gtsam/presets.py)")
 
 
+def add_run_options(p: argparse.ArgumentParser) -> None:
+    """``--seed``, ``--bootstrap`` and ``--effects`` (diagnosis candidates) of ``rce run`` and ``rce batch``."""
+    p.add_argument("--seed", type=int, default=None, help="bootstrap / cross-validation seed")
+    p.add_argument("--bootstrap", type=int, default=None, metavar="N", help="bootstrap resamples")
+    p.add_argument("--effects", default=None, metavar="A,B",
+                   help="diagnosis candidates, comma-separated (default: delay,dynamics,second_mode,offset,"
+                        "nonlinear)")
+
+
 def preset_from_args(args: argparse.Namespace) -> Preset:
     """The preset with its ``--set`` overrides; a bad override is an input error (exit 2), raised before any
     work starts."""

@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 from .live_args import add_live_arguments
-from .preset_args import add_preset_arguments, preset_from_args
+from .preset_args import add_preset_arguments, add_run_options, preset_from_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -24,11 +24,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="TAPIR ONNX export (default: the OpenCV tracker)")
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="use only the first N frames")
     add_preset_arguments(p)
-    p.add_argument("--seed", type=int, default=None, help="bootstrap / cross-validation seed")
-    p.add_argument("--bootstrap", type=int, default=None, metavar="N", help="bootstrap resamples")
-    p.add_argument("--effects", default=None, metavar="A,B",
-                   help="diagnosis candidates, comma-separated (default: delay,dynamics,second_mode,offset,"
-                        "nonlinear)")
+    add_run_options(p)
     p.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd", help="also save a Rerun recording")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

@@ -1,0 +1,226 @@
+"""Run a manifest of recordings on a Dask cluster and summarise them: :func:`run`.
+
+Steps: validate the manifest and the options (an :class:`~rce_gtsam.errors.InputError` before any
+work); fingerprint every recording (input file contents + resolved preset + options); reuse the stored
+outcome of each recording whose fingerprint and outputs are unchanged; submit the rest, one task per
+recording (:func:`rce_gtsam.batch.process.process_recording`), to a ``dask.distributed`` cluster — the
+``client`` given, the scheduler at ``scheduler`` or a new ``LocalCluster`` (one single-threaded worker
+process per core, at most one per recording: the pipeline holds the GIL); then write ``summary.csv``,
+``summary.json``, ``figures/`` and ``batch.rrd`` into the output folder.
+
+Nothing is submitted (and no cluster started) when every recording is up to date.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from ..errors import InputError
+from .manifest import Manifest, load_manifest
+from .options import BatchOptions, fingerprint
+from .process import Outcome, process_recording, stored_outcome, write_record
+
+SUMMARY_CSV, SUMMARY_JSON, FIGURES_DIR, RECORDING_RRD = "summary.csv", "summary.json", "figures", "batch.rrd"
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """What :func:`run` did. outcomes: per recording id (manifest order). summary: the ``summary.csv``
+    table. files: {name: path} of the batch-level outputs. wall_s: seconds for the whole call; timings_s:
+    its phases ("prepare": manifest and fingerprints, "cluster_start", "compute": from the first task
+    submitted to the last result, "summary": summary, figures and recording).
+    cluster: how the work was run ({"kind": "none" | "client" | "scheduler" | "local", ...})."""
+
+    out: Path
+    outcomes: dict[str, Outcome]
+    summary: pd.DataFrame
+    files: dict[str, Path] = field(default_factory=dict)
+    wall_s: float = 0.0
+    timings_s: dict = field(default_factory=dict)
+    cluster: dict = field(default_factory=dict)
+
+    def count(self, status: str) -> int:
+        return sum(o.status == status for o in self.outcomes.values())
+
+    @property
+    def failed(self) -> list[Outcome]:
+        return [o for o in self.outcomes.values() if o.status == "failed"]
+
+
+def default_workers(n_tasks: int) -> int:
+    """Worker processes for a LocalCluster: the usable cores, at most one per task (>= 1)."""
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(cores, n_tasks))
+
+
+def run(manifest: str | Path | Manifest, out: str | Path, client=None, *, scheduler: str | None = None,
+        workers: int | None = None, options: BatchOptions | None = None, progress: bool = False,
+        recording: bool = True) -> BatchResult:
+    """Run every recording of ``manifest`` into ``out/<id>/`` on Dask and write the batch summary.
+
+    ``client``: a ``distributed.Client`` to use (not closed). Else ``scheduler`` (``tcp://HOST:PORT`` of a
+    running ``dask scheduler``), else a new ``LocalCluster`` with ``workers`` single-threaded worker
+    processes (default :func:`default_workers`), closed at the end. ``options``: the settings shared by
+    every recording (:class:`BatchOptions`; default: the ``default`` preset, as ``rce run``). ``progress``:
+    a tqdm bar over recordings on stderr. ``recording``: also write ``batch.rrd``.
+    A failed recording is reported in the outcome and the summary and does not stop the others.
+    """
+    t0 = time.perf_counter()
+    m = manifest if isinstance(manifest, Manifest) else load_manifest(manifest)
+    options = options or BatchOptions()
+    if workers is not None and workers < 1:
+        raise InputError("--workers", f"must be >= 1, got {workers}")
+    for rec in m.recordings:
+        options.preset_for(rec)
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError(out, "the output path exists and is not a folder")
+    out.mkdir(parents=True, exist_ok=True)
+
+    fps = {rec.id: fingerprint(rec, options)["hash"] for rec in m.recordings}
+    outcomes: dict[str, Outcome] = {}
+    todo = []
+    for rec in m.recordings:
+        stored = stored_outcome(out / rec.id, fps[rec.id])
+        if stored is not None:
+            outcomes[rec.id] = stored
+        else:
+            todo.append(rec)
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+        bar = tqdm(total=len(m.recordings), initial=len(m.recordings) - len(todo), unit="recording",
+                   desc="batch", file=sys.stderr, dynamic_ncols=True)
+    cluster_info = {"kind": "none"}
+    timings = {"prepare": time.perf_counter() - t0}
+    try:
+        if todo:
+            cluster_info = _compute(todo, out, options, fps, outcomes, client, scheduler, workers, bar, timings)
+    finally:
+        if bar is not None:
+            bar.close()
+    outcomes = {rec.id: outcomes[rec.id] for rec in m.recordings}
+    t_summary = time.perf_counter()
+    key = _summary_key(m, outcomes, recording)
+    reused = _unchanged_summary(out, key) if cluster_info["kind"] == "none" else None
+    if reused is not None:
+        files, table = reused
+    else:
+        files, table = _write_summary(m, out, outcomes, options, recording,
+                                      {"key": key, "cluster": cluster_info, "timings_s": timings})
+    timings["summary"] = time.perf_counter() - t_summary
+    return BatchResult(out=out, outcomes=outcomes, summary=table, files=files, wall_s=time.perf_counter() - t0,
+                       cluster=cluster_info, timings_s=timings)
+
+
+def _compute(todo, out: Path, options: BatchOptions, fps: dict, outcomes: dict, client, scheduler, workers,
+             bar, timings: dict) -> dict:
+    """Submit ``todo`` to the cluster and fill ``outcomes`` as tasks finish. Returns the cluster info."""
+    t0 = time.perf_counter()
+    from distributed import Client, LocalCluster, as_completed
+
+    own_cluster = own_client = None
+    if client is not None:
+        info = {"kind": "client", "scheduler": client.scheduler.address}
+    elif scheduler is not None:
+        try:
+            client = own_client = Client(scheduler, timeout="20s")
+        except (OSError, TimeoutError) as exc:
+            raise InputError("--scheduler", f"cannot connect to {scheduler}: {exc}") from None
+        info = {"kind": "scheduler", "scheduler": scheduler}
+    else:
+        n = workers or default_workers(len(todo))
+        # ":0": any free port for the scheduler's HTTP endpoint, so concurrent clusters do not fight over 8787
+        own_cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0")
+        client = own_client = Client(own_cluster)
+        info = {"kind": "local", "workers": n, "threads_per_worker": 1}
+    info["n_workers"] = len(client.scheduler_info().get("workers", {}))
+    timings["cluster_start"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    try:
+        futures = {client.submit(process_recording, rec, str(out), options, fps[rec.id], pure=False,
+                                 key=f"rce-batch-{rec.id}-{fps[rec.id][:12]}"): rec for rec in todo}
+        for fut in as_completed(futures):
+            rec = futures[fut]
+            try:
+                oc = fut.result()
+            except Exception as exc:  # noqa: BLE001 - a lost worker or an unpicklable error: record it
+                oc = Outcome(id=rec.id, status="failed", fingerprint=fps[rec.id], error_kind="error",
+                             error=" ".join(f"{type(exc).__name__}: {exc}".split()))
+                write_record(out / rec.id, rec, oc, [])
+            outcomes[rec.id] = oc
+            if bar is not None:
+                bar.update(1)
+                if oc.status == "failed":
+                    bar.write(f"{rec.id}: failed: {oc.error}", file=sys.stderr)
+        timings["compute"] = time.perf_counter() - t0
+    finally:
+        if own_client is not None:
+            own_client.close()
+        if own_cluster is not None:
+            own_cluster.close()
+    return info
+
+
+def _summary_key(m: Manifest, outcomes: dict, recording: bool) -> str:
+    """Hash of what the batch outputs show: the manifest's contents and every recording's fingerprint and
+    status. Equal keys: the stored summary, figures and recording are still right."""
+    import hashlib
+    import json
+
+    from .options import file_digest
+    blob = json.dumps({"manifest": file_digest(m.path), "recording": recording,
+                       "outcomes": [[o.id, o.fingerprint, o.status == "failed", o.error] for o in outcomes.values()]})
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def _unchanged_summary(out: Path, key: str):
+    """(files, table) of the stored batch outputs when they were written for ``key`` and all exist, else None."""
+    import json
+    try:
+        stored = json.loads((out / SUMMARY_JSON).read_text())["batch"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    files = {name: out / name for name in stored.get("files", [])}
+    if stored.get("key") != key or not files or not all(p.is_file() for p in files.values()):
+        return None
+    return files, pd.read_csv(out / SUMMARY_CSV)
+
+
+def _write_summary(m: Manifest, out: Path, outcomes: dict, options: BatchOptions, recording: bool,
+                   batch: dict) -> tuple[dict[str, Path], pd.DataFrame]:
+    from ..diagnosis_io import write_json_atomic
+    from ..tracks import write_table_atomic
+    from .figures import write_batch_figures
+    from .summary import read_recordings, summary_document, summary_table
+
+    recs = read_recordings(m, out, outcomes, options)
+    table = summary_table(m, recs)
+    files = {SUMMARY_CSV: out / SUMMARY_CSV}
+    write_table_atomic(table, out / SUMMARY_CSV)
+    figs = write_batch_figures(recs, out / FIGURES_DIR)
+    files.update({f"{FIGURES_DIR}/{k}": v for k, v in figs.items()})
+    if recording:
+        from .recording import save_batch_recording
+        files[RECORDING_RRD] = save_batch_recording(recs, out / RECORDING_RRD, figures=figs)
+    counts = {s: sum(o.status == s for o in outcomes.values()) for s in ("ok", "skipped", "failed")}
+    doc = summary_document(m, recs, {
+        "manifest": str(m.path.resolve()), "out": str(out.resolve()), "n_recordings": len(m.recordings),
+        "n_computed": counts["ok"], "n_skipped": counts["skipped"], "n_failed": counts["failed"],
+        "metadata_columns": list(m.metadata_columns),
+        "options": {"preset": options.preset, "overrides": list(options.overrides), "seed": options.seed,
+                    "n_boot": options.n_boot, "effects": options.effects, "figures": options.figures,
+                    "max_frames": options.max_frames, "model": None if options.model is None else str(options.model)},
+        **batch, "files": sorted([*files, SUMMARY_JSON])})
+    files[SUMMARY_JSON] = write_json_atomic(doc, out / SUMMARY_JSON)
+    return files, table

@@ -1,0 +1,188 @@
+"""`rce batch` on a real 2-worker Dask LocalCluster: 5 simulated track recordings, one tiny simulated
+video and one broken tracks file. The summary matches each recording's folder, the broken one is reported
+without stopping the others, a re-run recomputes nothing, a changed row is recomputed alone, and every
+recording's files are byte for byte those of `rce analyze` + `rce diagnose` (or `rce run`) run on it alone."""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections import Counter
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from rce_gtsam import batch
+from rce_gtsam.cli import main
+from rce_gtsam.simulate import SimulationConfig, simulate
+
+OPTS = ["--effects", "offset", "--bootstrap", "20", "--seed", "3"]
+TRACK_IDS = ["p1", "p2", "p3", "p4", "p5"]
+
+
+def _write_manifest(path: Path, rows: list[dict]) -> Path:
+    cols = list(dict.fromkeys(k for r in rows for k in r))
+    with path.open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=cols)
+        w.writeheader()
+        w.writerows(rows)
+    return path
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory):
+    root = tmp_path_factory.mktemp("batch_inputs")
+    rows = []
+    for i, rid in enumerate(TRACK_IDS):
+        effects = ("offset",) if i % 2 else ()
+        simulate(SimulationConfig(n_nodes=6, n_frames=160, seed=i, effects=effects)).write(root / rid)
+        rows.append({"id": rid, "tracks": f"{rid}/tracks.csv", "graph": f"{rid}/graph.json",
+                     "plant": f"plant {i}", "treatment": "wind" if i % 2 else "control"})
+    simulate(SimulationConfig(n_nodes=5, n_frames=90, seed=7, image_size=(200, 160),
+                              segment_px=(16.0, 24.0))).write(root / "v1", video=True)
+    rows.append({"id": "v1", "video": "v1/video.mp4", "annotations": "v1/annotations.json",
+                 "graph": "v1/graph.json", "plant": "plant v", "treatment": "control"})
+    (root / "broken").mkdir()
+    (root / "broken" / "tracks.csv").write_text("point_id,frame,x,y\n0,0,1.0,2.0\n0,1,oops,2.0\n")
+    rows.append({"id": "broken", "tracks": "broken/tracks.csv", "graph": "p1/graph.json", "plant": "plant b",
+                 "treatment": "control"})
+    return root, _write_manifest(root / "manifest.csv", rows), rows
+
+
+@pytest.fixture(scope="module")
+def client():
+    from distributed import Client, LocalCluster
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cluster, \
+            Client(cluster) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def first_run(inputs, client, tmp_path_factory):
+    root, manifest, rows = inputs
+    out = tmp_path_factory.mktemp("batch_out") / "out"
+    code = main(["batch", str(manifest), "--out", str(out), "--scheduler", client.scheduler.address,
+                 *OPTS, "--no-figures", "--quiet"])
+    return out, code
+
+
+@pytest.mark.slow  # a 2-worker LocalCluster and 7 recordings: about 30 s on an idle 2-core machine
+def test_summary_matches_each_recording_and_reports_the_broken_one(inputs, first_run, capsys):
+    root, manifest, rows = inputs
+    out, code = first_run
+    assert code == 1  # one recording failed
+    summary = pd.read_csv(out / "summary.csv")
+    assert list(summary.columns[:7]) == ["id", "plant", "treatment", "status", "kind", "preset", "verdict"]
+    assert summary.columns[-1] == "error"
+    broken = summary[summary.id == "broken"]
+    assert len(broken) == 1 and broken.status.iloc[0] == "failed" and broken.kappa.isna().all()
+    assert "broken/tracks.csv" in broken.error.iloc[0] and "line 3" in broken.error.iloc[0]
+    for r in rows:
+        if r["id"] == "broken":
+            continue
+        mine = summary[summary.id == r["id"]].reset_index(drop=True)
+        comp = pd.read_csv(out / r["id"] / "compliance_summary.csv")
+        comp = comp[comp.kappa.notna()].reset_index(drop=True)
+        assert len(mine) == len(comp) > 0
+        assert (mine.status == "ok").all() and (mine.plant == r["plant"]).all()
+        assert (mine.treatment == r["treatment"]).all()
+        for col in ("parent", "child", "zone", "kappa", "kappa_ci_low", "kappa_ci_high", "uncertainty"):
+            assert mine[col].tolist() == comp[col].tolist()
+        verdict = json.loads((out / r["id"] / "diagnosis.json").read_text())["verdict"] or "none"
+        assert (mine.verdict == verdict).all()
+    assert set(summary[summary.id == "v1"].kind) == {"video"}
+    doc = json.loads((out / "summary.json").read_text())
+    assert doc["batch"]["n_recordings"] == 7 and doc["batch"]["n_failed"] == 1 and doc["batch"]["n_computed"] == 6
+    by_id = {d["id"]: d for d in doc["recordings"]}
+    assert by_id["broken"]["error_kind"] == "input" and by_id["p2"]["metadata"]["treatment"] == "wind"
+    assert by_id["p1"]["heldout_rmse_deg"]["baseline"] > 0
+    assert len(by_id["p1"]["segments"]) == len(summary[summary.id == "p1"])
+    for name in ("kappa_by_zone.png", "verdicts.png", "uncertainty.png"):
+        assert (out / "figures" / name).stat().st_size > 10_000
+    from rerun.chunk import RrdReader
+    paths = Counter(str(ch.entity_path) for ch in RrdReader(str(out / "batch.rrd")).stream())
+    assert "/overview/summary" in paths
+    for r in rows:
+        if r["id"] != "broken":
+            assert f"/plants/{r['id']}/image/tracks/smoothed" in paths
+            assert f"/plants/{r['id']}/diagnosis/report" in paths
+    assert not any(p.startswith("/plants/broken") for p in paths)
+
+
+@pytest.mark.slow
+def test_rerun_recomputes_nothing_and_a_changed_row_alone(inputs, first_run, tmp_path):
+    root, manifest, rows = inputs
+    out, _ = first_run
+    options = batch.BatchOptions(effects=("offset",), n_boot=20, seed=3, figures=False)
+    stamp = {p: p.stat().st_mtime_ns for p in out.glob("*/compliance_summary.csv")}
+    before = pd.read_csv(out / "summary.csv")
+    again = batch.run(manifest, out, options=options)  # no client: nothing to do, so no cluster either
+    assert again.cluster == {"kind": "none"}
+    assert Counter(o.status for o in again.outcomes.values()) == {"skipped": 6, "failed": 1}
+    assert again.outcomes["broken"].error_kind == "input"
+    assert {p: p.stat().st_mtime_ns for p in out.glob("*/compliance_summary.csv")} == stamp
+    pd.testing.assert_frame_equal(pd.read_csv(out / "summary.csv"), before)
+    changed = [dict(r, preset="paper") if r["id"] == "p2" else r for r in rows]
+    m2 = _write_manifest(root / "manifest_changed.csv", changed)
+    third = batch.run(m2, out, options=options, workers=1)  # the default path: a LocalCluster of its own
+    assert third.cluster["kind"] == "local" and third.cluster["n_workers"] == 1
+    assert {k for k, o in third.outcomes.items() if o.status == "ok"} == {"p2"}
+    assert set(third.summary[third.summary.id == "p2"].preset) == {"paper"}
+
+
+def _same_file(a: Path, b: Path):
+    assert a.read_bytes() == b.read_bytes(), f"{a} differs from {b}"
+
+
+@pytest.mark.slow
+def test_results_equal_running_each_recording_alone(inputs, first_run, tmp_path):
+    root, manifest, rows = inputs
+    out, _ = first_run
+    for rid in ("p1", "p3"):  # p2 is re-run with the paper preset by the test above
+        tracks, graph = str(root / rid / "tracks.csv"), str(root / rid / "graph.json")
+        alone = tmp_path / rid
+        assert main(["analyze", tracks, graph, "--out", str(alone), "--no-figures", "--bootstrap", "20",
+                     "--seed", "3"]) == 0
+        assert main(["diagnose", tracks, graph, "--json", str(alone / "diagnosis.json"), "--effects", "offset",
+                     "--seed", "3"]) == 0
+        for name in ("compliance_summary.csv", "excitation.csv", "bending.csv", "smoothed_tracks.csv",
+                     "diagnosis.json"):
+            _same_file(out / rid / name, alone / name)
+    alone = tmp_path / "v1"
+    v = root / "v1"
+    assert main(["run", str(v / "video.mp4"), str(v / "annotations.json"), str(v / "graph.json"), "--out",
+                 str(alone), *OPTS, "--no-figures", "--no-progress"]) == 0
+    for name in ("tracks.csv", "compliance_summary.csv", "excitation.csv", "bending.csv", "diagnosis.json"):
+        _same_file(out / "v1" / name, alone / name)
+
+
+@pytest.mark.parametrize("header, row, where, words", [
+    ("id,tracks,graph", "a,missing.csv,g.json", "row 2, column 'tracks'", "file not found"),
+    ("id,tracks,graph", "a/b,t.csv,g.json", "row 2, column 'id'", "output folder"),
+    ("id,tracks,video,annotations,graph", "a,t.csv,t.csv,g.json,g.json", "row 2, column 'tracks'", "exactly one"),
+    ("id,tracks,graph,preset", "a,t.csv,g.json,fast", "row 2, column 'preset'", "unknown preset"),
+    ("id,tracks,graph\na,t.csv,g.json", "a,t.csv,g.json", "row 3, column 'id'", "already used by row 2"),
+    ("id,graph", "a,g.json", "row 1", "'video' nor a 'tracks'"),
+    ("id,tracks,graph,zone", "a,t.csv,g.json,north", "row 1", "'zone' would clash"),
+])
+def test_bad_manifest_is_one_line_exit_2_before_any_work(tmp_path, capsys, header, row, where, words):
+    (tmp_path / "t.csv").write_text("point_id,frame,x,y\n")
+    (tmp_path / "g.json").write_text("{}")
+    manifest = tmp_path / "m.csv"
+    manifest.write_text(f"{header}\n{row}\n")
+    out = tmp_path / "out"
+    assert main(["batch", str(manifest), "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(manifest) in err and where in err and words in err, err
+    assert not out.exists()
+
+
+def test_bad_option_is_exit_2(tmp_path, capsys):
+    (tmp_path / "t.csv").write_text("point_id,frame,x,y\n")
+    (tmp_path / "g.json").write_text("{}")
+    manifest = tmp_path / "m.csv"
+    manifest.write_text("id,tracks,graph\na,t.csv,g.json\n")
+    assert main(["batch", str(manifest), "--out", str(tmp_path / "o"), "--set", "smoother.nope=1", "--quiet"]) == 2
+    assert "nope" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
