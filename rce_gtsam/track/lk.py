@@ -122,6 +122,7 @@ a node hidden from frame 0 onwards cannot be tracked.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -219,53 +220,84 @@ def _parabola_peak(m: np.ndarray, u: int, v: int) -> tuple[float, float]:
     """Sub-pixel offset of a 2-D peak at column u, row v by separable parabola fits."""
     def fit(a, b, c):
         den = a - 2 * b + c
-        return 0.0 if den >= 0 else float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
-    du = fit(m[v, u - 1], m[v, u], m[v, u + 1]) if 0 < u < m.shape[1] - 1 else 0.0
-    dv = fit(m[v - 1, u], m[v, u], m[v + 1, u]) if 0 < v < m.shape[0] - 1 else 0.0
+        return 0.0 if den >= 0 else min(max(0.5 * (a - c) / den, -0.5), 0.5)
+    b = float(m[v, u])
+    du = fit(float(m[v, u - 1]), b, float(m[v, u + 1])) if 0 < u < m.shape[1] - 1 else 0.0
+    dv = fit(float(m[v - 1, u]), b, float(m[v + 1, u])) if 0 < v < m.shape[0] - 1 else 0.0
     return du, dv
 
 
-def _weighted_lk(tmpl, wts, img, start, iters: int = 20, eps: float = 0.01):
+@functools.lru_cache(maxsize=64)
+def _grid(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column index grids (``np.ogrid``) of an array of ``shape``, built once per shape."""
+    return tuple(np.ogrid[:shape[0], :shape[1]])
+
+
+def _weighted_lk(tmpl, wts, img, start, iters: int = 20, eps: float = 0.01, with_ncc: bool = False):
     """Weighted inverse-compositional Lucas-Kanade (translation, gain/bias-normalised).
 
     Finds the position (x, y) in ``img`` (pixel centres at integers) whose neighbourhood best matches
     ``tmpl`` (odd-sized, centred) under per-pixel weights ``wts``, starting at ``start``. Returns
     ``(position, standard_error_px)`` -- the LK least-squares standard error
     sqrt(weighted residual variance / lambda_min(weighted structure tensor)) -- or None if ill-posed.
+    ``with_ncc``: also return the masked zero-mean NCC of template and patch at the optimum (third item).
+
+    Every weighted sum is a dot product with the flattened patch: one (3, N) @ (N,) product per iteration
+    gives the weighted mean of the patch and its projections on the weighted template gradients, and the
+    gain/bias-compensated residual enters only through them (sum w g e = gain * (sum w g p - mu_p sum w g)
+    - sum w g t0), so the residual image itself is formed once, at the end.
     """
-    t = tmpl.astype(np.float32)
-    w = wts.astype(np.float32)
+    t = np.ascontiguousarray(tmpl, dtype=np.float32)
+    w = np.asarray(wts, dtype=np.float64).ravel()
     wsum = float(w.sum())
-    mu_t = float((w * t).sum()) / wsum
-    t0 = t - mu_t
-    sd_t = math.sqrt(float((w * t0 * t0).sum()) / wsum) + 1e-6
-    gx = cv2.Sobel(t, cv2.CV_32F, 1, 0, ksize=3) / 8.0
-    gy = cv2.Sobel(t, cv2.CV_32F, 0, 1, ksize=3) / 8.0
-    hxx, hyy, hxy = float((w * gx * gx).sum()), float((w * gy * gy).sum()), float((w * gx * gy).sum())
+    tf = t.ravel().astype(np.float64)
+    mu_t = float(w @ tf) / wsum
+    t0 = tf - mu_t
+    sd_t = math.sqrt(float(w @ (t0 * t0)) / wsum) + 1e-6
+    grad = np.empty((2, tf.size))
+    grad[0] = cv2.Sobel(t, cv2.CV_32F, 1, 0, ksize=3, scale=0.125).ravel()
+    grad[1] = cv2.Sobel(t, cv2.CV_32F, 0, 1, ksize=3, scale=0.125).ravel()
+    proj = np.empty((3, tf.size))
+    proj[0] = w
+    np.multiply(grad, w, out=proj[1:])
+    (hxx, hxy), (_, hyy) = (proj[1:] @ grad.T).tolist()
     det = hxx * hyy - hxy * hxy
     if det <= 1e-9:
         return None
-    pos = np.asarray(start, float).copy()
+    gsum_x, gsum_y = proj[1:].sum(axis=1).tolist()
+    gt_x, gt_y = (proj[1:] @ t0).tolist()
+    x0, y0 = float(start[0]), float(start[1])
+    x, y = x0, y0
     size = (t.shape[1], t.shape[0])
-    e = None
+    pf = mu_p = gain = None
     for _ in range(iters):
-        patch = cv2.getRectSubPix(img, size, (float(pos[0]), float(pos[1])))
-        mu_p = float((w * patch).sum()) / wsum
-        p0 = patch - mu_p
-        sd_p = math.sqrt(float((w * p0 * p0).sum()) / wsum) + 1e-6
-        e = p0 * (sd_t / sd_p) - t0  # residual after gain/bias compensation
-        bx, by = float((w * gx * e).sum()), float((w * gy * e).sum())
+        pf = cv2.getRectSubPix(img, size, (x, y)).ravel().astype(np.float64)
+        sw, sx, sy = (proj @ pf).tolist()
+        mu_p = sw / wsum
+        var_p = max(float(w @ (pf * pf)) / wsum - mu_p * mu_p, 0.0)
+        gain = sd_t / (math.sqrt(var_p) + 1e-6)
+        bx = gain * (sx - mu_p * gsum_x) - gt_x
+        by = gain * (sy - mu_p * gsum_y) - gt_y
         dx = (hyy * bx - hxy * by) / det
         dy = (hxx * by - hxy * bx) / det
-        pos -= (dx, dy)
-        if not np.isfinite(pos).all() or abs(pos[0] - start[0]) > t.shape[1] or abs(pos[1] - start[1]) > t.shape[0]:
+        x -= dx
+        y -= dy
+        if not (math.isfinite(x) and math.isfinite(y)) or abs(x - x0) > t.shape[1] or abs(y - y0) > t.shape[0]:
             return None
         if dx * dx + dy * dy < eps * eps:
             break
+    e = (pf - mu_p) * gain - t0  # residual after gain/bias compensation, at the last patch sampled
     lam_min = 0.5 * (hxx + hyy - math.sqrt((hxx - hyy) ** 2 + 4 * hxy * hxy))
-    res_var = float((w * e * e).sum()) / wsum
+    res_var = float(w @ (e * e)) / wsum
     s_lk = math.sqrt(res_var / max(lam_min, 1e-9))
-    return pos, s_lk
+    if not with_ncc:
+        return np.array([x, y]), s_lk
+    # masked zero-mean NCC as cv2.TM_CCOEFF_NORMED defines it with a mask: means weighted by w, products by w^2
+    w2 = w * w
+    p0 = pf - mu_p
+    wt = w2 * t0
+    den = math.sqrt(float(wt @ t0) * float(w2 @ (p0 * p0)))
+    return np.array([x, y]), s_lk, (float(wt @ p0) / den if den > 0 else -1.0)
 
 
 def _turn(a, b, a0, b0) -> float:
@@ -494,19 +526,20 @@ class LKTracker:
         return float(last[i])
 
     # -- measurement against frame 0 ------------------------------------------------------------
-    def _anchor(self, gray0, gray, i, p0, q, theta, r, seg_theta=None):
-        """Locate node i (frame-0 position p0) near q in ``gray``; returns (xy, ncc, fb, sigma) or None.
+    def _template(self, gray0, i, p0, theta, r, seg_theta=None):
+        """Frame-0 appearance of node i posed for this frame: ``(crop, tmpl, wts)`` or None if textureless.
 
-        ``seg_theta`` maps each segment (p, c) incident to node i to its rotation (radians) since frame 0.
-        With branch bands, the template is *articulated*: each incident segment's band of the frame-0 image is
-        rotated about the node by that segment's own rotation (a node is a joint: the parent segment and the
-        child segments turn by different angles, and one rotation for the whole patch biases the match in
-        proportion to the bend). Otherwise the whole frame-0 patch is rotated by ``theta``.
+        ``crop`` is the (k, k) frame-0 neighbourhood (k = 2 (h + r) + 1, node at its centre), ``tmpl`` its
+        central (2h + 1) square and ``wts`` the template's per-pixel weights. ``seg_theta`` maps each segment
+        (p, c) incident to node i to its rotation (radians) since frame 0. With branch bands, the template is
+        *articulated*: each incident segment's band of the frame-0 image is rotated about the node by that
+        segment's own rotation (a node is a joint: the parent segment and the child segments turn by
+        different angles, and one rotation for the whole patch biases the match in proportion to the bend).
+        Otherwise the whole frame-0 patch is rotated by ``theta``.
         """
         h = self.h
         k = 2 * (h + r) + 1
         c = float(h + r)
-        cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1])))
         wts = None
         if self._band is not None and seg_theta:
             cs = float(3 * h)
@@ -537,19 +570,35 @@ class LKTracker:
             prev = cv2.warpAffine(gray0, m, (k, k), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
             prev = prev.astype(np.float32)
         tmpl = np.ascontiguousarray(prev[r:r + 2 * h + 1, r:r + 2 * h + 1])
-        cur = cur.astype(np.float32)
         if wts is None:
             wts = np.ones_like(tmpl)
-        wsum = float(wts.sum())
-        mu_t = float((wts * tmpl).sum()) / wsum
-        if float((wts * (tmpl - mu_t) ** 2).sum()) / wsum < 1e-3:
+        wf = wts.ravel().astype(np.float64)
+        wsum = float(wf.sum())
+        d_t = tmpl.ravel() - float(wf @ tmpl.ravel()) / wsum
+        if float(wf @ (d_t * d_t)) / wsum < 1e-3:
             return None  # textureless template: nothing to match
+        return prev, tmpl, wts
+
+    def _anchor(self, gray0, gray, i, p0, q, theta, r, seg_theta=None):
+        """Locate node i (frame-0 position p0) near q in ``gray`` within r px (see ``_template``).
+
+        Returns (xy, ncc, fb, sigma, second-peak ncc, template weight sum, second-peak xy) or None.
+        """
+        h = self.h
+        k = 2 * (h + r) + 1
+        c = float(h + r)
+        posed = self._template(gray0, i, p0, theta, r, seg_theta)
+        if posed is None:
+            return None
+        prev, tmpl, wts = posed
+        cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1]))).astype(np.float32)
         res = cv2.matchTemplate(cur, tmpl, cv2.TM_CCOEFF_NORMED, mask=wts)
-        res = np.nan_to_num(res, nan=-1.0, posinf=-1.0, neginf=-1.0)
+        if not np.isfinite(res).all():
+            res = np.nan_to_num(res, nan=-1.0, posinf=-1.0, neginf=-1.0)
         _, score, _, (u, v) = cv2.minMaxLoc(res)
         # best correlation away from the peak (outside a disc of radius h/2, the width of one match's
         # correlation peak): a second knot of a self-similar stem shows up here
-        yy, xx = np.ogrid[:res.shape[0], :res.shape[1]]
+        yy, xx = _grid(res.shape)
         far = (xx - u) ** 2 + (yy - v) ** 2 > (h / 2.0) ** 2
         second, xy2 = -1.0, None
         if far.any():
@@ -561,13 +610,43 @@ class LKTracker:
         fwd = _weighted_lk(tmpl, wts, cur, guess)
         if fwd is None or float(np.hypot(*(fwd[0] - guess))) > 2.0:
             return None
-        loc, s_lk = fwd
-        # backward: the matched patch (same weights) searched for in the frame-0 crop
+        loc, s_lk = fwd[:2]
+        fb = self._fb_error(cur, loc, tmpl, wts, prev, c)
+        xy = np.asarray(q, float) + (loc - c)
+        return xy, float(score), fb, s_lk, second, float(wts.sum()), xy2
+
+    def _reanchor(self, gray0, gray, i, p0, q, seg_theta):
+        """Re-measure node i, already matched near q, with a re-posed template: LK from q, no search.
+
+        The refinement pass moves a node by a fraction of a pixel, well inside the LK's basin, so the
+        correlation search of ``_anchor`` is skipped: the weighted LK starts at q, and the match's
+        correlation is the template's masked zero-mean NCC (the ``cv2.TM_CCOEFF_NORMED`` definition with
+        mask) at the LK's sub-pixel optimum. Returns (xy, ncc, fb, sigma) or None (ill-posed, or the LK moved
+        more than 2 px).
+        """
+        h = self.h
+        r = max(2, h // 4)
+        k = 2 * (h + r) + 1
+        c = float(h + r)
+        posed = self._template(gray0, i, p0, 0.0, r, seg_theta)
+        if posed is None:
+            return None
+        prev, tmpl, wts = posed
+        cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1]))).astype(np.float32)
+        start = np.array([c, c])
+        fwd = _weighted_lk(tmpl, wts, cur, start, with_ncc=True)
+        if fwd is None or float(np.hypot(*(fwd[0] - start))) > 2.0:
+            return None
+        loc, s_lk, score = fwd
+        fb = self._fb_error(cur, loc, tmpl, wts, prev, c)
+        return np.asarray(q, float) + (loc - c), score, fb, s_lk
+
+    @staticmethod
+    def _fb_error(cur, loc, tmpl, wts, prev, c) -> float:
+        """Forward-backward error (px): the matched patch (same weights) searched for in the frame-0 crop."""
         back_t = cv2.getRectSubPix(cur, tmpl.shape[::-1], (float(loc[0]), float(loc[1])))
         bwd = _weighted_lk(back_t, wts, prev, np.array([c, c]))
-        fb = math.inf if bwd is None else float(np.hypot(*(bwd[0] - c)))
-        xy = np.asarray(q, float) + (loc - c)
-        return xy, float(score), fb, s_lk, second, wsum, xy2
+        return math.inf if bwd is None else float(np.hypot(*(bwd[0] - c)))
 
     def _refine(self, gray0, gray, q0, est, vis, sig, fb_max, pred=None, counts=None, borrowed=None):
         """Second pass: re-match every visible node with segment rotations from this frame's matches.
@@ -583,7 +662,6 @@ class LKTracker:
         match itself implies does not fit there) is marked invisible at ``pred`` (its first-pass prediction).
         """
         cfg = self.config
-        rr = max(2, self.h // 4)
         rejected = []
         for i in self.order:
             if not vis[i]:
@@ -595,7 +673,7 @@ class LKTracker:
             for ch in self.children[i]:
                 seg_theta[(i, ch)] = (_turn(est[i], est[ch], q0[i], q0[ch]) if vis[ch]
                                       else seg_theta.get((p, i), 0.0))
-            m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, rr, seg_theta)
+            m = self._reanchor(gray0, gray, i, q0[i], est[i], seg_theta)
             if m is not None and m[1] >= cfg.min_ncc and m[2] <= fb_max:
                 xy, _, fb, s_lk = m[:4]
                 est[i] = xy
