@@ -122,6 +122,7 @@ a node hidden from frame 0 onwards cannot be tracked.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import time
@@ -134,7 +135,7 @@ import numpy as np
 from ..errors import InputError
 from ..graph import BranchGraph
 from .result import TrackResult
-from .sources import FrameSource
+from .sources import FrameSource, prefetched
 
 
 @dataclass(frozen=True)
@@ -484,22 +485,25 @@ class LKTracker:
         phis = phi_prev + np.arange(-span, span + step / 2, step)
         a0 = math.atan2(q0[c][1] - q0[p][1], q0[c][0] - q0[p][0])
         ang = a0 + phis
-        ex, ey = np.cos(ang), np.sin(ang)  # (A,)
-        # sample positions (A, V, U)
-        mx = xp[0] + uu[None, None, :] * ex[:, None, None] - vv[None, :, None] * ey[:, None, None]
-        my = xp[1] + uu[None, None, :] * ey[:, None, None] + vv[None, :, None] * ex[:, None, None]
+        ex, ey = np.cos(ang).astype(np.float32), np.sin(ang).astype(np.float32)  # (A,)
+        # sample positions (A * V, U): rows are (angle, across-offset) pairs
         A, V, U = len(phis), len(vv), len(uu)
-        smp = cv2.remap(gray, mx.reshape(A * V, U).astype(np.float32), my.reshape(A * V, U).astype(np.float32),
-                        cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(A, V * U).astype(np.float32)
-        smp -= smp.mean(axis=1, keepdims=True)
-        nrm = np.sqrt((smp * smp).sum(axis=1)) + 1e-6
+        mx = (np.multiply.outer(ex, uu)[:, None, :] - np.multiply.outer(ey, vv)[:, :, None]).reshape(A * V, U)
+        my = (np.multiply.outer(ey, uu)[:, None, :] + np.multiply.outer(ex, vv)[:, :, None]).reshape(A * V, U)
+        mx += np.float32(xp[0])
+        my += np.float32(xp[1])
+        smp = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(A, V * U)
+        smp = smp.astype(np.float32) - np.float32(128.0)  # centred near 0 so the sums below keep precision
+        # zero-mean NCC with the (zero-mean, unit-norm) strip: the sample's mean drops out of the numerator
+        s1 = smp.sum(axis=1)
+        nrm = np.sqrt(np.maximum(np.einsum("ij,ij->i", smp, smp) - s1 * s1 / smp.shape[1], 0.0)) + 1e-6
         ncc = (smp @ st0.ravel()) / nrm
         k = int(np.argmax(ncc))
         dk = 0.0
         if 0 < k < A - 1:
             a_, b_, c_ = ncc[k - 1], ncc[k], ncc[k + 1]
-            den = a_ - 2 * b_ + c_
-            dk = 0.0 if den >= 0 else float(np.clip(0.5 * (a_ - c_) / den, -0.5, 0.5))
+            den = float(a_ - 2 * b_ + c_)
+            dk = 0.0 if den >= 0 else min(max(0.5 * float(a_ - c_) / den, -0.5), 0.5)
         phi = float(phis[k] + dk * step)
         ct, sn = math.cos(phi), math.sin(phi)
         v0 = q0[c] - q0[p]
@@ -718,150 +722,152 @@ class LKTracker:
                   "rejected_refine": 0}
         t0 = time.perf_counter()
         n_done = 0
-        for frame in source:
-            if max_frames is not None and n_done >= max_frames:
-                break
-            img = frame.image
-            if img.ndim != 3 or img.shape[2] != 3:
-                raise InputError(src_name, f"frame {frame.index} is not an RGB image (shape {img.shape})")
-            gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
-            ga = self._anchor_image(gray)
-            if gray0 is None:
-                gray0 = ga
-                self.branch_halfwidth_px = None
-                self._band = self._branch_band(img, q0, graph)
-                hh, ww = gray.shape
-                out = (q0[:, 0] < -0.5) | (q0[:, 0] > ww - 0.5) | (q0[:, 1] < -0.5) | (q0[:, 1] > hh - 0.5)
-                if out.any():
-                    i = int(np.flatnonzero(out)[0])
-                    raise InputError(src_name, f"annotated point {i} {q0[i].tolist()} is outside the {ww}x{hh} frame",
-                                     f"point {i}")
-                sig = np.full(n, cfg.sigma_floor_px)
-            else:
-                prev_pts = est.astype(np.float32).reshape(-1, 1, 2)
-                f2f, st, _ = cv2.calcOpticalFlowPyrLK(prev_gray, gray, prev_pts, None, **lk_params)
-                back, st_b, _ = cv2.calcOpticalFlowPyrLK(gray, prev_gray, f2f, prev_pts.copy(),
-                                                         flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **lk_params)
-                fb_f2f = np.hypot(*(back - prev_pts).reshape(-1, 2).T)
-                f2f_ok = (st.ravel() == 1) & (st_b.ravel() == 1) & (fb_f2f < fb_max) & np.isfinite(f2f.reshape(-1, 2)).all(1)
-                f2f = f2f.reshape(-1, 2).astype(float)
-                prev_est, prev_vis = est.copy(), vis.copy()
-                new_est, new_vis, sig = prev_est.copy(), np.zeros(n, bool), np.zeros(n)
-                done = np.zeros(n, bool)
-                theta_now = np.zeros(n)
-                preds = prev_est.copy()
-                wide = np.zeros(n, bool)  # searched in the wide window: template posed by a borrowed rotation
-                for i in self.order:
-                    # rotation from the latest estimates (this frame's where already done)
-                    cur_est = np.where(done[:, None], new_est, prev_est)
-                    cur_vis = np.where(done, new_vis, prev_vis)
-                    theta = self._rotation(i, cur_est, cur_vis, q0, theta_last, theta_now, done)
-                    theta_now[i] = theta
-                    p = self.parent[i]
-                    seg = None
-                    if p >= 0 and new_vis[p] and self._band is not None:
-                        # a node lost in the last frame has not been measured while the whole branch kept
-                        # swinging: its segment turned with the parent's (the bend changes slowly, the
-                        # sway does not), so search around the parent's rotation plus the last bend
-                        phi_prev = seg_rot[i] if prev_vis[i] else seg_rot[p] + bend_rot[i]
-                        seg = self._segment_search(ga, new_est[p], p, i, q0, phi_prev)
-                    if seg is not None and seg[2] >= cfg.min_ncc:
-                        pred, r = seg[0], h
-                        counts["predicted_from_segment"] += 1
-                    elif f2f_ok[i] and prev_vis[i]:
-                        pred, r = f2f[i], h
-                    elif p >= 0:
-                        ct, sn = math.cos(theta), math.sin(theta)
-                        v0 = q0[i] - q0[p]
-                        pred = new_est[p] + np.array([ct * v0[0] - sn * v0[1], sn * v0[0] + ct * v0[1]])
-                        r = 2 * h
-                        counts["predicted_from_graph"] += 1
-                    else:
-                        pred, r = (f2f[i] if f2f_ok[i] else prev_est[i]), 2 * h
-                    seg_theta = None
-                    if self._band is not None:
-                        xi = pred
-                        seg_theta = {}
-                        if p >= 0:
-                            seg_theta[(p, i)] = _turn(new_est[p], xi, q0[p], q0[i])
-                        for ch in self.children[i]:
-                            if f2f_ok[ch] and prev_vis[ch]:
-                                seg_theta[(i, ch)] = _turn(xi, f2f[ch], q0[i], q0[ch])
-                            else:  # child not followed: assume the branch continues straight
-                                seg_theta[(i, ch)] = seg_theta.get((p, i), theta)
-                    # a wide search (no frame-to-frame or segment prediction to trust) is a re-acquisition
-                    # whatever the previous frame said: the same ambiguity and geometry checks apply
-                    reacquiring = not prev_vis[i] or r > h
-                    preds[i], wide[i] = pred, r > h
-                    m = self._anchor(gray0, ga, i, q0[i], pred, theta, r, seg_theta)
-                    ok = m is not None
-                    if not ok:
-                        counts["lost_match"] += 1
-                    else:
-                        xy, score, fb, s_lk, second, n_eff, xy2 = m
-                        ambiguous = second > score - cfg.distinct_sigmas / math.sqrt(n_eff)
-                        if score < cfg.min_ncc:
-                            ok = False
-                            counts["rejected_ncc"] += 1
-                        elif cfg.distinct_reacquire and reacquiring and ambiguous:
-                            ok = False
-                            counts["rejected_ambiguous"] += 1
-                        elif (cfg.distinct_follow and ambiguous and xy2 is not None
-                              and np.hypot(*(xy2 - pred)) < np.hypot(*(xy - pred))):
-                            # followed (not re-acquired), two indistinguishable peaks, and the prediction
-                            # points at the other one: which of the two the node is would be a guess
-                            ok = False
-                            counts["rejected_ambiguous"] += 1
-                        elif fb > fb_max:
-                            ok = False
-                            counts["rejected_fb"] += 1
-                        elif p >= 0 and reacquiring and not new_vis[p]:
-                            # re-acquiring while the parent is lost too: nothing checks the match's
-                            # geometry (a tip re-found next to a leaf edge 18 px off, then followed
-                            # to 67 px, on simulator seed 0); wait until the parent is seen again
-                            ok = False
-                            counts["rejected_unanchored"] += 1
-                        elif p >= 0 and new_vis[p]:
-                            d = float(np.hypot(*(xy - new_est[p])))
-                            l0 = self.rest_len[i]
-                            if d > (1 + cfg.max_stretch) * l0 + cfg.length_tol_px or d < cfg.min_length_fraction * l0 - cfg.length_tol_px:
+        # the next frames decode in a thread (GIL released) while this one is tracked; closed on any exit
+        with contextlib.closing(prefetched(source)) as frames:
+            for frame in frames:
+                if max_frames is not None and n_done >= max_frames:
+                    break
+                img = frame.image
+                if img.ndim != 3 or img.shape[2] != 3:
+                    raise InputError(src_name, f"frame {frame.index} is not an RGB image (shape {img.shape})")
+                gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+                ga = self._anchor_image(gray)
+                if gray0 is None:
+                    gray0 = ga
+                    self.branch_halfwidth_px = None
+                    self._band = self._branch_band(img, q0, graph)
+                    hh, ww = gray.shape
+                    out = (q0[:, 0] < -0.5) | (q0[:, 0] > ww - 0.5) | (q0[:, 1] < -0.5) | (q0[:, 1] > hh - 0.5)
+                    if out.any():
+                        i = int(np.flatnonzero(out)[0])
+                        raise InputError(src_name, f"annotated point {i} {q0[i].tolist()} is outside the {ww}x{hh} frame",
+                                         f"point {i}")
+                    sig = np.full(n, cfg.sigma_floor_px)
+                else:
+                    prev_pts = est.astype(np.float32).reshape(-1, 1, 2)
+                    f2f, st, _ = cv2.calcOpticalFlowPyrLK(prev_gray, gray, prev_pts, None, **lk_params)
+                    back, st_b, _ = cv2.calcOpticalFlowPyrLK(gray, prev_gray, f2f, prev_pts.copy(),
+                                                             flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **lk_params)
+                    fb_f2f = np.hypot(*(back - prev_pts).reshape(-1, 2).T)
+                    f2f_ok = (st.ravel() == 1) & (st_b.ravel() == 1) & (fb_f2f < fb_max) & np.isfinite(f2f.reshape(-1, 2)).all(1)
+                    f2f = f2f.reshape(-1, 2).astype(float)
+                    prev_est, prev_vis = est.copy(), vis.copy()
+                    new_est, new_vis, sig = prev_est.copy(), np.zeros(n, bool), np.zeros(n)
+                    done = np.zeros(n, bool)
+                    theta_now = np.zeros(n)
+                    preds = prev_est.copy()
+                    wide = np.zeros(n, bool)  # searched in the wide window: template posed by a borrowed rotation
+                    for i in self.order:
+                        # rotation from the latest estimates (this frame's where already done)
+                        cur_est = np.where(done[:, None], new_est, prev_est)
+                        cur_vis = np.where(done, new_vis, prev_vis)
+                        theta = self._rotation(i, cur_est, cur_vis, q0, theta_last, theta_now, done)
+                        theta_now[i] = theta
+                        p = self.parent[i]
+                        seg = None
+                        if p >= 0 and new_vis[p] and self._band is not None:
+                            # a node lost in the last frame has not been measured while the whole branch kept
+                            # swinging: its segment turned with the parent's (the bend changes slowly, the
+                            # sway does not), so search around the parent's rotation plus the last bend
+                            phi_prev = seg_rot[i] if prev_vis[i] else seg_rot[p] + bend_rot[i]
+                            seg = self._segment_search(ga, new_est[p], p, i, q0, phi_prev)
+                        if seg is not None and seg[2] >= cfg.min_ncc:
+                            pred, r = seg[0], h
+                            counts["predicted_from_segment"] += 1
+                        elif f2f_ok[i] and prev_vis[i]:
+                            pred, r = f2f[i], h
+                        elif p >= 0:
+                            ct, sn = math.cos(theta), math.sin(theta)
+                            v0 = q0[i] - q0[p]
+                            pred = new_est[p] + np.array([ct * v0[0] - sn * v0[1], sn * v0[0] + ct * v0[1]])
+                            r = 2 * h
+                            counts["predicted_from_graph"] += 1
+                        else:
+                            pred, r = (f2f[i] if f2f_ok[i] else prev_est[i]), 2 * h
+                        seg_theta = None
+                        if self._band is not None:
+                            xi = pred
+                            seg_theta = {}
+                            if p >= 0:
+                                seg_theta[(p, i)] = _turn(new_est[p], xi, q0[p], q0[i])
+                            for ch in self.children[i]:
+                                if f2f_ok[ch] and prev_vis[ch]:
+                                    seg_theta[(i, ch)] = _turn(xi, f2f[ch], q0[i], q0[ch])
+                                else:  # child not followed: assume the branch continues straight
+                                    seg_theta[(i, ch)] = seg_theta.get((p, i), theta)
+                        # a wide search (no frame-to-frame or segment prediction to trust) is a re-acquisition
+                        # whatever the previous frame said: the same ambiguity and geometry checks apply
+                        reacquiring = not prev_vis[i] or r > h
+                        preds[i], wide[i] = pred, r > h
+                        m = self._anchor(gray0, ga, i, q0[i], pred, theta, r, seg_theta)
+                        ok = m is not None
+                        if not ok:
+                            counts["lost_match"] += 1
+                        else:
+                            xy, score, fb, s_lk, second, n_eff, xy2 = m
+                            ambiguous = second > score - cfg.distinct_sigmas / math.sqrt(n_eff)
+                            if score < cfg.min_ncc:
                                 ok = False
-                                counts["rejected_length"] += 1
-                    if ok:
-                        new_est[i], new_vis[i] = xy, True
-                        if p >= 0:
-                            seg_rot[i] = _turn(new_est[p], xy, q0[p], q0[i])
-                            if new_vis[p]:
-                                bend_rot[i] = seg_rot[i] - seg_rot[p]
-                        sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
-                        counts["anchored"] += 1
-                    elif (cfg.segment_fallback and seg is not None and seg[2] >= cfg.min_segment_ncc
-                          ):
-                        # the node's own patch failed (a leaf over the joint, a template spoiled by a leaf in
-                        # frame 0) but its whole segment matched well, hinged at a measured parent: the node is
-                        # where the rigid segment puts it. sigma: the half-pixel angular search step at the
-                        # child on top of the parent's own uncertainty.
-                        new_est[i], new_vis[i] = seg[0], True
-                        sig[i] = math.sqrt(sig[p] ** 2 + 0.5 ** 2)
-                        seg_rot[i] = seg[1]
-                        counts["from_segment"] += 1
-                    else:
-                        new_est[i], new_vis[i], sig[i] = pred, False, float(r)
-                        counts["invisible"] += 1
-                    done[i] = True
-                if self._band is not None and cfg.refine_pass:
-                    self._refine(gray0, ga, q0, new_est, new_vis, sig, fb_max, preds, counts, wide)
-                hh, ww = gray.shape
-                new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
-                new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)
-                est, vis = new_est, new_vis
-            prev_gray = gray
-            xs.append(est.copy())
-            vis_all.append(vis.copy())
-            sig_all.append(np.maximum(sig, cfg.sigma_floor_px))
-            n_done += 1
-            if progress is not None:
-                progress(1)
+                                counts["rejected_ncc"] += 1
+                            elif cfg.distinct_reacquire and reacquiring and ambiguous:
+                                ok = False
+                                counts["rejected_ambiguous"] += 1
+                            elif (cfg.distinct_follow and ambiguous and xy2 is not None
+                                  and np.hypot(*(xy2 - pred)) < np.hypot(*(xy - pred))):
+                                # followed (not re-acquired), two indistinguishable peaks, and the prediction
+                                # points at the other one: which of the two the node is would be a guess
+                                ok = False
+                                counts["rejected_ambiguous"] += 1
+                            elif fb > fb_max:
+                                ok = False
+                                counts["rejected_fb"] += 1
+                            elif p >= 0 and reacquiring and not new_vis[p]:
+                                # re-acquiring while the parent is lost too: nothing checks the match's
+                                # geometry (a tip re-found next to a leaf edge 18 px off, then followed
+                                # to 67 px, on simulator seed 0); wait until the parent is seen again
+                                ok = False
+                                counts["rejected_unanchored"] += 1
+                            elif p >= 0 and new_vis[p]:
+                                d = float(np.hypot(*(xy - new_est[p])))
+                                l0 = self.rest_len[i]
+                                if d > (1 + cfg.max_stretch) * l0 + cfg.length_tol_px or d < cfg.min_length_fraction * l0 - cfg.length_tol_px:
+                                    ok = False
+                                    counts["rejected_length"] += 1
+                        if ok:
+                            new_est[i], new_vis[i] = xy, True
+                            if p >= 0:
+                                seg_rot[i] = _turn(new_est[p], xy, q0[p], q0[i])
+                                if new_vis[p]:
+                                    bend_rot[i] = seg_rot[i] - seg_rot[p]
+                            sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
+                            counts["anchored"] += 1
+                        elif (cfg.segment_fallback and seg is not None and seg[2] >= cfg.min_segment_ncc
+                              ):
+                            # the node's own patch failed (a leaf over the joint, a template spoiled by a leaf in
+                            # frame 0) but its whole segment matched well, hinged at a measured parent: the node is
+                            # where the rigid segment puts it. sigma: the half-pixel angular search step at the
+                            # child on top of the parent's own uncertainty.
+                            new_est[i], new_vis[i] = seg[0], True
+                            sig[i] = math.sqrt(sig[p] ** 2 + 0.5 ** 2)
+                            seg_rot[i] = seg[1]
+                            counts["from_segment"] += 1
+                        else:
+                            new_est[i], new_vis[i], sig[i] = pred, False, float(r)
+                            counts["invisible"] += 1
+                        done[i] = True
+                    if self._band is not None and cfg.refine_pass:
+                        self._refine(gray0, ga, q0, new_est, new_vis, sig, fb_max, preds, counts, wide)
+                    hh, ww = gray.shape
+                    new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
+                    new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)
+                    est, vis = new_est, new_vis
+                prev_gray = gray
+                xs.append(est.copy())
+                vis_all.append(vis.copy())
+                sig_all.append(np.maximum(sig, cfg.sigma_floor_px))
+                n_done += 1
+                if progress is not None:
+                    progress(1)
         if n_done == 0:
             raise InputError(src_name, "the video has no frames")
         info = {"tracker": "lk-anchored", "patch_radius_px": h, "branch_halfwidth_px": self.branch_halfwidth_px, "frames": n_done,
