@@ -240,7 +240,8 @@ def _weighted_lk(tmpl, wts, img, start, iters: int = 20, eps: float = 0.01, with
     Finds the position (x, y) in ``img`` (pixel centres at integers) whose neighbourhood best matches
     ``tmpl`` (odd-sized, centred) under per-pixel weights ``wts``, starting at ``start``. Returns
     ``(position, standard_error_px)`` -- the LK least-squares standard error
-    sqrt(weighted residual variance / lambda_min(weighted structure tensor)) -- or None if ill-posed.
+    sqrt(weighted residual variance / lambda_min(weighted structure tensor)) -- or None if ill-posed
+    (textureless template: weighted variance below 1e-3 grey levels^2, or a singular structure tensor).
     ``with_ncc``: also return the masked zero-mean NCC of template and patch at the optimum (third item).
 
     Every weighted sum is a dot product with the flattened patch: one (3, N) @ (N,) product per iteration
@@ -249,24 +250,29 @@ def _weighted_lk(tmpl, wts, img, start, iters: int = 20, eps: float = 0.01, with
     - sum w g t0), so the residual image itself is formed once, at the end.
     """
     t = np.ascontiguousarray(tmpl, dtype=np.float32)
-    w = np.asarray(wts, dtype=np.float64).ravel()
-    wsum = float(w.sum())
-    tf = t.ravel().astype(np.float64)
-    mu_t = float(w @ tf) / wsum
-    t0 = tf - mu_t
-    sd_t = math.sqrt(float(w @ (t0 * t0)) / wsum) + 1e-6
-    grad = np.empty((2, tf.size))
-    grad[0] = cv2.Sobel(t, cv2.CV_32F, 1, 0, ksize=3, scale=0.125).ravel()
-    grad[1] = cv2.Sobel(t, cv2.CV_32F, 0, 1, ksize=3, scale=0.125).ravel()
-    proj = np.empty((3, tf.size))
-    proj[0] = w
-    np.multiply(grad, w, out=proj[1:])
-    (hxx, hxy), (_, hyy) = (proj[1:] @ grad.T).tolist()
+    n = t.size
+    # proj rows: w, w gx, w gy; cols: gx, gy, 1, t, t^2 -- one product gives every sum the set-up needs
+    cols = np.empty((n, 5))
+    cols[:, 0] = cv2.Sobel(t, cv2.CV_32F, 1, 0, ksize=3, scale=0.125).ravel()
+    cols[:, 1] = cv2.Sobel(t, cv2.CV_32F, 0, 1, ksize=3, scale=0.125).ravel()
+    cols[:, 2] = 1.0
+    cols[:, 3] = t.ravel()
+    np.multiply(cols[:, 3], cols[:, 3], out=cols[:, 4])
+    proj = np.empty((3, n))
+    proj[0] = np.asarray(wts, dtype=np.float64).ravel()
+    np.multiply(cols[:, :2].T, proj[0], out=proj[1:])
+    (_, _, wsum, swt, swtt), (hxx, hxy, gsum_x, gxt, _), (_, hyy, gsum_y, gyt, _) = (proj @ cols).tolist()
+    w = proj[0]
     det = hxx * hyy - hxy * hxy
     if det <= 1e-9:
         return None
-    gsum_x, gsum_y = proj[1:].sum(axis=1).tolist()
-    gt_x, gt_y = (proj[1:] @ t0).tolist()
+    mu_t = swt / wsum
+    var_t = swtt / wsum - mu_t * mu_t
+    if var_t < 1e-3:
+        return None  # textureless template: nothing to match
+    sd_t = math.sqrt(var_t) + 1e-6
+    gt_x, gt_y = gxt - mu_t * gsum_x, gyt - mu_t * gsum_y  # sum w g (t - mu_t)
+    t0 = cols[:, 3] - mu_t
     x0, y0 = float(start[0]), float(start[1])
     x, y = x0, y0
     size = (t.shape[1], t.shape[0])
@@ -299,6 +305,15 @@ def _weighted_lk(tmpl, wts, img, start, iters: int = 20, eps: float = 0.01, with
     wt = w2 * t0
     den = math.sqrt(float(wt @ t0) * float(w2 @ (p0 * p0)))
     return np.array([x, y]), s_lk, (float(wt @ p0) / den if den > 0 else -1.0)
+
+
+def _rotation_about(cx: float, cy: float, theta: float, dx: float, dy: float) -> np.ndarray:
+    """2x3 affine matrix: rotation by ``theta`` (radians, image frame) about (cx, cy), then a shift (dx, dy) px.
+
+    ``cv2.getRotationMatrix2D((cx, cy), -degrees(theta), 1)`` with (dx, dy) added to its last column.
+    """
+    a, b = math.cos(theta), -math.sin(theta)
+    return np.array([[a, b, (1 - a) * cx - b * cy + dx], [-b, a, b * cx + (1 - a) * cy + dy]])
 
 
 def _turn(a, b, a0, b0) -> float:
@@ -531,7 +546,7 @@ class LKTracker:
 
     # -- measurement against frame 0 ------------------------------------------------------------
     def _template(self, gray0, i, p0, theta, r, seg_theta=None):
-        """Frame-0 appearance of node i posed for this frame: ``(crop, tmpl, wts)`` or None if textureless.
+        """Frame-0 appearance of node i posed for this frame: ``(crop, tmpl, wts)``.
 
         ``crop`` is the (k, k) frame-0 neighbourhood (k = 2 (h + r) + 1, node at its centre), ``tmpl`` its
         central (2h + 1) square and ``wts`` the template's per-pixel weights. ``seg_theta`` maps each segment
@@ -545,20 +560,20 @@ class LKTracker:
         k = 2 * (h + r) + 1
         c = float(h + r)
         wts = None
+        px, py = float(p0[0]), float(p0[1])
         if self._band is not None and seg_theta:
             cs = float(3 * h)
-            acc = np.zeros((k, k), np.float32)
-            wacc = np.zeros((k, k), np.float32)
-            prev = None
+            acc = wacc = prev = None
             for (sp, sc), th in seg_theta.items():
-                m = cv2.getRotationMatrix2D((float(p0[0]), float(p0[1])), -math.degrees(th), 1.0)
-                m[:, 2] += (c - p0[0], c - p0[1])
-                img_k = cv2.warpAffine(gray0, m, (k, k), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-                mb = cv2.getRotationMatrix2D((cs, cs), -math.degrees(th), 1.0)
-                mb[:, 2] += (c - cs, c - cs)
-                w_k = cv2.warpAffine(self._seg_band[(sp, sc, i)], mb, (k, k), flags=cv2.INTER_LINEAR, borderValue=0)
-                acc += w_k * img_k
-                wacc += w_k
+                img_k = cv2.warpAffine(gray0, _rotation_about(px, py, th, c - px, c - py), (k, k),
+                                       flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+                w_k = cv2.warpAffine(self._seg_band[(sp, sc, i)], _rotation_about(cs, cs, th, c - cs, c - cs), (k, k),
+                                     flags=cv2.INTER_LINEAR, borderValue=0)
+                if acc is None:
+                    acc, wacc = w_k * img_k, w_k
+                else:
+                    acc += w_k * img_k
+                    wacc = wacc + w_k
                 if prev is None or sc == i:  # outside every band: the parent-side warp (background)
                     prev = img_k
             inside = wacc > 1e-3
@@ -569,32 +584,27 @@ class LKTracker:
             if float(wts.sum()) < (_TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * h + 1)):
                 wts = None
         else:
-            m = cv2.getRotationMatrix2D((float(p0[0]), float(p0[1])), -math.degrees(theta), 1.0)
-            m[:, 2] += (c - p0[0], c - p0[1])
-            prev = cv2.warpAffine(gray0, m, (k, k), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            prev = prev.astype(np.float32)
+            prev = cv2.warpAffine(gray0, _rotation_about(px, py, theta, c - px, c - py), (k, k),
+                                  flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
         tmpl = np.ascontiguousarray(prev[r:r + 2 * h + 1, r:r + 2 * h + 1])
         if wts is None:
             wts = np.ones_like(tmpl)
-        wf = wts.ravel().astype(np.float64)
-        wsum = float(wf.sum())
-        d_t = tmpl.ravel() - float(wf @ tmpl.ravel()) / wsum
-        if float(wf @ (d_t * d_t)) / wsum < 1e-3:
-            return None  # textureless template: nothing to match
         return prev, tmpl, wts
 
-    def _anchor(self, gray0, gray, i, p0, q, theta, r, seg_theta=None):
+    def _anchor(self, gray0, gray, i, p0, q, theta, r, seg_theta=None, defer_fb=False):
         """Locate node i (frame-0 position p0) near q in ``gray`` within r px (see ``_template``).
 
-        Returns (xy, ncc, fb, sigma, second-peak ncc, template weight sum, second-peak xy) or None.
+        Returns (xy, ncc, fb, sigma, second-peak ncc, template weight sum, second-peak xy, fb_later) or None.
+        ``defer_fb``: fb is NaN and ``fb_later()`` computes it (the backward LK), for a caller that re-matches
+        the node anyway and needs this match's forward-backward error only if the re-match fails.
         """
         h = self.h
         k = 2 * (h + r) + 1
         c = float(h + r)
-        posed = self._template(gray0, i, p0, theta, r, seg_theta)
-        if posed is None:
-            return None
-        prev, tmpl, wts = posed
+        # the frame-0 crop is only searched by the backward LK, which starts at its centre: a margin of
+        # ``_rematch_radius`` px around the template suffices, whatever the search radius r in this frame
+        margin = self._rematch_radius()
+        prev, tmpl, wts = self._template(gray0, i, p0, theta, margin, seg_theta)
         cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1]))).astype(np.float32)
         res = cv2.matchTemplate(cur, tmpl, cv2.TM_CCOEFF_NORMED, mask=wts)
         if not np.isfinite(res).all():
@@ -615,9 +625,10 @@ class LKTracker:
         if fwd is None or float(np.hypot(*(fwd[0] - guess))) > 2.0:
             return None
         loc, s_lk = fwd[:2]
-        fb = self._fb_error(cur, loc, tmpl, wts, prev, c)
+        fb_later = functools.partial(self._fb_error, cur, loc, tmpl, wts, prev, float(h + margin))
+        fb = math.nan if defer_fb else fb_later()
         xy = np.asarray(q, float) + (loc - c)
-        return xy, float(score), fb, s_lk, second, float(wts.sum()), xy2
+        return xy, float(score), fb, s_lk, second, float(wts.sum()), xy2, fb_later
 
     def _reanchor(self, gray0, gray, i, p0, q, seg_theta):
         """Re-measure node i, already matched near q, with a re-posed template: LK from q, no search.
@@ -629,13 +640,10 @@ class LKTracker:
         more than 2 px).
         """
         h = self.h
-        r = max(2, h // 4)
+        r = self._rematch_radius()
         k = 2 * (h + r) + 1
         c = float(h + r)
-        posed = self._template(gray0, i, p0, 0.0, r, seg_theta)
-        if posed is None:
-            return None
-        prev, tmpl, wts = posed
+        prev, tmpl, wts = self._template(gray0, i, p0, 0.0, r, seg_theta)
         cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1]))).astype(np.float32)
         start = np.array([c, c])
         fwd = _weighted_lk(tmpl, wts, cur, start, with_ncc=True)
@@ -645,6 +653,10 @@ class LKTracker:
         fb = self._fb_error(cur, loc, tmpl, wts, prev, c)
         return np.asarray(q, float) + (loc - c), score, fb, s_lk
 
+    def _rematch_radius(self) -> int:
+        """Radius (px) of the refinement pass's re-match: max(2, h // 4) (the first pass is within a pixel)."""
+        return max(2, self.h // 4)
+
     @staticmethod
     def _fb_error(cur, loc, tmpl, wts, prev, c) -> float:
         """Forward-backward error (px): the matched patch (same weights) searched for in the frame-0 crop."""
@@ -652,7 +664,8 @@ class LKTracker:
         bwd = _weighted_lk(back_t, wts, prev, np.array([c, c]))
         return math.inf if bwd is None else float(np.hypot(*(bwd[0] - c)))
 
-    def _refine(self, gray0, gray, q0, est, vis, sig, fb_max, pred=None, counts=None, borrowed=None):
+    def _refine(self, gray0, gray, q0, est, vis, sig, fb_max, pred=None, counts=None, borrowed=None,
+                deferred=None):
         """Second pass: re-match every visible node with segment rotations from this frame's matches.
 
         In the first pass a node's articulated template is rotated with angles measured partly from
@@ -664,6 +677,10 @@ class LKTracker:
         borrowed from its parent, not measured) whose re-match fails (no match,
         correlation below ``min_ncc`` or forward-backward error above the limit: the template posed as the
         match itself implies does not fit there) is marked invisible at ``pred`` (its first-pass prediction).
+        ``deferred`` maps a node whose first-pass forward-backward error was not computed to (``fb_later``,
+        LK standard error, search radius) of its first-pass match: a re-match that succeeds makes it moot (about
+        19 in 20 on the simulator clips), and one that fails keeps the first-pass match only if its own
+        forward-backward check passes, else the node is invisible as the first pass would have made it.
         """
         cfg = self.config
         rejected = []
@@ -684,6 +701,19 @@ class LKTracker:
                 sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
             elif cfg.refine_consistency and borrowed is not None and borrowed[i]:
                 rejected.append(i)
+            elif deferred is not None and i in deferred:
+                fb_later, s_lk, r = deferred[i]
+                fb = fb_later()
+                if fb > fb_max:  # the first pass's own test, run late
+                    vis[i], sig[i] = False, float(r)
+                    if pred is not None:
+                        est[i] = pred[i]
+                    if counts is not None:
+                        counts["rejected_fb"] += 1
+                        counts["anchored"] -= 1
+                        counts["invisible"] += 1
+                else:
+                    sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
         for i in rejected:  # after the pass: a child's re-match is posed from its parent's match, not moved
             vis[i] = False
             if pred is not None:
@@ -757,6 +787,11 @@ class LKTracker:
                     theta_now = np.zeros(n)
                     preds = prev_est.copy()
                     wide = np.zeros(n, bool)  # searched in the wide window: template posed by a borrowed rotation
+                    # with a refinement pass every visible node is re-matched, and the backward LK of the first
+                    # pass is needed only where the re-match fails: it is run then (``_refine``); not with
+                    # ``segment_fallback``, whose sigma adds to the parent's
+                    refining = self._band is not None and cfg.refine_pass and not cfg.segment_fallback
+                    deferred = {}
                     for i in self.order:
                         # rotation from the latest estimates (this frame's where already done)
                         cur_est = np.where(done[:, None], new_est, prev_est)
@@ -799,12 +834,12 @@ class LKTracker:
                         # whatever the previous frame said: the same ambiguity and geometry checks apply
                         reacquiring = not prev_vis[i] or r > h
                         preds[i], wide[i] = pred, r > h
-                        m = self._anchor(gray0, ga, i, q0[i], pred, theta, r, seg_theta)
+                        m = self._anchor(gray0, ga, i, q0[i], pred, theta, r, seg_theta, defer_fb=refining)
                         ok = m is not None
                         if not ok:
                             counts["lost_match"] += 1
                         else:
-                            xy, score, fb, s_lk, second, n_eff, xy2 = m
+                            xy, score, fb, s_lk, second, n_eff, xy2, fb_later = m
                             ambiguous = second > score - cfg.distinct_sigmas / math.sqrt(n_eff)
                             if score < cfg.min_ncc:
                                 ok = False
@@ -818,7 +853,7 @@ class LKTracker:
                                 # points at the other one: which of the two the node is would be a guess
                                 ok = False
                                 counts["rejected_ambiguous"] += 1
-                            elif fb > fb_max:
+                            elif fb > fb_max:  # NaN when deferred to the refinement pass: not taken
                                 ok = False
                                 counts["rejected_fb"] += 1
                             elif p >= 0 and reacquiring and not new_vis[p]:
@@ -839,7 +874,10 @@ class LKTracker:
                                 seg_rot[i] = _turn(new_est[p], xy, q0[p], q0[i])
                                 if new_vis[p]:
                                     bend_rot[i] = seg_rot[i] - seg_rot[p]
-                            sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
+                            if refining:
+                                deferred[i] = (fb_later, s_lk, r)
+                            else:
+                                sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
                             counts["anchored"] += 1
                         elif (cfg.segment_fallback and seg is not None and seg[2] >= cfg.min_segment_ncc
                               ):
@@ -856,7 +894,7 @@ class LKTracker:
                             counts["invisible"] += 1
                         done[i] = True
                     if self._band is not None and cfg.refine_pass:
-                        self._refine(gray0, ga, q0, new_est, new_vis, sig, fb_max, preds, counts, wide)
+                        self._refine(gray0, ga, q0, new_est, new_vis, sig, fb_max, preds, counts, wide, deferred)
                     hh, ww = gray.shape
                     new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
                     new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)
