@@ -234,7 +234,7 @@ def _grid(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     return tuple(np.ogrid[:shape[0], :shape[1]])
 
 
-def _weighted_lk(tmpl, wts, img, start, iters: int = 20, eps: float = 0.01, with_ncc: bool = False):
+def _weighted_lk(tmpl, wts, img, start, iters: int = 20, eps: float = 0.01):
     """Weighted inverse-compositional Lucas-Kanade (translation, gain/bias-normalised).
 
     Finds the position (x, y) in ``img`` (pixel centres at integers) whose neighbourhood best matches
@@ -242,7 +242,6 @@ def _weighted_lk(tmpl, wts, img, start, iters: int = 20, eps: float = 0.01, with
     ``(position, standard_error_px)`` -- the LK least-squares standard error
     sqrt(weighted residual variance / lambda_min(weighted structure tensor)) -- or None if ill-posed
     (textureless template: weighted variance below 1e-3 grey levels^2, or a singular structure tensor).
-    ``with_ncc``: also return the masked zero-mean NCC of template and patch at the optimum (third item).
 
     Every weighted sum is a dot product with the flattened patch: one (3, N) @ (N,) product per iteration
     gives the weighted mean of the patch and its projections on the weighted template gradients, and the
@@ -297,14 +296,7 @@ def _weighted_lk(tmpl, wts, img, start, iters: int = 20, eps: float = 0.01, with
     lam_min = 0.5 * (hxx + hyy - math.sqrt((hxx - hyy) ** 2 + 4 * hxy * hxy))
     res_var = float(w @ (e * e)) / wsum
     s_lk = math.sqrt(res_var / max(lam_min, 1e-9))
-    if not with_ncc:
-        return np.array([x, y]), s_lk
-    # masked zero-mean NCC as cv2.TM_CCOEFF_NORMED defines it with a mask: means weighted by w, products by w^2
-    w2 = w * w
-    p0 = pf - mu_p
-    wt = w2 * t0
-    den = math.sqrt(float(wt @ t0) * float(w2 @ (p0 * p0)))
-    return np.array([x, y]), s_lk, (float(wt @ p0) / den if den > 0 else -1.0)
+    return np.array([x, y]), s_lk
 
 
 def _rotation_about(cx: float, cy: float, theta: float, dx: float, dy: float) -> np.ndarray:
@@ -591,12 +583,10 @@ class LKTracker:
             wts = np.ones_like(tmpl)
         return prev, tmpl, wts
 
-    def _anchor(self, gray0, gray, i, p0, q, theta, r, seg_theta=None, defer_fb=False):
+    def _anchor(self, gray0, gray, i, p0, q, theta, r, seg_theta=None):
         """Locate node i (frame-0 position p0) near q in ``gray`` within r px (see ``_template``).
 
-        Returns (xy, ncc, fb, sigma, second-peak ncc, template weight sum, second-peak xy, fb_later) or None.
-        ``defer_fb``: fb is NaN and ``fb_later()`` computes it (the backward LK), for a caller that re-matches
-        the node anyway and needs this match's forward-backward error only if the re-match fails.
+        Returns (xy, ncc, fb, sigma, second-peak ncc, template weight sum, second-peak xy) or None.
         """
         h = self.h
         k = 2 * (h + r) + 1
@@ -624,34 +614,10 @@ class LKTracker:
         fwd = _weighted_lk(tmpl, wts, cur, guess)
         if fwd is None or float(np.hypot(*(fwd[0] - guess))) > 2.0:
             return None
-        loc, s_lk = fwd[:2]
-        fb_later = functools.partial(self._fb_error, cur, loc, tmpl, wts, prev, float(h + margin))
-        fb = math.nan if defer_fb else fb_later()
+        loc, s_lk = fwd
+        fb = self._fb_error(cur, loc, tmpl, wts, prev, float(h + margin))
         xy = np.asarray(q, float) + (loc - c)
-        return xy, float(score), fb, s_lk, second, float(wts.sum()), xy2, fb_later
-
-    def _reanchor(self, gray0, gray, i, p0, q, seg_theta):
-        """Re-measure node i, already matched near q, with a re-posed template: LK from q, no search.
-
-        The refinement pass moves a node by a fraction of a pixel, well inside the LK's basin, so the
-        correlation search of ``_anchor`` is skipped: the weighted LK starts at q, and the match's
-        correlation is the template's masked zero-mean NCC (the ``cv2.TM_CCOEFF_NORMED`` definition with
-        mask) at the LK's sub-pixel optimum. Returns (xy, ncc, fb, sigma) or None (ill-posed, or the LK moved
-        more than 2 px).
-        """
-        h = self.h
-        r = self._rematch_radius()
-        k = 2 * (h + r) + 1
-        c = float(h + r)
-        prev, tmpl, wts = self._template(gray0, i, p0, 0.0, r, seg_theta)
-        cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1]))).astype(np.float32)
-        start = np.array([c, c])
-        fwd = _weighted_lk(tmpl, wts, cur, start, with_ncc=True)
-        if fwd is None or float(np.hypot(*(fwd[0] - start))) > 2.0:
-            return None
-        loc, s_lk, score = fwd
-        fb = self._fb_error(cur, loc, tmpl, wts, prev, c)
-        return np.asarray(q, float) + (loc - c), score, fb, s_lk
+        return xy, float(score), fb, s_lk, second, float(wts.sum()), xy2
 
     def _rematch_radius(self) -> int:
         """Radius (px) of the refinement pass's re-match: max(2, h // 4) (the first pass is within a pixel)."""
@@ -664,8 +630,7 @@ class LKTracker:
         bwd = _weighted_lk(back_t, wts, prev, np.array([c, c]))
         return math.inf if bwd is None else float(np.hypot(*(bwd[0] - c)))
 
-    def _refine(self, gray0, gray, q0, est, vis, sig, fb_max, pred=None, counts=None, borrowed=None,
-                deferred=None):
+    def _refine(self, gray0, gray, q0, est, vis, sig, fb_max, pred=None, counts=None, borrowed=None):
         """Second pass: re-match every visible node with segment rotations from this frame's matches.
 
         In the first pass a node's articulated template is rotated with angles measured partly from
@@ -677,10 +642,6 @@ class LKTracker:
         borrowed from its parent, not measured) whose re-match fails (no match,
         correlation below ``min_ncc`` or forward-backward error above the limit: the template posed as the
         match itself implies does not fit there) is marked invisible at ``pred`` (its first-pass prediction).
-        ``deferred`` maps a node whose first-pass forward-backward error was not computed to (``fb_later``,
-        LK standard error, search radius) of its first-pass match: a re-match that succeeds makes it moot (about
-        19 in 20 on the simulator clips), and one that fails keeps the first-pass match only if its own
-        forward-backward check passes, else the node is invisible as the first pass would have made it.
         """
         cfg = self.config
         rejected = []
@@ -694,26 +655,13 @@ class LKTracker:
             for ch in self.children[i]:
                 seg_theta[(i, ch)] = (_turn(est[i], est[ch], q0[i], q0[ch]) if vis[ch]
                                       else seg_theta.get((p, i), 0.0))
-            m = self._reanchor(gray0, gray, i, q0[i], est[i], seg_theta)
+            m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, self._rematch_radius(), seg_theta)
             if m is not None and m[1] >= cfg.min_ncc and m[2] <= fb_max:
                 xy, _, fb, s_lk = m[:4]
                 est[i] = xy
                 sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
             elif cfg.refine_consistency and borrowed is not None and borrowed[i]:
                 rejected.append(i)
-            elif deferred is not None and i in deferred:
-                fb_later, s_lk, r = deferred[i]
-                fb = fb_later()
-                if fb > fb_max:  # the first pass's own test, run late
-                    vis[i], sig[i] = False, float(r)
-                    if pred is not None:
-                        est[i] = pred[i]
-                    if counts is not None:
-                        counts["rejected_fb"] += 1
-                        counts["anchored"] -= 1
-                        counts["invisible"] += 1
-                else:
-                    sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
         for i in rejected:  # after the pass: a child's re-match is posed from its parent's match, not moved
             vis[i] = False
             if pred is not None:
@@ -787,11 +735,6 @@ class LKTracker:
                     theta_now = np.zeros(n)
                     preds = prev_est.copy()
                     wide = np.zeros(n, bool)  # searched in the wide window: template posed by a borrowed rotation
-                    # with a refinement pass every visible node is re-matched, and the backward LK of the first
-                    # pass is needed only where the re-match fails: it is run then (``_refine``); not with
-                    # ``segment_fallback``, whose sigma adds to the parent's
-                    refining = self._band is not None and cfg.refine_pass and not cfg.segment_fallback
-                    deferred = {}
                     for i in self.order:
                         # rotation from the latest estimates (this frame's where already done)
                         cur_est = np.where(done[:, None], new_est, prev_est)
@@ -834,12 +777,12 @@ class LKTracker:
                         # whatever the previous frame said: the same ambiguity and geometry checks apply
                         reacquiring = not prev_vis[i] or r > h
                         preds[i], wide[i] = pred, r > h
-                        m = self._anchor(gray0, ga, i, q0[i], pred, theta, r, seg_theta, defer_fb=refining)
+                        m = self._anchor(gray0, ga, i, q0[i], pred, theta, r, seg_theta)
                         ok = m is not None
                         if not ok:
                             counts["lost_match"] += 1
                         else:
-                            xy, score, fb, s_lk, second, n_eff, xy2, fb_later = m
+                            xy, score, fb, s_lk, second, n_eff, xy2 = m
                             ambiguous = second > score - cfg.distinct_sigmas / math.sqrt(n_eff)
                             if score < cfg.min_ncc:
                                 ok = False
@@ -853,7 +796,7 @@ class LKTracker:
                                 # points at the other one: which of the two the node is would be a guess
                                 ok = False
                                 counts["rejected_ambiguous"] += 1
-                            elif fb > fb_max:  # NaN when deferred to the refinement pass: not taken
+                            elif fb > fb_max:
                                 ok = False
                                 counts["rejected_fb"] += 1
                             elif p >= 0 and reacquiring and not new_vis[p]:
@@ -874,10 +817,7 @@ class LKTracker:
                                 seg_rot[i] = _turn(new_est[p], xy, q0[p], q0[i])
                                 if new_vis[p]:
                                     bend_rot[i] = seg_rot[i] - seg_rot[p]
-                            if refining:
-                                deferred[i] = (fb_later, s_lk, r)
-                            else:
-                                sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
+                            sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
                             counts["anchored"] += 1
                         elif (cfg.segment_fallback and seg is not None and seg[2] >= cfg.min_segment_ncc
                               ):
@@ -894,7 +834,7 @@ class LKTracker:
                             counts["invisible"] += 1
                         done[i] = True
                     if self._band is not None and cfg.refine_pass:
-                        self._refine(gray0, ga, q0, new_est, new_vis, sig, fb_max, preds, counts, wide, deferred)
+                        self._refine(gray0, ga, q0, new_est, new_vis, sig, fb_max, preds, counts, wide)
                     hh, ww = gray.shape
                     new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
                     new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)
