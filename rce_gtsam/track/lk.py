@@ -116,6 +116,24 @@ What hurts is compression: at x264 crf 28 the median is 0.19 px and 83 % of poin
 (clean crf 16: 0.07 px, 88 %), at crf 34 0.34 px and 52 %; the thin distal stem's texture is quantised
 away, and the tracker marks those nodes invisible rather than guess.
 
+Speed (``benchmarks/bench_track.py``, which runs this tracker and the one of revision 7f3b223 on the same
+frames in one process): most of the time went to numpy calls on small arrays, one node at a time, not to
+pixels. The weighted LK now gets every sum from matrix products (one (3, N) product per iteration instead
+of a dozen reductions), the frame-0 crop is only as large as the backward LK needs (the template plus the
+re-match radius) rather than the search window, rotation matrices are built directly, the segment search
+samples with float32 maps and no per-angle mean pass, and frames are decoded in a thread while the previous
+one is tracked (:func:`~rce_gtsam.track.sources.prefetched`). Measured on the shared 2-core machine
+(120-frame seed-0 render, best of 5): 1.31x wall, 1.34x CPU time; on the 600-frame clips of seeds 0-4 (seed 1:
+400) median, largest visible error, visible share and Spearman of kappa equal the old tracker's at the
+README's precision (p99 0.69/1.69 -> 0.70/1.71 px on seeds 0/1, the rest equal). Tried and not kept (measured on the simulator clips):
+re-matching by LK alone without the correlation search in the refinement pass, deferring the first pass's
+forward-backward check to the refinement pass (both moved the tails: largest visible error 1.6 -> 3.9 px on
+seed 0, 7.8 -> 8.5 px on seed 1), and skipping the re-match when the re-measured rotations moved the template
+by less than 0.05 px (median error 0.038 -> 0.039 px, largest 4.2 -> 6.9 px on a 150-frame seed-2 clip: the
+re-match gains by re-centring the search crop on the match, not only by re-posing the template). Batching
+the refinement pass's LK over nodes saved only ~20 % of its CPU time (the arithmetic, not the per-call
+overhead, dominates at 20 nodes), not worth a second LK implementation.
+
 Limits: the template is rotated, not scaled (a branch that moves a lot toward the camera changes scale);
 a node hidden from frame 0 onwards cannot be tracked.
 """
