@@ -122,8 +122,10 @@ pixels. The weighted LK now gets every sum from matrix products (one (3, N) prod
 of a dozen reductions), the frame-0 crop is only as large as the backward LK needs (the template plus the
 re-match radius) rather than the search window, rotation matrices are built directly, the segment search
 samples with float32 maps and no per-angle mean pass, and frames are decoded in a thread while the previous
-one is tracked (:func:`~rce_gtsam.track.sources.prefetched`). Measured on the shared 2-core machine
-(120-frame seed-0 render, best of 5): 1.31x wall, 1.34x CPU time; on the 600-frame clips of seeds 0-4 (seed 1:
+one is tracked (:func:`~rce_gtsam.track.sources.prefetched`; no gain measurable on the shared machine, where
+no core is idle: 27.9 vs 27.5 frames/s from the mp4, best of 6). Measured on the shared 2-core machine
+(120-frame seed-0 render, best of 5-7, two runs): 1.19-1.31x wall, 1.22-1.34x CPU time, far from the
+2.5x the issue asks for; on the 600-frame clips of seeds 0-4 (seed 1:
 400) median, largest visible error, visible share and Spearman of kappa equal the old tracker's at the
 README's precision (p99 0.69/1.69 -> 0.70/1.71 px on seeds 0/1, the rest equal). Tried and not kept (measured on the simulator clips):
 re-matching by LK alone without the correlation search in the refinement pass, deferring the first pass's
