@@ -129,8 +129,8 @@ no core is idle: 27.9 vs 27.5 frames/s from the mp4, best of 6). Measured on the
 400) median, largest visible error, visible share and Spearman of kappa equal the old tracker's at the
 README's precision (p99 0.69/1.69 -> 0.70/1.71 px on seeds 0/1, the rest equal). Tried and not kept (measured on the simulator clips):
 re-matching by LK alone without the correlation search in the refinement pass, deferring the first pass's
-forward-backward check to the refinement pass (both moved the tails: largest visible error 1.6 -> 3.9 px on
-seed 0, 7.8 -> 8.5 px on seed 1), and skipping the re-match when the re-measured rotations moved the template
+forward-backward check to the refinement pass (the first moved the largest visible error on seed 0 from 1.6
+to 3.9 px, the second that on seed 1 from 7.8 to 8.5 px), and skipping the re-match when the re-measured rotations moved the template
 by less than 0.05 px (median error 0.038 -> 0.039 px, largest 4.2 -> 6.9 px on a 150-frame seed-2 clip: the
 re-match gains by re-centring the search crop on the match, not only by re-posing the template). Batching
 the refinement pass's LK over nodes saved only ~20 % of its CPU time (the arithmetic, not the per-call
