@@ -1,19 +1,32 @@
-"""Tracking throughput on this machine (prints measured figures; not a test).
+"""Default tracker: speed and accuracy against a baseline revision of it, in the same run (prints figures; not a test).
 
-1. Default tracker (anchored LK) frames/s on a 640x480 video with 20 nodes -- the simulator's render when
-   rce_gtsam.render is available, else the synthetic branch of tests/track_fixtures.py -- next to plain
-   frame-to-frame pyramidal LK on the same frames (the baseline ratio). Frames are decoded beforehand so
-   decode time is not counted.
-2. TAPIR ONNX runner overhead per frame *excluding the network*: a fake model with the real export's I/O
+The baseline is ``rce_gtsam/track/lk.py`` as it was at ``--baseline`` (git revision, default 7f3b223: before the
+speed-up), loaded from ``git show`` into a module of its own, so both trackers run on the same frames in the same
+process.
+
+1. Speed, on the simulator's 640x480 render (seed 0, 20 nodes, ``--frames`` frames, H.264 as ``rce simulate
+   --video`` writes it): decode time (``open_video``, frames to RGB) on its own; then tracking time alone on the
+   decoded frames held in memory, baseline and current alternating ``--repeat`` times, best of each (wall clock,
+   and process CPU time, which counts less of what other processes take from a shared machine), next to plain
+   frame-to-frame pyramidal LK. cv2 threads as found (``--cv-threads N`` sets them).
+2. Accuracy, on rendered clips (``--clips SEED:FRAMES,...``; default seeds 0-4, 600 frames, seed 1 400, as in the
+   README), each tracked by both: median, 99th percentile and largest error of points marked visible (px, against
+   the true node positions), visible share of point-frames, and Spearman(kappa, kappa_true) from the full analysis
+   (default preset, no bootstrap: kappa does not depend on it), plus the largest position difference between the
+   two trackers on points both call visible. Clips are cached in ``--cache``.
+3. TAPIR ONNX runner overhead per frame *excluding the network*: a fake model with the real export's I/O
    shapes (R=256, causal state [4, 12, N, 2, 2560], 256/128 query channels) whose graph is nearly free;
    overhead = wall time of track() minus time inside InferenceSession.run.
 
-Usage: .venv/bin/python benchmarks/bench_track.py [--frames 120]
+Usage: .venv/bin/python benchmarks/bench_track.py [--frames 120] [--repeat 5] [--clips 0:600,1:400,...]
+       [--no-accuracy] [--no-tapir] [--baseline REV] [--cache DIR] [--cv-threads N]
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
+import subprocess
 import sys
 import tempfile
 import time
@@ -21,28 +34,43 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from scipy.stats import spearmanr
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests"))
 
-from rce_gtsam.track import ArraySource, LKTracker  # noqa: E402
+from rce_gtsam.render import render_video  # noqa: E402
+from rce_gtsam.simulate import SimulationConfig, simulate  # noqa: E402
+from rce_gtsam.track import ArraySource, LKTracker, open_video  # noqa: E402
 
 
-def scene(n_frames: int):
-    try:
-        from rce_gtsam.render import iter_frames
-        from rce_gtsam.simulate import SimulationConfig, simulate
+def baseline_tracker(rev: str, tmp: Path):
+    """``LKTracker`` class of ``rce_gtsam/track/lk.py`` at git revision ``rev`` (its own module, same package)."""
+    src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:rce_gtsam/track/lk.py"], check=True,
+                         capture_output=True, text=True).stdout
+    path = tmp / f"lk_{rev}.py"
+    path.write_text(src)
+    spec = importlib.util.spec_from_file_location("rce_gtsam.track.lk_baseline", path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod  # dataclasses look their module up here
+    spec.loader.exec_module(mod)
+    return mod.LKTracker
 
-        sim = simulate(SimulationConfig(n_nodes=20, n_frames=n_frames, seed=0))
-        frames = np.stack([cv2.cvtColor(f, cv2.COLOR_BGR2RGB) for f in iter_frames(sim)])
-        truth = np.zeros_like(sim.true_xy)
-        truth[list(sim.tracks.node_ids)] = sim.true_xy
-        return "simulator render", frames, truth, sim.graph
-    except ImportError:
-        from rce_gtsam.graph import BranchGraph
-        from track_fixtures import branch_video
 
-        bv = branch_video(n_frames=n_frames, size=(640, 480), n_nodes=20, segment_px=15)
-        return "synthetic fixture", bv.frames, bv.true_xy, BranchGraph.from_edges(0, bv.edges)
+def clip(seed: int, n_frames: int, cache: Path):
+    """(simulation, mp4 path, (P, F, 2) true positions indexed by node id) of a cached clean render."""
+    sim = simulate(SimulationConfig(n_nodes=20, n_frames=n_frames, seed=seed))
+    path = cache / f"clean_s{seed}_f{n_frames}.mp4"
+    if not path.exists():
+        render_video(sim, path)
+    truth = np.zeros_like(sim.true_xy)
+    truth[list(sim.tracks.node_ids)] = sim.true_xy
+    return sim, path, truth
+
+
+def decode(path: Path) -> np.ndarray:
+    with open_video(path) as src:
+        return np.stack([fr.image for fr in src])
 
 
 def plain_lk(frames, q):
@@ -55,39 +83,116 @@ def plain_lk(frames, q):
         prev = g
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--frames", type=int, default=120)
-    args = ap.parse_args()
-    name, frames, truth, graph = scene(args.frames)
-    h, w = frames.shape[1:3]
-    print(f"scene: {name}, {w}x{h}, {truth.shape[0]} nodes, {len(frames)} frames, cv2 threads {cv2.getNumThreads()}")
-    t = time.perf_counter()
-    res = LKTracker().track(ArraySource(frames), truth[:, 0], graph)
-    t_lk = time.perf_counter() - t
-    t = time.perf_counter()
-    plain_lk(frames, truth[:, 0])
-    t_plain = time.perf_counter() - t
-    err = np.hypot(*(res.xy - truth).transpose(2, 0, 1))
-    vis = res.visible
-    print(f"default tracker: {len(frames) / t_lk:.1f} frames/s ({1000 * t_lk / len(frames):.1f} ms/frame); "
-          f"plain frame-to-frame LK: {len(frames) / t_plain:.1f} frames/s; ratio {t_lk / t_plain:.1f}x slower")
-    print(f"  accuracy: median {np.median(err[vis]):.3f} px, 90th pct {np.percentile(err[vis], 90):.3f} px, "
-          f"visible {100 * vis.mean():.1f}%, last-frame median {np.median(err[:, -1]):.3f} px")
+def timed(fn, *args):
+    """(result, wall s, process CPU s) of fn(*args)."""
+    c, t = time.process_time(), time.perf_counter()
+    out = fn(*args)
+    return out, time.perf_counter() - t, time.process_time() - c
 
+
+def spearman_kappa(res, sim) -> float:
+    import rce_gtsam
+    from rce_gtsam.tracks import load_tracks
+
+    with tempfile.TemporaryDirectory() as tmp:
+        tracks = load_tracks(res.write_csv(Path(tmp) / "t.csv"), sim.graph)
+    r = rce_gtsam.analyze(tracks, sim.graph, preset="default", n_boot=0)
+    est = np.array([r.kappa[e] for e in r.response.edges])
+    tru = np.array([sim.kappa_true[e] for e in r.response.edges])
+    return float(spearmanr(est, tru)[0])
+
+
+def speed(trackers, cache: Path, n_frames: int, repeat: int) -> None:
+    sim, path, truth = clip(0, n_frames, cache)
+    best_dec = min(timed(decode, path)[1] for _ in range(repeat))
+    frames = decode(path)
+    h, w = frames.shape[1:3]
+    print(f"speed: simulator render seed 0, {w}x{h} H.264, {truth.shape[0]} nodes, {len(frames)} frames, "
+          f"cv2 threads {cv2.getNumThreads()}, best of {repeat} (machine shared with other processes)")
+    print(f"  decode alone: {len(frames) / best_dec:.0f} frames/s ({1000 * best_dec / len(frames):.2f} ms/frame)")
+    wall = {k: np.inf for k in trackers}
+    cpu = dict(wall)
+    for _ in range(repeat):
+        for name, cls in trackers.items():
+            _, t, c = timed(cls().track, ArraySource(frames), truth[:, 0], sim.graph)
+            wall[name], cpu[name] = min(wall[name], t), min(cpu[name], c)
+    t_plain = min(timed(plain_lk, frames, truth[:, 0])[1] for _ in range(repeat))
+    for name in trackers:
+        print(f"  {name:8s} tracking alone: {len(frames) / wall[name]:6.1f} frames/s wall "
+              f"({1000 * wall[name] / len(frames):5.2f} ms/frame), {len(frames) / cpu[name]:6.1f} frames/s CPU; "
+              f"with decode {len(frames) / (wall[name] + best_dec):6.1f} frames/s")
+    print(f"  plain frame-to-frame LK: {len(frames) / t_plain:.0f} frames/s")
+    print(f"  speed-up current/baseline: {wall['baseline'] / wall['current']:.2f}x wall, "
+          f"{cpu['baseline'] / cpu['current']:.2f}x CPU")
+
+
+def accuracy(trackers, cache: Path, clips: list[tuple[int, int]]) -> None:
+    print("accuracy on rendered clips (px against the true node positions; rho = Spearman(kappa, kappa_true)):")
+    print(f"  {'seed':>4s} {'frames':>6s} {'tracker':8s} {'median':>7s} {'p99':>6s} {'max':>6s} {'visible':>7s} "
+          f"{'rho':>6s} {'s':>5s}")
+    rows = {k: [] for k in trackers}
+    for seed, n in clips:
+        sim, path, truth = clip(seed, n, cache)
+        res = {}
+        for name, cls in trackers.items():
+            with open_video(path) as src:
+                r, t, _ = timed(cls().track, src, truth[:, 0], sim.graph)
+            res[name] = r
+            err = np.hypot(*(r.xy - truth).transpose(2, 0, 1))[r.visible]
+            rho = spearman_kappa(r, sim)
+            rows[name].append((np.median(err), np.percentile(err, 99), err.max(), r.visible.mean(), rho))
+            print(f"  {seed:4d} {n:6d} {name:8s} {rows[name][-1][0]:7.3f} {rows[name][-1][1]:6.2f} "
+                  f"{rows[name][-1][2]:6.1f} {rows[name][-1][3]:7.3f} {rho:6.3f} {t:5.0f}", flush=True)
+        both = res["baseline"].visible & res["current"].visible
+        d = np.hypot(*(res["baseline"].xy - res["current"].xy).transpose(2, 0, 1))[both]
+        print(f"  {'':11s} both visible: {both.mean():.3f}, |current - baseline| median {np.median(d):.4f} px, "
+              f"max {d.max():.2f} px; visible in one only: {(res['baseline'].visible != res['current'].visible).sum()}")
+    for name, rs in rows.items():
+        a = np.array(rs)
+        print(f"  {name:8s} per seed: median {' / '.join(f'{v:.3f}' for v in a[:, 0])}; "
+              f"p99 {' / '.join(f'{v:.2f}' for v in a[:, 1])}; max {' / '.join(f'{v:.1f}' for v in a[:, 2])}; "
+              f"visible {' / '.join(f'{v:.3f}' for v in a[:, 3])}; rho {' / '.join(f'{v:.2f}' for v in a[:, 4])}")
+
+
+def tapir(cache: Path, n_frames: int) -> None:
     from rce_gtsam.track.tapir import TapirOnnxTracker
     from track_fixtures import build_fake_tapir
 
+    _, path, truth = clip(0, n_frames, cache)
+    frames = decode(path)
     with tempfile.TemporaryDirectory() as tmp:
         model = build_fake_tapir(Path(tmp) / "m", resolution=256, n_points="N", c1=256, c2=128, state=(4, 12, 2560))
-        tracker = TapirOnnxTracker(model)
         nf = min(len(frames), 60)
-        r = tracker.track(ArraySource(frames[:nf]), truth[:, 0])
-        i = r.info
+        i = TapirOnnxTracker(model).track(ArraySource(frames[:nf]), truth[:, 0]).info
         print(f"TAPIR ONNX runner (fake network, R=256, N={truth.shape[0]}, state 4x12xNx2x2560): "
               f"total {1000 * i['time_total_s'] / nf:.2f} ms/frame, inside session.run "
               f"{1000 * i['time_network_s'] / nf:.2f} ms/frame, overhead outside the network "
               f"{i['overhead_ms_per_frame']:.2f} ms/frame")
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=120, help="frames of the speed clip")
+    ap.add_argument("--repeat", type=int, default=5, help="timings per tracker (best is reported)")
+    ap.add_argument("--clips", default="0:600,1:400,2:600,3:600,4:600", help="accuracy clips SEED:FRAMES,...")
+    ap.add_argument("--baseline", default="7f3b223", help="git revision of rce_gtsam/track/lk.py to compare with")
+    ap.add_argument("--cache", type=Path, default=Path(tempfile.gettempdir()) / "rce_track_clips")
+    ap.add_argument("--cv-threads", type=int, default=None, help="cv2.setNumThreads before timing")
+    ap.add_argument("--no-accuracy", action="store_true")
+    ap.add_argument("--no-tapir", action="store_true")
+    args = ap.parse_args()
+    if args.cv_threads is not None:
+        cv2.setNumThreads(args.cv_threads)
+    clips = [tuple(int(v) for v in c.split(":")) for c in args.clips.split(",") if c]
+    args.cache.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        trackers = {"baseline": baseline_tracker(args.baseline, Path(tmp)), "current": LKTracker}
+        print(f"baseline: rce_gtsam/track/lk.py at {args.baseline}; current: the working tree")
+        speed(trackers, args.cache, args.frames, args.repeat)
+        if not args.no_accuracy:
+            accuracy(trackers, args.cache, clips)
+    if not args.no_tapir:
+        tapir(args.cache, args.frames)
 
 
 if __name__ == "__main__":

@@ -116,12 +116,34 @@ What hurts is compression: at x264 crf 28 the median is 0.19 px and 83 % of poin
 (clean crf 16: 0.07 px, 88 %), at crf 34 0.34 px and 52 %; the thin distal stem's texture is quantised
 away, and the tracker marks those nodes invisible rather than guess.
 
+Speed (``benchmarks/bench_track.py``, which runs this tracker and the one of revision 7f3b223 on the same
+frames in one process): most of the time went to numpy calls on small arrays, one node at a time, not to
+pixels. The weighted LK now gets every sum from matrix products (one (3, N) product per iteration instead
+of a dozen reductions), the frame-0 crop is only as large as the backward LK needs (the template plus the
+re-match radius) rather than the search window, rotation matrices are built directly, the segment search
+samples with float32 maps and no per-angle mean pass, and frames are decoded in a thread while the previous
+one is tracked (:func:`~rce_gtsam.track.sources.prefetched`; no gain measurable on the shared machine, where
+no core is idle: 27.9 vs 27.5 frames/s from the mp4, best of 6). Measured on the shared 2-core machine
+(120-frame seed-0 render, best of 5-7, two runs): 1.19-1.31x wall, 1.22-1.34x CPU time, far from the
+2.5x the issue asks for; on the 600-frame clips of seeds 0-4 (seed 1:
+400) median, largest visible error, visible share and Spearman of kappa equal the old tracker's at the
+README's precision (p99 0.69/1.69 -> 0.70/1.71 px on seeds 0/1, the rest equal). Tried and not kept (measured on the simulator clips):
+re-matching by LK alone without the correlation search in the refinement pass, deferring the first pass's
+forward-backward check to the refinement pass (the first moved the largest visible error on seed 0 from 1.6
+to 3.9 px, the second that on seed 1 from 7.8 to 8.5 px), and skipping the re-match when the re-measured rotations moved the template
+by less than 0.05 px (median error 0.038 -> 0.039 px, largest 4.2 -> 6.9 px on a 150-frame seed-2 clip: the
+re-match gains by re-centring the search crop on the match, not only by re-posing the template). Batching
+the refinement pass's LK over nodes saved only ~20 % of its CPU time (the arithmetic, not the per-call
+overhead, dominates at 20 nodes), not worth a second LK implementation.
+
 Limits: the template is rotated, not scaled (a branch that moves a lot toward the camera changes scale);
 a node hidden from frame 0 onwards cannot be tracked.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import math
 import time
 from collections.abc import Callable
@@ -133,7 +155,7 @@ import numpy as np
 from ..errors import InputError
 from ..graph import BranchGraph
 from .result import TrackResult
-from .sources import FrameSource
+from .sources import FrameSource, prefetched
 
 
 @dataclass(frozen=True)
@@ -219,10 +241,17 @@ def _parabola_peak(m: np.ndarray, u: int, v: int) -> tuple[float, float]:
     """Sub-pixel offset of a 2-D peak at column u, row v by separable parabola fits."""
     def fit(a, b, c):
         den = a - 2 * b + c
-        return 0.0 if den >= 0 else float(np.clip(0.5 * (a - c) / den, -0.5, 0.5))
-    du = fit(m[v, u - 1], m[v, u], m[v, u + 1]) if 0 < u < m.shape[1] - 1 else 0.0
-    dv = fit(m[v - 1, u], m[v, u], m[v + 1, u]) if 0 < v < m.shape[0] - 1 else 0.0
+        return 0.0 if den >= 0 else min(max(0.5 * (a - c) / den, -0.5), 0.5)
+    b = float(m[v, u])
+    du = fit(float(m[v, u - 1]), b, float(m[v, u + 1])) if 0 < u < m.shape[1] - 1 else 0.0
+    dv = fit(float(m[v - 1, u]), b, float(m[v + 1, u])) if 0 < v < m.shape[0] - 1 else 0.0
     return du, dv
+
+
+@functools.lru_cache(maxsize=64)
+def _grid(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column index grids (``np.ogrid``) of an array of ``shape``, built once per shape."""
+    return tuple(np.ogrid[:shape[0], :shape[1]])
 
 
 def _weighted_lk(tmpl, wts, img, start, iters: int = 20, eps: float = 0.01):
@@ -231,41 +260,72 @@ def _weighted_lk(tmpl, wts, img, start, iters: int = 20, eps: float = 0.01):
     Finds the position (x, y) in ``img`` (pixel centres at integers) whose neighbourhood best matches
     ``tmpl`` (odd-sized, centred) under per-pixel weights ``wts``, starting at ``start``. Returns
     ``(position, standard_error_px)`` -- the LK least-squares standard error
-    sqrt(weighted residual variance / lambda_min(weighted structure tensor)) -- or None if ill-posed.
+    sqrt(weighted residual variance / lambda_min(weighted structure tensor)) -- or None if ill-posed
+    (textureless template: weighted variance below 1e-3 grey levels^2, or a singular structure tensor).
+
+    Every weighted sum is a dot product with the flattened patch: one (3, N) @ (N,) product per iteration
+    gives the weighted mean of the patch and its projections on the weighted template gradients, and the
+    gain/bias-compensated residual enters only through them (sum w g e = gain * (sum w g p - mu_p sum w g)
+    - sum w g t0), so the residual image itself is formed once, at the end.
     """
-    t = tmpl.astype(np.float32)
-    w = wts.astype(np.float32)
-    wsum = float(w.sum())
-    mu_t = float((w * t).sum()) / wsum
-    t0 = t - mu_t
-    sd_t = math.sqrt(float((w * t0 * t0).sum()) / wsum) + 1e-6
-    gx = cv2.Sobel(t, cv2.CV_32F, 1, 0, ksize=3) / 8.0
-    gy = cv2.Sobel(t, cv2.CV_32F, 0, 1, ksize=3) / 8.0
-    hxx, hyy, hxy = float((w * gx * gx).sum()), float((w * gy * gy).sum()), float((w * gx * gy).sum())
+    t = np.ascontiguousarray(tmpl, dtype=np.float32)
+    n = t.size
+    # proj rows: w, w gx, w gy; cols: gx, gy, 1, t, t^2 -- one product gives every sum the set-up needs
+    cols = np.empty((n, 5))
+    cols[:, 0] = cv2.Sobel(t, cv2.CV_32F, 1, 0, ksize=3, scale=0.125).ravel()
+    cols[:, 1] = cv2.Sobel(t, cv2.CV_32F, 0, 1, ksize=3, scale=0.125).ravel()
+    cols[:, 2] = 1.0
+    cols[:, 3] = t.ravel()
+    np.multiply(cols[:, 3], cols[:, 3], out=cols[:, 4])
+    proj = np.empty((3, n))
+    proj[0] = np.asarray(wts, dtype=np.float64).ravel()
+    np.multiply(cols[:, :2].T, proj[0], out=proj[1:])
+    (_, _, wsum, swt, swtt), (hxx, hxy, gsum_x, gxt, _), (_, hyy, gsum_y, gyt, _) = (proj @ cols).tolist()
+    w = proj[0]
     det = hxx * hyy - hxy * hxy
     if det <= 1e-9:
         return None
-    pos = np.asarray(start, float).copy()
+    mu_t = swt / wsum
+    var_t = swtt / wsum - mu_t * mu_t
+    if var_t < 1e-3:
+        return None  # textureless template: nothing to match
+    sd_t = math.sqrt(var_t) + 1e-6
+    gt_x, gt_y = gxt - mu_t * gsum_x, gyt - mu_t * gsum_y  # sum w g (t - mu_t)
+    t0 = cols[:, 3] - mu_t
+    x0, y0 = float(start[0]), float(start[1])
+    x, y = x0, y0
     size = (t.shape[1], t.shape[0])
-    e = None
+    pf = mu_p = gain = None
     for _ in range(iters):
-        patch = cv2.getRectSubPix(img, size, (float(pos[0]), float(pos[1])))
-        mu_p = float((w * patch).sum()) / wsum
-        p0 = patch - mu_p
-        sd_p = math.sqrt(float((w * p0 * p0).sum()) / wsum) + 1e-6
-        e = p0 * (sd_t / sd_p) - t0  # residual after gain/bias compensation
-        bx, by = float((w * gx * e).sum()), float((w * gy * e).sum())
+        pf = cv2.getRectSubPix(img, size, (x, y)).ravel().astype(np.float64)
+        sw, sx, sy = (proj @ pf).tolist()
+        mu_p = sw / wsum
+        var_p = max(float(w @ (pf * pf)) / wsum - mu_p * mu_p, 0.0)
+        gain = sd_t / (math.sqrt(var_p) + 1e-6)
+        bx = gain * (sx - mu_p * gsum_x) - gt_x
+        by = gain * (sy - mu_p * gsum_y) - gt_y
         dx = (hyy * bx - hxy * by) / det
         dy = (hxx * by - hxy * bx) / det
-        pos -= (dx, dy)
-        if not np.isfinite(pos).all() or abs(pos[0] - start[0]) > t.shape[1] or abs(pos[1] - start[1]) > t.shape[0]:
+        x -= dx
+        y -= dy
+        if not (math.isfinite(x) and math.isfinite(y)) or abs(x - x0) > t.shape[1] or abs(y - y0) > t.shape[0]:
             return None
         if dx * dx + dy * dy < eps * eps:
             break
+    e = (pf - mu_p) * gain - t0  # residual after gain/bias compensation, at the last patch sampled
     lam_min = 0.5 * (hxx + hyy - math.sqrt((hxx - hyy) ** 2 + 4 * hxy * hxy))
-    res_var = float((w * e * e).sum()) / wsum
+    res_var = float(w @ (e * e)) / wsum
     s_lk = math.sqrt(res_var / max(lam_min, 1e-9))
-    return pos, s_lk
+    return np.array([x, y]), s_lk
+
+
+def _rotation_about(cx: float, cy: float, theta: float, dx: float, dy: float) -> np.ndarray:
+    """2x3 affine matrix: rotation by ``theta`` (radians, image frame) about (cx, cy), then a shift (dx, dy) px.
+
+    ``cv2.getRotationMatrix2D((cx, cy), -degrees(theta), 1)`` with (dx, dy) added to its last column.
+    """
+    a, b = math.cos(theta), -math.sin(theta)
+    return np.array([[a, b, (1 - a) * cx - b * cy + dx], [-b, a, b * cx + (1 - a) * cy + dy]])
 
 
 def _turn(a, b, a0, b0) -> float:
@@ -452,22 +512,25 @@ class LKTracker:
         phis = phi_prev + np.arange(-span, span + step / 2, step)
         a0 = math.atan2(q0[c][1] - q0[p][1], q0[c][0] - q0[p][0])
         ang = a0 + phis
-        ex, ey = np.cos(ang), np.sin(ang)  # (A,)
-        # sample positions (A, V, U)
-        mx = xp[0] + uu[None, None, :] * ex[:, None, None] - vv[None, :, None] * ey[:, None, None]
-        my = xp[1] + uu[None, None, :] * ey[:, None, None] + vv[None, :, None] * ex[:, None, None]
+        ex, ey = np.cos(ang).astype(np.float32), np.sin(ang).astype(np.float32)  # (A,)
+        # sample positions (A * V, U): rows are (angle, across-offset) pairs
         A, V, U = len(phis), len(vv), len(uu)
-        smp = cv2.remap(gray, mx.reshape(A * V, U).astype(np.float32), my.reshape(A * V, U).astype(np.float32),
-                        cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(A, V * U).astype(np.float32)
-        smp -= smp.mean(axis=1, keepdims=True)
-        nrm = np.sqrt((smp * smp).sum(axis=1)) + 1e-6
+        mx = (np.multiply.outer(ex, uu)[:, None, :] - np.multiply.outer(ey, vv)[:, :, None]).reshape(A * V, U)
+        my = (np.multiply.outer(ey, uu)[:, None, :] + np.multiply.outer(ex, vv)[:, :, None]).reshape(A * V, U)
+        mx += np.float32(xp[0])
+        my += np.float32(xp[1])
+        smp = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(A, V * U)
+        smp = smp.astype(np.float32) - np.float32(128.0)  # centred near 0 so the sums below keep precision
+        # zero-mean NCC with the (zero-mean, unit-norm) strip: the sample's mean drops out of the numerator
+        s1 = smp.sum(axis=1)
+        nrm = np.sqrt(np.maximum(np.einsum("ij,ij->i", smp, smp) - s1 * s1 / smp.shape[1], 0.0)) + 1e-6
         ncc = (smp @ st0.ravel()) / nrm
         k = int(np.argmax(ncc))
         dk = 0.0
         if 0 < k < A - 1:
             a_, b_, c_ = ncc[k - 1], ncc[k], ncc[k + 1]
-            den = a_ - 2 * b_ + c_
-            dk = 0.0 if den >= 0 else float(np.clip(0.5 * (a_ - c_) / den, -0.5, 0.5))
+            den = float(a_ - 2 * b_ + c_)
+            dk = 0.0 if den >= 0 else min(max(0.5 * float(a_ - c_) / den, -0.5), 0.5)
         phi = float(phis[k] + dk * step)
         ct, sn = math.cos(phi), math.sin(phi)
         v0 = q0[c] - q0[p]
@@ -494,34 +557,35 @@ class LKTracker:
         return float(last[i])
 
     # -- measurement against frame 0 ------------------------------------------------------------
-    def _anchor(self, gray0, gray, i, p0, q, theta, r, seg_theta=None):
-        """Locate node i (frame-0 position p0) near q in ``gray``; returns (xy, ncc, fb, sigma) or None.
+    def _template(self, gray0, i, p0, theta, r, seg_theta=None):
+        """Frame-0 appearance of node i posed for this frame: ``(crop, tmpl, wts)``.
 
-        ``seg_theta`` maps each segment (p, c) incident to node i to its rotation (radians) since frame 0.
-        With branch bands, the template is *articulated*: each incident segment's band of the frame-0 image is
-        rotated about the node by that segment's own rotation (a node is a joint: the parent segment and the
-        child segments turn by different angles, and one rotation for the whole patch biases the match in
-        proportion to the bend). Otherwise the whole frame-0 patch is rotated by ``theta``.
+        ``crop`` is the (k, k) frame-0 neighbourhood (k = 2 (h + r) + 1, node at its centre), ``tmpl`` its
+        central (2h + 1) square and ``wts`` the template's per-pixel weights. ``seg_theta`` maps each segment
+        (p, c) incident to node i to its rotation (radians) since frame 0. With branch bands, the template is
+        *articulated*: each incident segment's band of the frame-0 image is rotated about the node by that
+        segment's own rotation (a node is a joint: the parent segment and the child segments turn by
+        different angles, and one rotation for the whole patch biases the match in proportion to the bend).
+        Otherwise the whole frame-0 patch is rotated by ``theta``.
         """
         h = self.h
         k = 2 * (h + r) + 1
         c = float(h + r)
-        cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1])))
         wts = None
+        px, py = float(p0[0]), float(p0[1])
         if self._band is not None and seg_theta:
             cs = float(3 * h)
-            acc = np.zeros((k, k), np.float32)
-            wacc = np.zeros((k, k), np.float32)
-            prev = None
+            acc = wacc = prev = None
             for (sp, sc), th in seg_theta.items():
-                m = cv2.getRotationMatrix2D((float(p0[0]), float(p0[1])), -math.degrees(th), 1.0)
-                m[:, 2] += (c - p0[0], c - p0[1])
-                img_k = cv2.warpAffine(gray0, m, (k, k), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-                mb = cv2.getRotationMatrix2D((cs, cs), -math.degrees(th), 1.0)
-                mb[:, 2] += (c - cs, c - cs)
-                w_k = cv2.warpAffine(self._seg_band[(sp, sc, i)], mb, (k, k), flags=cv2.INTER_LINEAR, borderValue=0)
-                acc += w_k * img_k
-                wacc += w_k
+                img_k = cv2.warpAffine(gray0, _rotation_about(px, py, th, c - px, c - py), (k, k),
+                                       flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+                w_k = cv2.warpAffine(self._seg_band[(sp, sc, i)], _rotation_about(cs, cs, th, c - cs, c - cs), (k, k),
+                                     flags=cv2.INTER_LINEAR, borderValue=0)
+                if acc is None:
+                    acc, wacc = w_k * img_k, w_k
+                else:
+                    acc += w_k * img_k
+                    wacc = wacc + w_k
                 if prev is None or sc == i:  # outside every band: the parent-side warp (background)
                     prev = img_k
             inside = wacc > 1e-3
@@ -532,24 +596,33 @@ class LKTracker:
             if float(wts.sum()) < (_TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * h + 1)):
                 wts = None
         else:
-            m = cv2.getRotationMatrix2D((float(p0[0]), float(p0[1])), -math.degrees(theta), 1.0)
-            m[:, 2] += (c - p0[0], c - p0[1])
-            prev = cv2.warpAffine(gray0, m, (k, k), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            prev = prev.astype(np.float32)
+            prev = cv2.warpAffine(gray0, _rotation_about(px, py, theta, c - px, c - py), (k, k),
+                                  flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
         tmpl = np.ascontiguousarray(prev[r:r + 2 * h + 1, r:r + 2 * h + 1])
-        cur = cur.astype(np.float32)
         if wts is None:
             wts = np.ones_like(tmpl)
-        wsum = float(wts.sum())
-        mu_t = float((wts * tmpl).sum()) / wsum
-        if float((wts * (tmpl - mu_t) ** 2).sum()) / wsum < 1e-3:
-            return None  # textureless template: nothing to match
+        return prev, tmpl, wts
+
+    def _anchor(self, gray0, gray, i, p0, q, theta, r, seg_theta=None):
+        """Locate node i (frame-0 position p0) near q in ``gray`` within r px (see ``_template``).
+
+        Returns (xy, ncc, fb, sigma, second-peak ncc, template weight sum, second-peak xy) or None.
+        """
+        h = self.h
+        k = 2 * (h + r) + 1
+        c = float(h + r)
+        # the frame-0 crop is only searched by the backward LK, which starts at its centre: a margin of
+        # ``_rematch_radius`` px around the template suffices, whatever the search radius r in this frame
+        margin = self._rematch_radius()
+        prev, tmpl, wts = self._template(gray0, i, p0, theta, margin, seg_theta)
+        cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1]))).astype(np.float32)
         res = cv2.matchTemplate(cur, tmpl, cv2.TM_CCOEFF_NORMED, mask=wts)
-        res = np.nan_to_num(res, nan=-1.0, posinf=-1.0, neginf=-1.0)
+        if not np.isfinite(res).all():
+            res = np.nan_to_num(res, nan=-1.0, posinf=-1.0, neginf=-1.0)
         _, score, _, (u, v) = cv2.minMaxLoc(res)
         # best correlation away from the peak (outside a disc of radius h/2, the width of one match's
         # correlation peak): a second knot of a self-similar stem shows up here
-        yy, xx = np.ogrid[:res.shape[0], :res.shape[1]]
+        yy, xx = _grid(res.shape)
         far = (xx - u) ** 2 + (yy - v) ** 2 > (h / 2.0) ** 2
         second, xy2 = -1.0, None
         if far.any():
@@ -562,12 +635,20 @@ class LKTracker:
         if fwd is None or float(np.hypot(*(fwd[0] - guess))) > 2.0:
             return None
         loc, s_lk = fwd
-        # backward: the matched patch (same weights) searched for in the frame-0 crop
+        fb = self._fb_error(cur, loc, tmpl, wts, prev, float(h + margin))
+        xy = np.asarray(q, float) + (loc - c)
+        return xy, float(score), fb, s_lk, second, float(wts.sum()), xy2
+
+    def _rematch_radius(self) -> int:
+        """Radius (px) of the refinement pass's re-match: max(2, h // 4) (the first pass is within a pixel)."""
+        return max(2, self.h // 4)
+
+    @staticmethod
+    def _fb_error(cur, loc, tmpl, wts, prev, c) -> float:
+        """Forward-backward error (px): the matched patch (same weights) searched for in the frame-0 crop."""
         back_t = cv2.getRectSubPix(cur, tmpl.shape[::-1], (float(loc[0]), float(loc[1])))
         bwd = _weighted_lk(back_t, wts, prev, np.array([c, c]))
-        fb = math.inf if bwd is None else float(np.hypot(*(bwd[0] - c)))
-        xy = np.asarray(q, float) + (loc - c)
-        return xy, float(score), fb, s_lk, second, wsum, xy2
+        return math.inf if bwd is None else float(np.hypot(*(bwd[0] - c)))
 
     def _refine(self, gray0, gray, q0, est, vis, sig, fb_max, pred=None, counts=None, borrowed=None):
         """Second pass: re-match every visible node with segment rotations from this frame's matches.
@@ -583,7 +664,6 @@ class LKTracker:
         match itself implies does not fit there) is marked invisible at ``pred`` (its first-pass prediction).
         """
         cfg = self.config
-        rr = max(2, self.h // 4)
         rejected = []
         for i in self.order:
             if not vis[i]:
@@ -595,7 +675,7 @@ class LKTracker:
             for ch in self.children[i]:
                 seg_theta[(i, ch)] = (_turn(est[i], est[ch], q0[i], q0[ch]) if vis[ch]
                                       else seg_theta.get((p, i), 0.0))
-            m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, rr, seg_theta)
+            m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, self._rematch_radius(), seg_theta)
             if m is not None and m[1] >= cfg.min_ncc and m[2] <= fb_max:
                 xy, _, fb, s_lk = m[:4]
                 est[i] = xy
@@ -642,152 +722,154 @@ class LKTracker:
                   "rejected_refine": 0}
         t0 = time.perf_counter()
         n_done = 0
-        for frame in source:
-            if max_frames is not None and n_done >= max_frames:
-                break
-            img = frame.image
-            if img.ndim != 3 or img.shape[2] != 3:
-                raise InputError(src_name, f"frame {frame.index} is not an RGB image (shape {img.shape})")
-            gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
-            ga = self._anchor_image(gray)
-            if gray0 is None:
-                gray0 = ga
-                self.branch_halfwidth_px = None
-                self._band = self._branch_band(img, q0, graph)
-                hh, ww = gray.shape
-                out = (q0[:, 0] < -0.5) | (q0[:, 0] > ww - 0.5) | (q0[:, 1] < -0.5) | (q0[:, 1] > hh - 0.5)
-                if out.any():
-                    i = int(np.flatnonzero(out)[0])
-                    raise InputError(src_name, f"annotated point {i} {q0[i].tolist()} is outside the {ww}x{hh} frame",
-                                     f"point {i}")
-                sig = np.full(n, cfg.sigma_floor_px)
-            else:
-                prev_pts = est.astype(np.float32).reshape(-1, 1, 2)
-                f2f, st, _ = cv2.calcOpticalFlowPyrLK(prev_gray, gray, prev_pts, None, **lk_params)
-                back, st_b, _ = cv2.calcOpticalFlowPyrLK(gray, prev_gray, f2f, prev_pts.copy(),
-                                                         flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **lk_params)
-                fb_f2f = np.hypot(*(back - prev_pts).reshape(-1, 2).T)
-                f2f_ok = (st.ravel() == 1) & (st_b.ravel() == 1) & (fb_f2f < fb_max) & np.isfinite(f2f.reshape(-1, 2)).all(1)
-                f2f = f2f.reshape(-1, 2).astype(float)
-                prev_est, prev_vis = est.copy(), vis.copy()
-                new_est, new_vis, sig = prev_est.copy(), np.zeros(n, bool), np.zeros(n)
-                done = np.zeros(n, bool)
-                theta_now = np.zeros(n)
-                preds = prev_est.copy()
-                wide = np.zeros(n, bool)  # searched in the wide window: template posed by a borrowed rotation
-                for i in self.order:
-                    # rotation from the latest estimates (this frame's where already done)
-                    cur_est = np.where(done[:, None], new_est, prev_est)
-                    cur_vis = np.where(done, new_vis, prev_vis)
-                    theta = self._rotation(i, cur_est, cur_vis, q0, theta_last, theta_now, done)
-                    theta_now[i] = theta
-                    p = self.parent[i]
-                    seg = None
-                    if p >= 0 and new_vis[p] and self._band is not None:
-                        # a node lost in the last frame has not been measured while the whole branch kept
-                        # swinging: its segment turned with the parent's (the bend changes slowly, the
-                        # sway does not), so search around the parent's rotation plus the last bend
-                        phi_prev = seg_rot[i] if prev_vis[i] else seg_rot[p] + bend_rot[i]
-                        seg = self._segment_search(ga, new_est[p], p, i, q0, phi_prev)
-                    if seg is not None and seg[2] >= cfg.min_ncc:
-                        pred, r = seg[0], h
-                        counts["predicted_from_segment"] += 1
-                    elif f2f_ok[i] and prev_vis[i]:
-                        pred, r = f2f[i], h
-                    elif p >= 0:
-                        ct, sn = math.cos(theta), math.sin(theta)
-                        v0 = q0[i] - q0[p]
-                        pred = new_est[p] + np.array([ct * v0[0] - sn * v0[1], sn * v0[0] + ct * v0[1]])
-                        r = 2 * h
-                        counts["predicted_from_graph"] += 1
-                    else:
-                        pred, r = (f2f[i] if f2f_ok[i] else prev_est[i]), 2 * h
-                    seg_theta = None
-                    if self._band is not None:
-                        xi = pred
-                        seg_theta = {}
-                        if p >= 0:
-                            seg_theta[(p, i)] = _turn(new_est[p], xi, q0[p], q0[i])
-                        for ch in self.children[i]:
-                            if f2f_ok[ch] and prev_vis[ch]:
-                                seg_theta[(i, ch)] = _turn(xi, f2f[ch], q0[i], q0[ch])
-                            else:  # child not followed: assume the branch continues straight
-                                seg_theta[(i, ch)] = seg_theta.get((p, i), theta)
-                    # a wide search (no frame-to-frame or segment prediction to trust) is a re-acquisition
-                    # whatever the previous frame said: the same ambiguity and geometry checks apply
-                    reacquiring = not prev_vis[i] or r > h
-                    preds[i], wide[i] = pred, r > h
-                    m = self._anchor(gray0, ga, i, q0[i], pred, theta, r, seg_theta)
-                    ok = m is not None
-                    if not ok:
-                        counts["lost_match"] += 1
-                    else:
-                        xy, score, fb, s_lk, second, n_eff, xy2 = m
-                        ambiguous = second > score - cfg.distinct_sigmas / math.sqrt(n_eff)
-                        if score < cfg.min_ncc:
-                            ok = False
-                            counts["rejected_ncc"] += 1
-                        elif cfg.distinct_reacquire and reacquiring and ambiguous:
-                            ok = False
-                            counts["rejected_ambiguous"] += 1
-                        elif (cfg.distinct_follow and ambiguous and xy2 is not None
-                              and np.hypot(*(xy2 - pred)) < np.hypot(*(xy - pred))):
-                            # followed (not re-acquired), two indistinguishable peaks, and the prediction
-                            # points at the other one: which of the two the node is would be a guess
-                            ok = False
-                            counts["rejected_ambiguous"] += 1
-                        elif fb > fb_max:
-                            ok = False
-                            counts["rejected_fb"] += 1
-                        elif p >= 0 and reacquiring and not new_vis[p]:
-                            # re-acquiring while the parent is lost too: nothing checks the match's
-                            # geometry (a tip re-found next to a leaf edge 18 px off, then followed
-                            # to 67 px, on simulator seed 0); wait until the parent is seen again
-                            ok = False
-                            counts["rejected_unanchored"] += 1
-                        elif p >= 0 and new_vis[p]:
-                            d = float(np.hypot(*(xy - new_est[p])))
-                            l0 = self.rest_len[i]
-                            if d > (1 + cfg.max_stretch) * l0 + cfg.length_tol_px or d < cfg.min_length_fraction * l0 - cfg.length_tol_px:
+        # the next frames decode in a thread (GIL released) while this one is tracked; closed on any exit
+        with contextlib.closing(prefetched(source)) as frames:
+            for frame in frames:
+                if max_frames is not None and n_done >= max_frames:
+                    break
+                img = frame.image
+                if img.ndim != 3 or img.shape[2] != 3:
+                    raise InputError(src_name, f"frame {frame.index} is not an RGB image (shape {img.shape})")
+                gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+                ga = self._anchor_image(gray)
+                if gray0 is None:
+                    gray0 = ga
+                    self.branch_halfwidth_px = None
+                    self._band = self._branch_band(img, q0, graph)
+                    hh, ww = gray.shape
+                    out = (q0[:, 0] < -0.5) | (q0[:, 0] > ww - 0.5) | (q0[:, 1] < -0.5) | (q0[:, 1] > hh - 0.5)
+                    if out.any():
+                        i = int(np.flatnonzero(out)[0])
+                        raise InputError(src_name, f"annotated point {i} {q0[i].tolist()} is outside the {ww}x{hh} frame",
+                                         f"point {i}")
+                    sig = np.full(n, cfg.sigma_floor_px)
+                else:
+                    prev_pts = est.astype(np.float32).reshape(-1, 1, 2)
+                    f2f, st, _ = cv2.calcOpticalFlowPyrLK(prev_gray, gray, prev_pts, None, **lk_params)
+                    back, st_b, _ = cv2.calcOpticalFlowPyrLK(gray, prev_gray, f2f, prev_pts.copy(),
+                                                             flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **lk_params)
+                    fb_f2f = np.hypot(*(back - prev_pts).reshape(-1, 2).T)
+                    f2f_ok = (st.ravel() == 1) & (st_b.ravel() == 1) & (fb_f2f < fb_max) & np.isfinite(f2f.reshape(-1, 2)).all(1)
+                    f2f = f2f.reshape(-1, 2).astype(float)
+                    prev_est, prev_vis = est.copy(), vis.copy()
+                    new_est, new_vis, sig = prev_est.copy(), np.zeros(n, bool), np.zeros(n)
+                    done = np.zeros(n, bool)
+                    theta_now = np.zeros(n)
+                    preds = prev_est.copy()
+                    wide = np.zeros(n, bool)  # searched in the wide window: template posed by a borrowed rotation
+                    for i in self.order:
+                        # rotation from the latest estimates (this frame's where already done)
+                        cur_est = np.where(done[:, None], new_est, prev_est)
+                        cur_vis = np.where(done, new_vis, prev_vis)
+                        theta = self._rotation(i, cur_est, cur_vis, q0, theta_last, theta_now, done)
+                        theta_now[i] = theta
+                        p = self.parent[i]
+                        seg = None
+                        if p >= 0 and new_vis[p] and self._band is not None:
+                            # a node lost in the last frame has not been measured while the whole branch kept
+                            # swinging: its segment turned with the parent's (the bend changes slowly, the
+                            # sway does not), so search around the parent's rotation plus the last bend
+                            phi_prev = seg_rot[i] if prev_vis[i] else seg_rot[p] + bend_rot[i]
+                            seg = self._segment_search(ga, new_est[p], p, i, q0, phi_prev)
+                        if seg is not None and seg[2] >= cfg.min_ncc:
+                            pred, r = seg[0], h
+                            counts["predicted_from_segment"] += 1
+                        elif f2f_ok[i] and prev_vis[i]:
+                            pred, r = f2f[i], h
+                        elif p >= 0:
+                            ct, sn = math.cos(theta), math.sin(theta)
+                            v0 = q0[i] - q0[p]
+                            pred = new_est[p] + np.array([ct * v0[0] - sn * v0[1], sn * v0[0] + ct * v0[1]])
+                            r = 2 * h
+                            counts["predicted_from_graph"] += 1
+                        else:
+                            pred, r = (f2f[i] if f2f_ok[i] else prev_est[i]), 2 * h
+                        seg_theta = None
+                        if self._band is not None:
+                            xi = pred
+                            seg_theta = {}
+                            if p >= 0:
+                                seg_theta[(p, i)] = _turn(new_est[p], xi, q0[p], q0[i])
+                            for ch in self.children[i]:
+                                if f2f_ok[ch] and prev_vis[ch]:
+                                    seg_theta[(i, ch)] = _turn(xi, f2f[ch], q0[i], q0[ch])
+                                else:  # child not followed: assume the branch continues straight
+                                    seg_theta[(i, ch)] = seg_theta.get((p, i), theta)
+                        # a wide search (no frame-to-frame or segment prediction to trust) is a re-acquisition
+                        # whatever the previous frame said: the same ambiguity and geometry checks apply
+                        reacquiring = not prev_vis[i] or r > h
+                        preds[i], wide[i] = pred, r > h
+                        m = self._anchor(gray0, ga, i, q0[i], pred, theta, r, seg_theta)
+                        ok = m is not None
+                        if not ok:
+                            counts["lost_match"] += 1
+                        else:
+                            xy, score, fb, s_lk, second, n_eff, xy2 = m
+                            ambiguous = second > score - cfg.distinct_sigmas / math.sqrt(n_eff)
+                            if score < cfg.min_ncc:
                                 ok = False
-                                counts["rejected_length"] += 1
-                    if ok:
-                        new_est[i], new_vis[i] = xy, True
-                        if p >= 0:
-                            seg_rot[i] = _turn(new_est[p], xy, q0[p], q0[i])
-                            if new_vis[p]:
-                                bend_rot[i] = seg_rot[i] - seg_rot[p]
-                        sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
-                        counts["anchored"] += 1
-                    elif (cfg.segment_fallback and seg is not None and seg[2] >= cfg.min_segment_ncc
-                          ):
-                        # the node's own patch failed (a leaf over the joint, a template spoiled by a leaf in
-                        # frame 0) but its whole segment matched well, hinged at a measured parent: the node is
-                        # where the rigid segment puts it. sigma: the half-pixel angular search step at the
-                        # child on top of the parent's own uncertainty.
-                        new_est[i], new_vis[i] = seg[0], True
-                        sig[i] = math.sqrt(sig[p] ** 2 + 0.5 ** 2)
-                        seg_rot[i] = seg[1]
-                        counts["from_segment"] += 1
-                    else:
-                        new_est[i], new_vis[i], sig[i] = pred, False, float(r)
-                        counts["invisible"] += 1
-                    done[i] = True
-                if self._band is not None and cfg.refine_pass:
-                    self._refine(gray0, ga, q0, new_est, new_vis, sig, fb_max, preds, counts, wide)
-                hh, ww = gray.shape
-                new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
-                new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)
-                est, vis = new_est, new_vis
-            prev_gray = gray
-            xs.append(est.copy())
-            vis_all.append(vis.copy())
-            sig_all.append(np.maximum(sig, cfg.sigma_floor_px))
-            n_done += 1
-            if progress is not None:
-                progress(1)
-            if on_frame is not None:
-                on_frame(n_done - 1, est.copy(), vis.copy())
+                                counts["rejected_ncc"] += 1
+                            elif cfg.distinct_reacquire and reacquiring and ambiguous:
+                                ok = False
+                                counts["rejected_ambiguous"] += 1
+                            elif (cfg.distinct_follow and ambiguous and xy2 is not None
+                                  and np.hypot(*(xy2 - pred)) < np.hypot(*(xy - pred))):
+                                # followed (not re-acquired), two indistinguishable peaks, and the prediction
+                                # points at the other one: which of the two the node is would be a guess
+                                ok = False
+                                counts["rejected_ambiguous"] += 1
+                            elif fb > fb_max:
+                                ok = False
+                                counts["rejected_fb"] += 1
+                            elif p >= 0 and reacquiring and not new_vis[p]:
+                                # re-acquiring while the parent is lost too: nothing checks the match's
+                                # geometry (a tip re-found next to a leaf edge 18 px off, then followed
+                                # to 67 px, on simulator seed 0); wait until the parent is seen again
+                                ok = False
+                                counts["rejected_unanchored"] += 1
+                            elif p >= 0 and new_vis[p]:
+                                d = float(np.hypot(*(xy - new_est[p])))
+                                l0 = self.rest_len[i]
+                                if d > (1 + cfg.max_stretch) * l0 + cfg.length_tol_px or d < cfg.min_length_fraction * l0 - cfg.length_tol_px:
+                                    ok = False
+                                    counts["rejected_length"] += 1
+                        if ok:
+                            new_est[i], new_vis[i] = xy, True
+                            if p >= 0:
+                                seg_rot[i] = _turn(new_est[p], xy, q0[p], q0[i])
+                                if new_vis[p]:
+                                    bend_rot[i] = seg_rot[i] - seg_rot[p]
+                            sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
+                            counts["anchored"] += 1
+                        elif (cfg.segment_fallback and seg is not None and seg[2] >= cfg.min_segment_ncc
+                              ):
+                            # the node's own patch failed (a leaf over the joint, a template spoiled by a leaf in
+                            # frame 0) but its whole segment matched well, hinged at a measured parent: the node is
+                            # where the rigid segment puts it. sigma: the half-pixel angular search step at the
+                            # child on top of the parent's own uncertainty.
+                            new_est[i], new_vis[i] = seg[0], True
+                            sig[i] = math.sqrt(sig[p] ** 2 + 0.5 ** 2)
+                            seg_rot[i] = seg[1]
+                            counts["from_segment"] += 1
+                        else:
+                            new_est[i], new_vis[i], sig[i] = pred, False, float(r)
+                            counts["invisible"] += 1
+                        done[i] = True
+                    if self._band is not None and cfg.refine_pass:
+                        self._refine(gray0, ga, q0, new_est, new_vis, sig, fb_max, preds, counts, wide)
+                    hh, ww = gray.shape
+                    new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
+                    new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)
+                    est, vis = new_est, new_vis
+                prev_gray = gray
+                xs.append(est.copy())
+                vis_all.append(vis.copy())
+                sig_all.append(np.maximum(sig, cfg.sigma_floor_px))
+                n_done += 1
+                if progress is not None:
+                    progress(1)
+                if on_frame is not None:
+                    on_frame(n_done - 1, est.copy(), vis.copy())
         if n_done == 0:
             raise InputError(src_name, "the video has no frames")
         info = {"tracker": "lk-anchored", "patch_radius_px": h, "branch_halfwidth_px": self.branch_halfwidth_px, "frames": n_done,

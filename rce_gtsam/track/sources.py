@@ -8,15 +8,17 @@ time, so a long video is never held in memory. Images are ``(H, W, 3)`` ``uint8`
   librealsense >= 2.58) recordings, colour stream, played back *not* in real time so no frame is dropped.
 * :class:`ArraySource` -- frames already in memory (tests, notebooks).
 
-:func:`open_video` picks the right one from the file suffix.
+:func:`open_video` picks the right one from the file suffix; :func:`prefetched` decodes ahead in a thread.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import queue
+import threading
 from abc import ABC, abstractmethod
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -107,6 +109,53 @@ def quiet_stderr():
     finally:
         os.dup2(saved, 2)
         os.close(saved)
+
+
+def prefetched(frames: Iterable[Frame], depth: int = 8) -> Iterator[Frame]:
+    """Iterate ``frames`` while a background thread decodes up to ``depth`` frames ahead.
+
+    Decoding (``cv2.VideoCapture.read``, the colour conversion, PyAV) releases the GIL, so the next frames are
+    decoded while the caller works on this one, and at most ``depth`` decoded frames are held (the video stays
+    streamed). An exception raised by the source is raised here, after the frames before it; when the caller
+    stops early, the thread stops after the frame it is decoding.
+    """
+    if depth < 1:
+        raise ValueError(f"prefetch depth must be >= 1, got {depth}")
+    buf: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+    end = object()
+
+    def put(item) -> bool:
+        while not stop.is_set():
+            try:
+                buf.put(item, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def decode() -> None:
+        try:
+            for fr in frames:
+                if not put(fr):
+                    return
+            put(end)
+        except BaseException as exc:  # noqa: BLE001 - handed to the consumer, which raises it
+            put(exc)
+
+    worker = threading.Thread(target=decode, name="frame-prefetch", daemon=True)
+    worker.start()
+    try:
+        while True:
+            item = buf.get()
+            if item is end:
+                return
+            if isinstance(item, BaseException):
+                raise item
+            yield item
+    finally:
+        stop.set()
+        worker.join()
 
 
 class VideoFileSource(FrameSource):
