@@ -233,8 +233,7 @@ DEFAULT = Preset(
     smoother=SmootherConfig(presmooth_window=1, velocity_weight=0.0, acceleration_weight=20.0,
                             edge_weight=0.0),
     bending=BendingConfig(signed=True, rest="median"),
-    compliance=ComplianceConfig(response="signed", shrinkage="precision", weighted=True, bootstrap="phase",
-                                time_split_blocks=4),
+    compliance=ComplianceConfig(response="signed", shrinkage="precision", weighted=True, bootstrap="phase"),
 )
 
 PRESETS: dict[str, Preset] = {p.name: p for p in (PAPER, DEFAULT)}
