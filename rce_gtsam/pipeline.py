@@ -165,6 +165,10 @@ def build_response(bending: BendingResult, geometry: Geometry, preset: Preset) -
                     frames=frames)
 
 
+#: The steps :func:`analyze` reports to its ``progress`` callback, in order.
+ANALYSIS_STEPS = ("load", "smooth", "bending", "fit", "bootstrap")
+
+
 @dataclass(frozen=True, eq=False)
 class AnalysisResult:
     """Everything one analysis computed; :mod:`rce_gtsam.results` turns it into tables and files."""
@@ -217,7 +221,8 @@ class AnalysisResult:
 
 
 def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset: str | Preset = "default",
-            seed: int | None = None, n_boot: int | None = None, effects: tuple[str, ...] | str = ()) -> AnalysisResult:
+            seed: int | None = None, n_boot: int | None = None, effects: tuple[str, ...] | str = (),
+            progress=None) -> AnalysisResult:
     """Run the whole analysis on saved tracks.
 
     ``tracks`` and ``graph`` may be objects or file paths. ``seed`` and ``n_boot`` override the preset's
@@ -225,11 +230,15 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     ``dynamics``, ``second_mode``, ``offset``, ``nonlinear``; a tuple or ``"a,b"``) to add to the rank-1
     model; kappa and its bootstrap CIs then come from the extended model
     (:mod:`rce_gtsam.extended_fit`). An unknown name is an :class:`~rce_gtsam.errors.InputError`.
+    ``progress``: optional callable ``progress(step)`` called as each of :data:`ANALYSIS_STEPS` starts
+    (the CLI's progress bar).
     """
+    step = progress or (lambda _name: None)
     from .diagnosis_io import parse_effect_names
     effects = parse_effect_names(effects, source="effects") or ()
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    step("load")
     inputs = {}
     if not isinstance(graph, BranchGraph):
         inputs["graph"] = str(graph)
@@ -248,10 +257,12 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     timings["load"] = time.perf_counter() - t0
 
     t = time.perf_counter()
+    step("smooth")
     smoothed = smooth_tracks(tracks, graph, preset.smoother)
     timings["smooth"] = time.perf_counter() - t
 
     t = time.perf_counter()
+    step("bending")
     xy = observed_positions(smoothed)
     raw_xy = smoothed.presmoothed.xy
     geometry = compute_geometry(xy, tracks.node_ids, graph, rest=preset.bending.rest)
@@ -264,6 +275,7 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     timings["bending"] = time.perf_counter() - t
 
     t = time.perf_counter()
+    step("fit")
     weights = response.weights if preset.compliance.weighted else None
     precision = None
     if preset.compliance.correlated:
@@ -280,6 +292,7 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
         fit = fit_rank1(response.Y, preset.compliance, weights, precision)
     timings["fit"] = time.perf_counter() - t
     t = time.perf_counter()
+    step("bootstrap")
     if effects:
         ci, boot_info = bootstrap_extended(fit, preset.compliance)
     else:

@@ -19,9 +19,7 @@ The folder is written through a temporary sibling directory, so a failure leaves
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import tempfile
 from dataclasses import asdict
 from pathlib import Path
 
@@ -29,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 from . import __version__
+from .fileio import publish, temp_dir_beside
 from .jsonutil import jsonable as _jsonable
 
 
@@ -133,8 +132,7 @@ def write_outputs(result, out_dir: str | Path, extra_writers=()) -> dict[str, Pa
     that run inside the same temporary folder.
     """
     out_dir = Path(out_dir)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    tmp = temp_dir_beside(out_dir)
     try:
         tables = {"compliance_summary.csv": compliance_summary(result),
                   "excitation.csv": excitation_table(result),
@@ -145,16 +143,8 @@ def write_outputs(result, out_dir: str | Path, extra_writers=()) -> dict[str, Pa
         (tmp / "report.json").write_text(json.dumps(report_dict(result), indent=2) + "\n")
         for writer in extra_writers:
             writer(result, tmp)
-        written = sorted(p.relative_to(tmp) for p in tmp.rglob("*") if p.is_file())
-        if not out_dir.exists():
-            os.replace(tmp, out_dir)
-        else:
-            for rel in written:
-                dest = out_dir / rel
-                dest.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(tmp / rel, dest)
-            shutil.rmtree(tmp, ignore_errors=True)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    written = publish(tmp, out_dir)
     return {str(rel): out_dir / rel for rel in written}

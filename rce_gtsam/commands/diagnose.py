@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import shutil
-import tempfile
 from pathlib import Path
 
 from .preset_args import add_preset_arguments, preset_from_args
@@ -62,16 +61,14 @@ def run(args: argparse.Namespace) -> int:
 
 def _write_figures_atomic(result, view, out_dir: Path) -> None:
     """Analysis + diagnosis figures into ``out_dir`` through a temporary sibling folder."""
+    from ..fileio import publish, temp_dir_beside
     from ..viz.figures import write_figures
 
-    out_dir = Path(out_dir)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    tmp = temp_dir_beside(out_dir)
     try:
-        written = write_figures(result, tmp, diagnosis=view)
-        out_dir.mkdir(exist_ok=True)
-        for name in written:
-            (tmp / name).replace(out_dir / name)
-    finally:
+        write_figures(result, tmp, diagnosis=view)
+    except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    publish(tmp, out_dir)
 
