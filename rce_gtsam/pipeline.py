@@ -222,7 +222,7 @@ class AnalysisResult:
 
 def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset: str | Preset = "default",
             seed: int | None = None, n_boot: int | None = None, effects: tuple[str, ...] | str = (),
-            progress=None) -> AnalysisResult:
+            progress=None, before_bootstrap=None) -> AnalysisResult:
     """Run the whole analysis on saved tracks.
 
     ``tracks`` and ``graph`` may be objects or file paths. ``seed`` and ``n_boot`` override the preset's
@@ -231,7 +231,8 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     model; kappa and its bootstrap CIs then come from the extended model
     (:mod:`rce_gtsam.extended_fit`). An unknown name is an :class:`~rce_gtsam.errors.InputError`.
     ``progress``: optional callable ``progress(step)`` called as each of :data:`ANALYSIS_STEPS` starts
-    (the CLI's progress bar).
+    (the CLI's progress bar). ``before_bootstrap``: optional callable given the result without CIs
+    (``ci=None``) just before the bootstrap starts (the CLI draws the figures that need no CI meanwhile).
     """
     step = progress or (lambda _name: None)
     from .diagnosis_io import parse_effect_names
@@ -291,6 +292,11 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     else:
         fit = fit_rank1(response.Y, preset.compliance, weights, precision)
     timings["fit"] = time.perf_counter() - t
+    if before_bootstrap is not None:
+        before_bootstrap(AnalysisResult(graph=graph, tracks=tracks, preset=preset, smoothed=smoothed,
+                                        geometry=geometry, bending=bending, raw_bending=raw_bending,
+                                        response=response, fit=fit, ci=None, smoothing=smoothing,
+                                        timings_s=dict(timings), inputs=dict(inputs), effects=tuple(effects)))
     t = time.perf_counter()
     step("bootstrap")
     if effects:
