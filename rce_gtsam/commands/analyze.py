@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from .preset_args import add_preset_arguments, preset_from_args
+from .progress import add_quiet_argument
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -14,7 +15,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "joint and fit the rank-1 relative-compliance model with bootstrap CIs.")
     p.add_argument("tracks", type=Path, help="tracks CSV: point_id,frame,x,y[,visible,sigma_px] (pixels)")
     p.add_argument("graph", type=Path, help='branch graph JSON: {"root": id, "edges": [[parent, child], ...]}')
-    p.add_argument("--out", type=Path, required=True, help="output folder (created; existing files replaced)")
+    p.add_argument("--out", type=Path, required=True, help="output folder (created; the files this command writes are replaced, others left alone)")
     add_preset_arguments(p)
     p.add_argument("--seed", type=int, default=None,
                    help="seed of every random step of this command: kappa's bootstrap resamples and the "
@@ -31,27 +32,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def add_quiet_argument(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--quiet", "-q", action="store_true",
-                   help="no progress bars on stderr (they are drawn only when stderr is a terminal)")
-
-
-def extra_writers(args: argparse.Namespace, video=None, diagnosis=None) -> list:
-    """Figure and overlay writers for ``AnalysisResult.write`` (none with ``--no-figures``)."""
-    writers = []
-    if not getattr(args, "no_figures", False):
-        from ..viz.figures import write_figures  # a broken install must fail here, not silently skip figures
-        from ..viz.overlays import write_overlays
-
-        def figures(result, tmp):
-            out = dict(write_figures(result, tmp / "figures", diagnosis=diagnosis))
-            out.update(write_overlays(result, tmp / "figures", first_frame=_first_frame(video)))
-            return out
-        writers.append(figures)
-    return writers
-
-
-def _first_frame(video):
+def first_video_frame(video):
+    """The first frame of ``video`` (RGB array) for the overlays, or None without a video."""
     if video is None:
         return None
     from ..track import open_video
@@ -123,9 +105,10 @@ class FiguresInBackground:
     """The analysis figures drawn by a :class:`~.figure_worker.FigureWorker`: those that need no CI while
     the bootstrap runs, the rest right after it, collected into the output's ``figures/``."""
 
-    def __init__(self, worker):
+    def __init__(self, worker, first_frame=None):
         import tempfile
         self.worker = worker
+        self.first_frame = first_frame
         self.dir = Path(tempfile.mkdtemp(prefix="rce_figures_"))  # scratch: files are moved out of it
 
     def before_bootstrap(self, partial) -> None:
@@ -134,13 +117,19 @@ class FiguresInBackground:
         from .figure_worker import draw_analysis_figures
         self.worker.submit(draw_analysis_figures, partial, self.dir,
                            [n for n in FIGURE_FILES if n not in CI_FIGURES],
-                           [n for n in OVERLAY_FILES if n not in CI_OVERLAYS])
+                           [n for n in OVERLAY_FILES if n not in CI_OVERLAYS], self.first_frame)
 
     def after_bootstrap(self, result) -> None:
         from ..viz.figures import CI_FIGURES
         from ..viz.overlays import CI_OVERLAYS
         from .figure_worker import draw_analysis_figures
-        self.worker.submit(draw_analysis_figures, result, self.dir, list(CI_FIGURES), list(CI_OVERLAYS))
+        self.worker.submit(draw_analysis_figures, result, self.dir, list(CI_FIGURES), list(CI_OVERLAYS),
+                           self.first_frame)
+
+    def diagnosis(self, view, result) -> None:
+        """Also draw the diagnosis figures (``view``: :func:`~rce_gtsam.diagnosis_io.diagnosis_for_viz`)."""
+        from ..viz.figures import write_diagnosis_figures
+        self.worker.submit(write_diagnosis_figures, view, self.dir, result)
 
     def writer(self, bar):
         def collect(_result, tmp: Path) -> dict:
@@ -149,7 +138,7 @@ class FiguresInBackground:
             try:
                 drawn = {}
                 for out in self.worker.results():
-                    drawn.update(out)
+                    drawn.update({str(k): str(v) for k, v in out.items()})
                 (tmp / "figures").mkdir(exist_ok=True)
                 for name in drawn:
                     shutil.move(str(self.dir / name), tmp / "figures" / name)
@@ -184,7 +173,7 @@ def format_summary(result) -> str:
     tot = result.timings_s.get("total", float("nan"))
     waited = " wall, from the command's start" if "imports" in result.timings_s else ""
     lines.append(f"\ntotal {tot:.2f} s{waited} (" + ", ".join(f"{k} {v:.2f}" for k, v in result.timings_s.items()
-                                                              if k not in ("total", "track")) + ")")
+                                                              if k != "total") + ")")
     return "\n".join(lines)
 
 

@@ -12,6 +12,7 @@ command prints is the time the user waited.
 
 from __future__ import annotations
 
+import argparse
 import os
 import sys
 import threading
@@ -32,6 +33,12 @@ def process_seconds() -> float:
         return max(uptime - start_ticks / os.sysconf("SC_CLK_TCK"), time.perf_counter() - _IMPORTED_AT)
     except (OSError, ValueError, IndexError):
         return time.perf_counter() - _IMPORTED_AT
+
+
+def add_quiet_argument(p: argparse.ArgumentParser, *aliases: str) -> None:
+    """``--quiet`` (and any older ``aliases`` such as ``--no-progress``): no progress bars."""
+    p.add_argument("--quiet", "-q", *aliases, action="store_true", dest="quiet",
+                   help="no progress bars on stderr (they are drawn only when stderr is a terminal)")
 
 
 def progress_enabled(quiet: bool) -> bool:

@@ -8,6 +8,8 @@ import time
 from pathlib import Path
 
 from .preset_args import add_preset_arguments, preset_from_args
+from .progress import add_quiet_argument
+from .wording import add_candidates_argument, candidates_from_args, cli_wording, cli_wording_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -18,31 +20,48 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("video", type=Path, help="video file (mp4/avi/...) or RealSense recording (.bag, .db3)")
     p.add_argument("annotations", type=Path, help='first-frame points JSON {"points": [[x, y], ...]} (pixels)')
     p.add_argument("graph", type=Path, help='branch graph JSON {"root": id, "edges": [[parent, child], ...]}')
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--out", type=Path, required=True,
+                   help="output folder (created; the files this command writes are replaced, others left alone)")
     p.add_argument("--model", type=Path, default=None, metavar="DIR_OR_ONNX",
                    help="TAPIR ONNX export (default: the OpenCV tracker)")
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="use only the first N frames")
     add_preset_arguments(p)
-    p.add_argument("--seed", type=int, default=None, help="bootstrap / cross-validation seed")
+    p.add_argument("--seed", type=int, default=None,
+                   help="seed of every random step of this command: kappa's bootstrap resamples, the motion "
+                        "figure's CIs and the diagnosis' cross-validation split (default: the preset's, 0)")
     p.add_argument("--bootstrap", type=int, default=None, metavar="N", help="bootstrap resamples")
-    p.add_argument("--effects", default=None, metavar="A,B",
-                   help="diagnosis candidates, comma-separated (default: delay,dynamics,second_mode,offset,"
-                        "nonlinear)")
+    add_candidates_argument(p, "run")
     p.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd", help="also save a Rerun recording")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_quiet_argument(p, "--no-progress")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..diagnosis_io import parse_effect_names
+    from .figure_worker import FigureWorker
+    from .progress import Steps, process_seconds, progress_enabled
+
+    worker = None if args.no_figures else FigureWorker()  # forks while this process is small
+    try:
+        return _run(args, worker, Steps, process_seconds, progress_enabled(args.quiet))
+    finally:
+        if worker:
+            worker.close()
+
+
+def _run(args, worker, Steps, process_seconds, show: bool) -> int:
+    import shutil
+    import tempfile
+
+    from ..diagnosis_io import diagnose_result, diagnosis_for_viz, diagnosis_json, parse_effect_names
     from ..graph import load_graph
-    from ..pipeline import analyze
+    from ..pipeline import ANALYSIS_STEPS, analyze
     from ..track import load_annotations, make_tracker, open_video
-    from ..tracks import tracks_from_table
+    from ..tracks import load_tracks
+    from .analyze import FiguresInBackground, first_video_frame, format_summary, record_wall_time, save_recording
     from .track import track_with_progress
 
-    args.effects = parse_effect_names(args.effects)  # fail on a bad name before tracking
+    candidates = parse_effect_names(candidates_from_args(args), source="--candidates")  # before tracking
     preset = preset_from_args(args)
     t0 = time.perf_counter()
     graph = load_graph(args.graph)
@@ -50,30 +69,52 @@ def run(args: argparse.Namespace) -> int:
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
         _check_graph_matches_points(graph, points, args)
-        tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress)
+        tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=show)
     t_track = time.perf_counter() - t0
-    table = tracked.to_frame()
-    tracks = tracks_from_table(table, graph, source=f"tracks of {args.video}")
-    result = analyze(tracks, graph, preset=preset, seed=args.seed, n_boot=args.bootstrap)
-    result.timings_s["track"] = t_track
-    result.inputs.update(video=str(args.video), annotations=str(args.annotations), graph=str(args.graph))
+    scratch = Path(tempfile.mkdtemp(prefix="rce_run_"))
+    try:
+        # analyse the tracks exactly as `rce track` writes them, so track + analyze + diagnose == run
+        tracks_csv = tracked.write_csv(scratch / "tracks.csv")
+        tracks = load_tracks(tracks_csv, graph)
+        t_start = process_seconds()
+        steps = [*ANALYSIS_STEPS, "diagnosis", "write"] + (["figures"] if worker else []) \
+            + (["recording"] if args.rerun else [])
+        with Steps("run", steps, enabled=show) as bar:
+            figures = FiguresInBackground(worker, first_frame=first_video_frame(args.video)) if worker else None
+            result = analyze(tracks, graph, preset=preset, seed=args.seed, n_boot=args.bootstrap,
+                             progress=bar.callback, before_bootstrap=figures.before_bootstrap if figures else None)
+            if figures:
+                figures.after_bootstrap(result)
+            result.inputs.update(video=str(args.video), annotations=str(args.annotations), graph=str(args.graph),
+                                 tracks=str(args.out / "tracks.csv"))
+            bar.start("diagnosis")
+            diagnosis = diagnose_result(result, effects=candidates,
+                                        seed=args.seed if args.seed is not None else 0)
+            view = cli_wording_json(diagnosis_for_viz(diagnosis, result))
+            if figures:
+                figures.diagnosis(view, result)
 
-    from ..diagnosis_io import diagnose_result, diagnosis_for_viz, diagnosis_json
-    diagnosis = diagnose_result(result, effects=args.effects, seed=args.seed if args.seed is not None else 0)
-    view = diagnosis_for_viz(diagnosis, result)
+            def write_tracks(_result, tmp: Path) -> dict:
+                shutil.copyfile(tracks_csv, tmp / "tracks.csv")
+                (tmp / "diagnosis.json").write_text(
+                    json.dumps(cli_wording_json(diagnosis_json(diagnosis, result)), indent=1) + "\n")
+                return {}
 
-    def write_tracks(_result, tmp: Path) -> dict:
-        table.to_csv(tmp / "tracks.csv", index=False)
-        (tmp / "diagnosis.json").write_text(json.dumps(diagnosis_json(diagnosis, result), indent=1) + "\n")
-        return {}
-
-    from .analyze import extra_writers, format_summary, save_recording
-    files = result.write(args.out, extra_writers=[write_tracks, *extra_writers(args, video=args.video,
-                                                                                diagnosis=view)])
-    save_recording(args, result, video=args.video, diagnosis=view)
+            bar.start("write")
+            files = result.write(args.out, extra_writers=[write_tracks, *([figures.writer(bar)] if figures else [])])
+            if args.rerun is not None:
+                bar.start("recording")
+                save_recording(args, result, video=args.video, diagnosis=view, announce=False)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    record_wall_time(result, t_start)
+    t = result.timings_s  # the time before the analysis was imports and tracking: split it
+    t.update({"imports": t["imports"] - t_track, "track": t_track, **{k: t.pop(k) for k in list(t)[1:]}})
     print(format_summary(result))
     print()
-    print(diagnosis.report())
+    print(cli_wording(diagnosis.report()))
+    if args.rerun is not None:
+        print(f"\nwrote Rerun recording {args.rerun} (open it with: rerun {args.rerun})")
     print(f"\nwrote {len(files)} files to {args.out}/")
     return 0
 

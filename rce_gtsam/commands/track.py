@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from .progress import add_quiet_argument, progress_enabled
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("track", help="track the annotated nodes through a video (mp4 or RealSense .bag/.db3)",
@@ -23,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="TAPIR ONNX export: folder with tapir.onnx + tapir_pointencoder.onnx "
                         "(see tools/export_tapir_onnx.py); default: the OpenCV tracker")
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="track only the first N frames")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_quiet_argument(p, "--no-progress")
     p.set_defaults(func=run_track)
 
     a = sub.add_parser("annotate", help="place N evenly spaced nodes along a polyline; write annotations + graph",
@@ -49,7 +51,8 @@ def run_track(args: argparse.Namespace) -> int:
     tracker = make_tracker(args.model)
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
-        result = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress)
+        result = track_with_progress(tracker, src, points, graph, args.max_frames,
+                                     show=progress_enabled(args.quiet))
     result.write_csv(args.out)
     vis = result.visible
     print(f"tracked {result.n_points} points over {result.n_frames} frames with {result.info.get('tracker')}; "
