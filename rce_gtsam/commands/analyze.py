@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
     from .figure_worker import FigureWorker
     from .progress import Steps, process_seconds, progress_enabled
 
-    # the figure worker forks now, while this process is small; it imports matplotlib meanwhile
+    # the figure worker forks at its first job, just before the bootstrap (see figure_worker)
     worker = None if args.no_figures else FigureWorker()
     try:
         from ..diagnosis_io import parse_effect_names

@@ -1,11 +1,12 @@
 """Draw the figures in a second process while the analysis runs, so they do not hold the user up.
 
-``rce analyze`` starts :class:`FigureWorker` first thing (a fork of the still-small CLI process); the worker
-imports matplotlib while the main process imports the numerical stack and analyses. Just before the
-bootstrap the main process hands over the result without CIs and the worker draws every figure that does
-not need them; after the bootstrap it hands over the full result for the rest. Jobs run in order; each job
-is a module-level function plus its arguments (pickled through a pipe, ~12 MB for plant 1), and its return
-value or its error comes back. Where ``fork`` is not available the jobs run in the calling process instead.
+:class:`FigureWorker` forks at its first job: ``rce analyze`` submits that job (every figure that needs no
+confidence interval) just before the bootstrap, so the worker inherits the analysis in memory with every
+module already imported, and draws while the main process bootstraps and writes the tables; the main
+process never imports matplotlib. Later jobs (the figures that need the CIs, the diagnosis figures of
+``rce run``) are a module-level function plus its arguments pickled through a pipe (~12 MB for plant 1,
+unpickled without new imports). Jobs run in order; each one's return value or error comes back. Where
+``fork`` is not available the jobs run in the calling process when their results are asked for.
 """
 
 from __future__ import annotations
@@ -15,17 +16,10 @@ import traceback
 from pathlib import Path
 
 
-def _serve(conn) -> None:
-    """Worker loop: import the plotting stack once, then run jobs until told to stop (None)."""
-    try:
-        from ..viz import figures, overlays  # noqa: F401  (warm up matplotlib while the parent computes)
-    except Exception:  # noqa: BLE001 - reported when a job needs them
-        pass
+def _serve(conn, first) -> None:
+    """Worker loop: run the first job (inherited through the fork), then jobs from the pipe until None."""
+    job = first
     while True:
-        try:
-            job = conn.recv()
-        except EOFError:
-            return
         if job is None:
             return
         fn, args, kwargs = job
@@ -33,6 +27,10 @@ def _serve(conn) -> None:
             conn.send(("ok", fn(*args, **kwargs)))
         except BaseException as exc:  # noqa: BLE001 - the parent re-raises it
             conn.send(("error", (exc, traceback.format_exc())))
+        try:
+            job = conn.recv()
+        except EOFError:
+            return
 
 
 class FigureWorker:
@@ -42,17 +40,22 @@ class FigureWorker:
         self._pending = 0
         self._proc = self._conn = None
         self._inline: list = []
-        try:
-            ctx = multiprocessing.get_context("fork")
-        except ValueError:
-            return
-        self._conn, child = ctx.Pipe()
-        self._proc = ctx.Process(target=_serve, args=(child,), daemon=True, name="rce-figures")
-        self._proc.start()
-        child.close()
 
     def submit(self, fn, *args, **kwargs) -> None:
-        """Queue ``fn(*args, **kwargs)``; its result comes back from :meth:`results`."""
+        """Queue ``fn(*args, **kwargs)``; its result comes back from :meth:`results`. The first job forks."""
+        if self._proc is None and not self._inline:
+            try:
+                ctx = multiprocessing.get_context("fork")
+            except ValueError:
+                ctx = None
+            if ctx is not None:
+                self._conn, child = ctx.Pipe()
+                self._proc = ctx.Process(target=_serve, args=(child, (fn, args, kwargs)), daemon=True,
+                                         name="rce-figures")
+                self._proc.start()
+                child.close()
+                self._pending += 1
+                return
         if self._proc is None:
             self._inline.append((fn, args, kwargs))
             return

@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     from .figure_worker import FigureWorker
     from .progress import Steps, process_seconds, progress_enabled
 
-    worker = None if args.no_figures else FigureWorker()  # forks while this process is small
+    worker = None if args.no_figures else FigureWorker()  # forks just before the bootstrap
     try:
         return _run(args, worker, Steps, process_seconds, progress_enabled(args.quiet))
     finally:

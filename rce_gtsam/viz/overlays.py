@@ -61,8 +61,12 @@ def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.nda
         aspect = (x1 - x0) / max(y1 - y0, 1)
         h = 4.2
         fig, ax = plt.subplots(figsize=(min(7.16, h * aspect + 1.4), h), constrained_layout=True)
-        ax.imshow(bg, extent=(-0.5, W - 0.5, H - 0.5, -0.5), interpolation="bilinear")
-        ax.imshow(np.full((H, W, 4), [1, 1, 1, 0.25]), extent=(-0.5, W - 0.5, H - 0.5, -0.5))  # fade the photo
+        # only the cropped part of the photo, faded toward white once here (two full-frame images, one of
+        # them a float RGBA veil, were most of an overlay's drawing time)
+        r0, r1 = int(max(0, np.floor(y0))), int(min(H, np.ceil(y1) + 1))
+        c0, c1 = int(max(0, np.floor(x0))), int(min(W, np.ceil(x1) + 1))
+        faded = (0.75 * np.asarray(bg[r0:r1, c0:c1], dtype=np.float32) + 0.25 * 255).astype(np.uint8)
+        ax.imshow(faded, extent=(c0 - 0.5, c1 - 0.5, r1 - 0.5, r0 - 0.5), interpolation="bilinear")
         # a dark casing under every segment keeps pale mid-scale colours visible on a light background
         ax.add_collection(LineCollection(segs, colors="0.15", linewidths=8.5, capstyle="round", zorder=1.5))
         ax.add_collection(LineCollection(segs[~ok], colors=MISSING_COLOR, linewidths=6, capstyle="round",
