@@ -29,9 +29,11 @@ def _best_of(cmd, n=5) -> float:
 
 
 def test_help_and_argument_errors_answer_in_half_a_second():
-    """`rce --help` and an argument error need no numpy/pandas/scipy: best of 5 subprocesses < 0.5 s."""
+    """`rce --help` and an argument error need no numpy/pandas/scipy: best of 5 subprocesses < 0.5 s (on a
+    machine so loaded that a bare interpreter start takes > 0.12 s: within 4x of that start, measured here)."""
+    bare = _best_of([sys.executable, "-c", "import argparse, pathlib, dataclasses"])
     for cmd in ([*RCE, "--help"], [*RCE, "analyze"], [*RCE, "simulate", "--frames", "x"]):
-        assert _best_of(cmd) < 0.5, cmd
+        assert _best_of(cmd) < max(0.5, 4 * bare), cmd
     out = subprocess.run([*RCE, "--help"], capture_output=True, text=True).stdout
     assert "analyze" in out and "simulate" in out
     imported = subprocess.run([sys.executable, "-c", "import sys, rce_gtsam.cli as c; c.build_parser(); "

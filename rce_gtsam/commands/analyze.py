@@ -15,7 +15,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "joint and fit the rank-1 relative-compliance model with bootstrap CIs.")
     p.add_argument("tracks", type=Path, help="tracks CSV: point_id,frame,x,y[,visible,sigma_px] (pixels)")
     p.add_argument("graph", type=Path, help='branch graph JSON: {"root": id, "edges": [[parent, child], ...]}')
-    p.add_argument("--out", type=Path, required=True, help="output folder (created; the files this command writes are replaced, others left alone)")
+    p.add_argument("--out", type=Path, required=True,
+                   help="output folder (created; the files this command writes are replaced, others left alone)")
     add_preset_arguments(p)
     p.add_argument("--seed", type=int, default=None,
                    help="seed of every random step of this command: kappa's bootstrap resamples and the "
@@ -58,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
 
     # the figure worker forks at its first job, just before the bootstrap (see figure_worker)
     worker = None if args.no_figures else FigureWorker()
+    figures = None
     try:
         from ..diagnosis_io import parse_effect_names
         from ..pipeline import ANALYSIS_STEPS, analyze
@@ -82,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if worker:
             worker.close()
+        if figures:
+            figures.discard()
     record_wall_time(result, t_start)
     print(format_summary(result))
     if args.rerun is not None:
@@ -110,6 +114,11 @@ class FiguresInBackground:
         self.worker = worker
         self.first_frame = first_frame
         self.dir = Path(tempfile.mkdtemp(prefix="rce_figures_"))  # scratch: files are moved out of it
+
+    def discard(self) -> None:
+        """Remove the scratch folder (after a failure; :meth:`writer` removes it on success)."""
+        import shutil
+        shutil.rmtree(self.dir, ignore_errors=True)
 
     def before_bootstrap(self, partial) -> None:
         from ..viz.figures import CI_FIGURES, FIGURE_FILES

@@ -72,6 +72,7 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
         tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=show)
     t_track = time.perf_counter() - t0
     scratch = Path(tempfile.mkdtemp(prefix="rce_run_"))
+    figures = None
     try:
         # analyse the tracks exactly as `rce track` writes them, so track + analyze + diagnose == run
         tracks_csv = tracked.write_csv(scratch / "tracks.csv")
@@ -101,12 +102,15 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
                 return {}
 
             bar.start("write")
-            files = result.write(args.out, extra_writers=[write_tracks, *([figures.writer(bar)] if figures else [])])
+            files = result.write(args.out,
+                                 extra_writers=[write_tracks, *([figures.writer(bar)] if figures else [])])
             if args.rerun is not None:
                 bar.start("recording")
                 save_recording(args, result, video=args.video, diagnosis=view, announce=False)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
+        if figures:
+            figures.discard()
     record_wall_time(result, t_start)
     t = result.timings_s  # the time before the analysis was imports and tracking: split it
     t.update({"imports": t["imports"] - t_track, "track": t_track, **{k: t.pop(k) for k in list(t)[1:]}})
