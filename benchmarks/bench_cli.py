@@ -4,7 +4,7 @@ Usage: python benchmarks/bench_cli.py [--plant DIR] [--repeat 3] [--no-diagnose]
 
 Prints one table:
 1. `rce --help` and an argument error (`rce analyze` without arguments): best of 5 subprocesses (goal < 0.5 s);
-2. `rce analyze` on the plant (default preset, 250 resamples, figures included) against
+2. `rce analyze` on the plant (default and paper presets, 250 resamples, figures included) against
    benchmarks/reference_numpy.py, the published computation as one plain numpy/scipy process (moving average,
    sparse least-squares smoother, angles, MAD, rank-1 ALS, 250 block-bootstrap refits): both timed as whole
    subprocesses, imports included, runs interleaved so both see the same machine load; median of --repeat
@@ -48,20 +48,25 @@ def main() -> None:
     rows = []
     for label, cmd in (("rce --help", [*RCE, "--help"]), ("rce analyze (argument error)", [*RCE, "analyze"])):
         rows.append((label + ", best of 5", min(wall(cmd)[0] for _ in range(5)), "goal < 0.5 s"))
-    ref, rce, printed = [], [], []
+    ref, printed = [], {}
+    rce = {"default": [], "paper": []}
     with tempfile.TemporaryDirectory() as tmp:
         for i in range(args.repeat):
             ref.append(wall([sys.executable, str(REPO / "benchmarks" / "reference_numpy.py"), tracks, graph])[0])
-            dt, out = wall([*RCE, "analyze", tracks, graph, "--out", f"{tmp}/a{i}", "--quiet"])
-            rce.append(dt)
-            printed.append(float(out.split("\ntotal ")[1].split()[0]))
-        t_ref, t_rce = statistics.median(ref), statistics.median(rce)
+            for preset in rce:
+                dt, out = wall([*RCE, "analyze", tracks, graph, "--out", f"{tmp}/{preset}{i}", "--quiet",
+                                "--preset", preset])
+                rce[preset].append(dt)
+                printed.setdefault(preset, []).append(float(out.split("\ntotal ")[1].split()[0]))
+        t_ref = statistics.median(ref)
         rows.append((f"plain numpy/scipy process of the published computation ({args.plant.name})", t_ref,
                      f"median of {args.repeat}: {', '.join(f'{v:.2f}' for v in ref)}"))
-        rows.append((f"rce analyze {args.plant.name}, figures included", t_rce,
-                     f"median of {args.repeat}: {', '.join(f'{v:.2f}' for v in rce)}; ratio "
-                     f"{t_rce / t_ref:.2f}x the plain process (goal <= 2x); printed totals "
-                     f"{', '.join(f'{v:.2f}' for v in printed)}"))
+        for preset, times in rce.items():
+            t = statistics.median(times)
+            rows.append((f"rce analyze {args.plant.name} --preset {preset}, figures included", t,
+                         f"median of {args.repeat}: {', '.join(f'{v:.2f}' for v in times)}; ratio "
+                         f"{t / t_ref:.2f}x the plain process (goal <= 2x); printed totals "
+                         f"{', '.join(f'{v:.2f}' for v in printed[preset])}"))
         if not args.no_diagnose:
             dt, _ = wall([*RCE, "diagnose", tracks, graph, "--json", f"{tmp}/d.json", "--quiet"])
             rows.append((f"rce diagnose {args.plant.name}, all five candidates", dt, "once"))
