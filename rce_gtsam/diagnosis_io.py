@@ -15,8 +15,6 @@
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -113,15 +111,5 @@ def diagnosis_for_viz(diagnosis, result=None) -> dict:
 
 def write_json_atomic(data: dict, path: str | Path) -> Path:
     """Write ``data`` as JSON to a temporary file in the same folder, then rename it onto ``path``."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=1)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    from .fileio import write_text_atomic
+    return write_text_atomic(json.dumps(data, indent=1) + "\n", path)

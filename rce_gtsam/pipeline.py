@@ -170,6 +170,10 @@ def build_response(bending: BendingResult, geometry: Geometry, preset: Preset) -
                     frames=frames)
 
 
+#: The steps :func:`analyze` reports to its ``progress`` callback, in order.
+ANALYSIS_STEPS = ("load", "smooth", "bending", "fit", "bootstrap")
+
+
 @dataclass(frozen=True, eq=False)
 class AnalysisResult:
     """Everything one analysis computed; :mod:`rce_gtsam.results` turns it into tables and files."""
@@ -223,7 +227,8 @@ class AnalysisResult:
 
 
 def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset: str | Preset = "default",
-            seed: int | None = None, n_boot: int | None = None, effects: tuple[str, ...] | str = ()) -> AnalysisResult:
+            seed: int | None = None, n_boot: int | None = None, effects: tuple[str, ...] | str = (),
+            progress=None, before_bootstrap=None) -> AnalysisResult:
     """Run the whole analysis on saved tracks.
 
     ``tracks`` and ``graph`` may be objects or file paths. ``seed`` and ``n_boot`` override the preset's
@@ -231,11 +236,16 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     ``dynamics``, ``second_mode``, ``offset``, ``nonlinear``; a tuple or ``"a,b"``) to add to the rank-1
     model; kappa and its bootstrap CIs then come from the extended model
     (:mod:`rce_gtsam.extended_fit`). An unknown name is an :class:`~rce_gtsam.errors.InputError`.
+    ``progress``: optional callable ``progress(step)`` called as each of :data:`ANALYSIS_STEPS` starts
+    (the CLI's progress bar). ``before_bootstrap``: optional callable given the result without CIs
+    (``ci=None``) just before the bootstrap starts (the CLI draws the figures that need no CI meanwhile).
     """
+    step = progress or (lambda _name: None)
     from .diagnosis_io import parse_effect_names
     effects = parse_effect_names(effects, source="effects") or ()
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    step("load")
     inputs = {}
     if not isinstance(graph, BranchGraph):
         inputs["graph"] = str(graph)
@@ -254,10 +264,12 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     timings["load"] = time.perf_counter() - t0
 
     t = time.perf_counter()
+    step("smooth")
     smoothed = smooth_tracks(tracks, graph, preset.smoother)
     timings["smooth"] = time.perf_counter() - t
 
     t = time.perf_counter()
+    step("bending")
     xy = observed_positions(smoothed)
     raw_xy = smoothed.presmoothed.xy
     geometry = compute_geometry(xy, tracks.node_ids, graph, rest=preset.bending.rest)
@@ -270,6 +282,7 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     timings["bending"] = time.perf_counter() - t
 
     t = time.perf_counter()
+    step("fit")
     weights = response.weights if preset.compliance.weighted else None
     precision = None
     if preset.compliance.correlated:
@@ -286,7 +299,13 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
         fit = ResponseModel(config=preset.compliance).fit(response.Y, weights, response.root_distance,
                                                           precision=precision).core
     timings["fit"] = time.perf_counter() - t
+    if before_bootstrap is not None:
+        before_bootstrap(AnalysisResult(graph=graph, tracks=tracks, preset=preset, smoothed=smoothed,
+                                        geometry=geometry, bending=bending, raw_bending=raw_bending,
+                                        response=response, fit=fit, ci=None, smoothing=smoothing,
+                                        timings_s=dict(timings), inputs=dict(inputs), effects=tuple(effects)))
     t = time.perf_counter()
+    step("bootstrap")
     if effects:
         ci, boot_info = bootstrap_extended(fit, preset.compliance)
     else:

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
@@ -274,13 +273,12 @@ def render_video(sim, path: str | Path, *, crf: int | None = None, preset: str =
         import av
     except ImportError as exc:  # pragma: no cover - av is a dependency
         raise MissingDependencyError("rendering a video needs PyAV: pip install av") from exc
+    from .fileio import temp_file_beside
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     width, height = sim.config.image_size
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=".mp4")
-    os.close(fd)
+    tmp = temp_file_beside(path, suffix=".mp4")
     try:
-        with av.open(tmp, mode="w", format="mp4") as container:
+        with av.open(str(tmp), mode="w", format="mp4") as container:
             stream = container.add_stream("libx264", rate=Fraction(sim.config.fps).limit_denominator(1001))
             stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
             cfg = config or RenderConfig()

@@ -22,15 +22,14 @@ interruption leaves the previous results as they were and no half-written files.
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import tempfile
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
+from .fileio import temp_dir_beside
 from .version import __version__
 from .jsonutil import jsonable as _jsonable
 from .quality import assess_quality, quality_report
@@ -143,8 +142,7 @@ def write_outputs(result, out_dir: str | Path, extra_writers=()) -> dict[str, Pa
     that run inside the same temporary folder.
     """
     out_dir = Path(out_dir)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    tmp = temp_dir_beside(out_dir)
     try:
         tables = {"compliance_summary.csv": compliance_summary(result),
                   "excitation.csv": excitation_table(result),

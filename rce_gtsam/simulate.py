@@ -29,7 +29,6 @@ import json
 import math
 import os
 import shutil
-import tempfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -40,6 +39,7 @@ from scipy import signal
 from scipy.interpolate import make_interp_spline
 
 from .errors import InputError
+from .fileio import publish, temp_dir_beside
 from .graph import BranchGraph
 from .jsonutil import jsonable as _jsonable
 from .tracks import Tracks, write_table_atomic
@@ -542,21 +542,14 @@ class Simulation:
         annotations.json is unchanged); a non-default config is recorded in truth.json under ``"render"``
         (its fields and ``camera_shift_px``, (F, 2) pixels). kappa, z and the bends do not change: a
         translation of the whole image turns no segment.
-        Atomic: files are written into a temporary folder next to ``out_dir`` that then replaces it.
-        Refuses to overwrite a non-empty folder that holds anything this method does not write.
+        Atomic: files are written into a temporary folder next to ``out_dir`` and then moved into it,
+        replacing files of the same name and leaving other files alone (the overwrite policy of every
+        command, :func:`rce_gtsam.fileio.publish`); a ``video.mp4`` of an earlier run is removed when this one
+        renders none, so the folder never pairs new tracks with an old video.
         Returns {name: path}.
         """
         out = Path(out_dir)
-        names = set(WRITTEN_FILES) | {"README.md"}  # README.md: the note write_sample() adds
-        if out.exists():
-            if not out.is_dir():
-                raise InputError(out, "output path exists and is not a folder")
-            foreign = sorted(p.name for p in out.iterdir() if p.name not in names)
-            if foreign:
-                raise InputError(out, f"refusing to overwrite a non-empty folder holding files this command "
-                                      f"does not write: {foreign[:5]}; choose an empty or new --out folder")
-        out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+        tmp = temp_dir_beside(out)
         try:
             from .nuisance import RenderConfig, camera_shift
             tracks, true_xy, truth = self.tracks, self.true_xy, self.truth_json()
@@ -578,16 +571,10 @@ class Simulation:
             if video:
                 from .render import render_video
                 render_video(self, tmp / "video.mp4", config=render)
-            if out.exists():
-                old = out.parent / f".{out.name}.old.{os.getpid()}"
-                out.rename(old)
-                tmp.rename(out)
-                shutil.rmtree(old, ignore_errors=True)
-            else:
-                tmp.rename(out)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
+        publish(tmp, out, stale=WRITTEN_FILES)
         return {p.name: p for p in sorted(out.iterdir()) if p.name in WRITTEN_FILES}
 
 

@@ -11,7 +11,6 @@ In memory, :class:`Tracks` is dense: ``xy[i, f]`` is node ``node_ids[i]`` at fra
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from .errors import InputError
+from .fileio import temp_file_beside
 from .graph import BranchGraph
 
 REQUIRED_COLUMNS = ("point_id", "frame", "x", "y")
@@ -195,9 +195,7 @@ def load_tracks(path: str | Path, graph: BranchGraph) -> Tracks:
 def write_table_atomic(df: pd.DataFrame, path: str | Path) -> None:
     """Write a CSV so that a reader never sees a half-written file."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    os.close(fd)
+    tmp = temp_file_beside(path)
     try:
         df.to_csv(tmp, index=False)
         os.replace(tmp, path)

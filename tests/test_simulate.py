@@ -151,13 +151,22 @@ def test_write_round_trips_and_is_safe(tmp_path):
     assert len(truth["z_true"]) == 90
     ann = json.loads((out / "annotations.json").read_text())["points"]
     np.testing.assert_allclose(ann, sim.true_xy[:, 0], atol=1e-4)
-    # rewriting our own folder is fine; a folder with foreign files is refused and left untouched
-    sim.write(out)
+    # the overwrite policy of every command: our files are replaced, other files are left alone, and a
+    # video of an earlier run is removed when this run renders none (never new tracks beside an old video)
     (out / "notes.txt").write_text("mine")
-    with pytest.raises(InputError, match="refusing"):
-        sim.write(out)
-    assert (out / "notes.txt").read_text() == "mine"
+    (out / "video.mp4").write_bytes(b"old")
+    (out / "tracks.csv").write_text("stale")
+    files = sim.write(out)
+    assert set(files) == {"tracks.csv", "true_tracks.csv", "graph.json", "truth.json", "annotations.json"}
+    assert (out / "notes.txt").read_text() == "mine" and not (out / "video.mp4").exists()
+    np.testing.assert_allclose(load_tracks(out / "tracks.csv", g).xy, sim.tracks.xy, atol=1e-4)
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp leftovers
+    # ordinary modes (umask), not tempfile's private 0700 / 0600
+    import os
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (out.stat().st_mode & 0o777) == 0o777 & ~umask
+    assert {p.stat().st_mode & 0o777 for p in out.iterdir() if p.name != "notes.txt"} == {0o666 & ~umask}
 
 
 def test_cli_writes_what_simulate_gives(tmp_path, capsys):

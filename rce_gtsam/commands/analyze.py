@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from .preset_args import add_preset_arguments, preset_from_args
+from .progress import add_quiet_argument
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -14,9 +15,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "joint and fit the rank-1 relative-compliance model with bootstrap CIs.")
     p.add_argument("tracks", type=Path, help="tracks CSV: point_id,frame,x,y[,visible,sigma_px] (pixels)")
     p.add_argument("graph", type=Path, help='branch graph JSON: {"root": id, "edges": [[parent, child], ...]}')
-    p.add_argument("--out", type=Path, required=True, help="output folder (created; existing files replaced)")
+    p.add_argument("--out", type=Path, required=True,
+                   help="output folder (created; the files this command writes are replaced, others left alone)")
     add_preset_arguments(p)
-    p.add_argument("--seed", type=int, default=None, help="bootstrap RNG seed (default: the preset's, 0)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="seed of every random step of this command: kappa's bootstrap resamples and the "
+                        "motion figure's CIs (default: the preset's, 0)")
     p.add_argument("--bootstrap", type=int, default=None, metavar="N",
                    help="bootstrap resamples (default: the preset's, 250; 0 disables CIs)")
     p.add_argument("--effects", default=None, metavar="A,B",
@@ -25,25 +29,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "nonlinear (see `rce diagnose` for which one your data need)")
     p.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd", help="also save a Rerun recording")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    add_quiet_argument(p)
     p.set_defaults(func=run)
 
 
-def extra_writers(args: argparse.Namespace, video=None, diagnosis=None) -> list:
-    """Figure and overlay writers for ``AnalysisResult.write`` (none with ``--no-figures``)."""
-    writers = []
-    if not getattr(args, "no_figures", False):
-        from ..viz.figures import write_figures  # a broken install must fail here, not silently skip figures
-        from ..viz.overlays import write_overlays
-
-        def figures(result, tmp):
-            out = dict(write_figures(result, tmp / "figures", diagnosis=diagnosis))
-            out.update(write_overlays(result, tmp / "figures", first_frame=_first_frame(video)))
-            return out
-        writers.append(figures)
-    return writers
-
-
-def _first_frame(video):
+def first_video_frame(video):
+    """The first frame of ``video`` (RGB array) for the overlays, or None without a video."""
     if video is None:
         return None
     from ..track import open_video
@@ -53,31 +44,58 @@ def _first_frame(video):
     return None
 
 
-def save_recording(args, result, video=None, diagnosis=None) -> None:
+def save_recording(args, result, video=None, diagnosis=None, announce: bool = True) -> None:
     if args.rerun is None:
         return
     from ..viz.rerun_log import save_recording as _save
     path = _save(result, args.rerun, video_path=video, diagnosis=diagnosis)
-    from ..viewer import open_command
-    print(f"wrote Rerun recording {path} (open it with: {open_command(path)})")
+    if announce:
+        from ..viewer import open_command
+        print(f"wrote Rerun recording {path} (open it with: {open_command(path)})")
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..pipeline import analyze
+    from .figure_worker import FigureWorker
+    from .progress import Steps, process_seconds, progress_enabled
 
-    from ..diagnosis_io import parse_effect_names
+    # the figure worker forks at its first job, just before the bootstrap (see figure_worker)
+    worker = None if args.no_figures else FigureWorker()
+    figures = None
+    try:
+        from ..diagnosis_io import parse_effect_names
+        from ..pipeline import ANALYSIS_STEPS, analyze
 
-    from ..validate import check_analysis_inputs, check_command_options
+        from ..validate import check_analysis_inputs, check_command_options
 
-    check_command_options(args)
-    effects = parse_effect_names(args.effects) or ()  # fail on a bad name before the (slow) analysis
-    preset = preset_from_args(args)
-    check_analysis_inputs(args.tracks, args.graph, preset)
-    result = analyze(args.tracks, args.graph, preset=preset, seed=args.seed, n_boot=args.bootstrap,
-                     effects=effects)
-    files = result.write(args.out, extra_writers=extra_writers(args))
-    save_recording(args, result)
+        check_command_options(args)
+        effects = parse_effect_names(args.effects) or ()  # fail on a bad name before the (slow) analysis
+        preset = preset_from_args(args)
+        check_analysis_inputs(args.tracks, args.graph, preset)
+        t_start = process_seconds()
+        steps = [*ANALYSIS_STEPS, "write"] + (["figures"] if worker else []) + (["recording"] if args.rerun else [])
+        with Steps("analyze", steps, enabled=progress_enabled(args.quiet)) as bar:
+            figures = FiguresInBackground(worker) if worker else None
+            result = analyze(args.tracks, args.graph, preset=preset, seed=args.seed, n_boot=args.bootstrap,
+                             effects=effects, progress=bar.callback,
+                             before_bootstrap=figures.before_bootstrap if figures else None)
+            if figures:
+                figures.after_bootstrap(result)
+            bar.start("write")
+            writers = [figures.writer(bar)] if figures else []
+            files = result.write(args.out, extra_writers=writers)
+            if args.rerun is not None:
+                bar.start("recording")
+                save_recording(args, result, announce=False)
+    finally:
+        if worker:
+            worker.close()
+        if figures:
+            figures.discard()
+    record_wall_time(result, t_start)
     print(format_summary(result))
+    if args.rerun is not None:
+        from ..viewer import open_command
+        print(f"wrote Rerun recording {args.rerun} (open it with: {open_command(args.rerun)})")
     print(f"wrote {len(files)} files to {args.out}/: {', '.join(sorted(files))}")
     return quality_exit_code(result, "analyze")
 
@@ -93,6 +111,69 @@ def quality_exit_code(result, command: str) -> int:
         return 0
     print(f"rce {command}: {line}", file=sys.stderr)
     return 3
+
+
+def record_wall_time(result, t_start: float) -> None:
+    """Put the time before the analysis started (Python start-up and imports) and after it (writing files,
+    waiting for figures) into ``result.timings_s``, whose ``total`` becomes the wall time since the process
+    started: what the user waited."""
+    from .progress import process_seconds
+    t = dict(result.timings_s)
+    after = process_seconds() - t_start - t.pop("total", 0.0)
+    result.timings_s.clear()
+    result.timings_s.update({"imports": t_start, **t, "write": after, "total": process_seconds()})
+
+
+class FiguresInBackground:
+    """The analysis figures drawn by a :class:`~.figure_worker.FigureWorker`: those that need no CI while
+    the bootstrap runs, the rest right after it, collected into the output's ``figures/``."""
+
+    def __init__(self, worker, first_frame=None):
+        import tempfile
+        self.worker = worker
+        self.first_frame = first_frame
+        self.dir = Path(tempfile.mkdtemp(prefix="rce_figures_"))  # scratch: files are moved out of it
+
+    def discard(self) -> None:
+        """Remove the scratch folder (after a failure; :meth:`writer` removes it on success)."""
+        import shutil
+        shutil.rmtree(self.dir, ignore_errors=True)
+
+    def before_bootstrap(self, partial) -> None:
+        from ..viz.figures import CI_FIGURES, FIGURE_FILES
+        from ..viz.overlays import CI_OVERLAYS, OVERLAY_FILES
+        from .figure_worker import draw_analysis_figures
+        self.worker.submit(draw_analysis_figures, partial, self.dir,
+                           [n for n in FIGURE_FILES if n not in CI_FIGURES],
+                           [n for n in OVERLAY_FILES if n not in CI_OVERLAYS], self.first_frame)
+
+    def after_bootstrap(self, result) -> None:
+        from ..viz.figures import CI_FIGURES
+        from ..viz.overlays import CI_OVERLAYS
+        from .figure_worker import draw_analysis_figures
+        self.worker.submit(draw_analysis_figures, result, self.dir, list(CI_FIGURES), list(CI_OVERLAYS),
+                           self.first_frame)
+
+    def diagnosis(self, view, result) -> None:
+        """Also draw the diagnosis figures (``view``: :func:`~rce_gtsam.diagnosis_io.diagnosis_for_viz`)."""
+        from ..viz.figures import write_diagnosis_figures
+        self.worker.submit(write_diagnosis_figures, view, self.dir, result)
+
+    def writer(self, bar):
+        def collect(_result, tmp: Path) -> dict:
+            import shutil
+            bar.start("figures")
+            try:
+                drawn = {}
+                for out in self.worker.results():
+                    drawn.update({str(k): str(v) for k, v in out.items()})
+                (tmp / "figures").mkdir(exist_ok=True)
+                for name in drawn:
+                    shutil.move(str(self.dir / name), tmp / "figures" / name)
+            finally:
+                shutil.rmtree(self.dir, ignore_errors=True)
+            return {f"figures/{n}": tmp / "figures" / n for n in drawn}
+        return collect
 
 
 def format_summary(result) -> str:
@@ -121,8 +202,9 @@ def format_summary(result) -> str:
     lines.append(f"quality: {n_ok} of {int(df['kappa'].notna().sum())} segments ok (reasons: see README, "
                  "'Quality of each kappa')")
     tot = result.timings_s.get("total", float("nan"))
-    lines.append(f"\ntotal {tot:.2f} s (" + ", ".join(f"{k} {v:.2f}" for k, v in result.timings_s.items()
-                                                     if k != "total") + ")")
+    waited = " wall, from the command's start" if "imports" in result.timings_s else ""
+    lines.append(f"\ntotal {tot:.2f} s{waited} (" + ", ".join(f"{k} {v:.2f}" for k, v in result.timings_s.items()
+                                                              if k != "total") + ")")
     return "\n".join(lines)
 
 

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from .preset_args import add_preset_arguments, add_run_options
+from .wording import candidates_from_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -27,7 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help="worker processes of the LocalCluster, one thread each (default: one per core, "
                             "at most one per recording)")
     add_preset_arguments(p)
-    add_run_options(p)
+    add_run_options(p, "batch")
     p.add_argument("--model", type=Path, default=None, metavar="DIR_OR_ONNX",
                    help="TAPIR ONNX export for video rows (default: the OpenCV tracker)")
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="track only the first N frames")
@@ -43,7 +44,7 @@ def run(args: argparse.Namespace) -> int:
 
     manifest = load_manifest(args.manifest)
     options = BatchOptions(preset=args.preset, overrides=tuple(args.overrides), seed=args.seed,
-                           n_boot=args.bootstrap, effects=args.effects, figures=not args.no_figures,
+                           n_boot=args.bootstrap, effects=candidates_from_args(args), figures=not args.no_figures,
                            max_frames=args.max_frames, model=args.model)
     result = run_batch(manifest, args.out, scheduler=args.scheduler, workers=args.workers, options=options,
                        progress=not args.quiet, recording=not args.no_rerun)

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import argparse
 import shutil
-import tempfile
 from pathlib import Path
 
 from .preset_args import add_preset_arguments, preset_from_args
+from .progress import add_quiet_argument
+from .wording import add_candidates_argument, candidates_from_args, cli_wording, cli_wording_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -19,14 +20,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("graph", type=Path, help='branch graph JSON: {"root": id, "edges": [[parent, child], ...]}')
     p.add_argument("--json", type=Path, required=True, dest="json_path", help="write the diagnosis JSON here")
     add_preset_arguments(p)
-    p.add_argument("--effects", default=None, metavar="A,B",
-                   help="comma-separated candidates (default: delay,dynamics,second_mode,offset,nonlinear)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the stratified edge split (default 0)")
+    add_candidates_argument(p, "diagnose")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of every random step of this command: the split of the segments into the two "
+                        "node-disjoint halves of the cross-validation (no bootstrap runs here; default 0)")
     p.add_argument("--folds", type=int, default=8, help="cross-validation blocks (default 8)")
     p.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd",
                    help="also save a Rerun recording of the analysis with the diagnosis report")
     p.add_argument("--figures", type=Path, default=None, metavar="DIR",
                    help="also write the analysis and diagnosis figures (PNG) into DIR")
+    add_quiet_argument(p)
     p.set_defaults(func=run)
 
 
@@ -36,48 +39,56 @@ def run(args: argparse.Namespace) -> int:
     from ..errors import InputError
     from ..pipeline import analyze
 
+    from .progress import Steps, process_seconds, progress_enabled
+
     from ..validate import check_analysis_inputs, check_command_options, check_folds
 
     check_command_options(args, out_dir_option=None)
-    names = parse_effect_names(args.effects)  # fail on a bad name before the (slow) analysis
+    names = parse_effect_names(candidates_from_args(args), source="--candidates")  # before the slow part
     preset = preset_from_args(args)
     if args.folds < 2:
         raise InputError("--folds", f"need at least 2 cross-validation blocks, got {args.folds}")
     _, table = check_analysis_inputs(args.tracks, args.graph, preset)
     check_folds(args.folds, int(table["frame"].max()) + 1, preset.compliance.block_length)
-    result = analyze(args.tracks, args.graph, preset=preset, n_boot=0)
-    diag = diagnose_result(result, effects=names, seed=args.seed, n_folds=args.folds)
-    data = diagnosis_json(diag, result)
-    view = diagnosis_for_viz(diag, result) if (args.figures or args.rerun) else None
-    # write every optional output first, the JSON last: a failure leaves no partial set of new files
-    if args.figures is not None:
-        _write_figures_atomic(result, view, args.figures)
-    if args.rerun is not None:
-        from ..viz.rerun_log import save_recording
-        save_recording(result, args.rerun, diagnosis=view)
-    write_json_atomic(data, args.json_path)
-    print(diag.report())
+    steps = ["load", "smooth", "bending", "fit", "diagnosis"] + (["figures"] if args.figures else []) \
+        + (["recording"] if args.rerun else [])
+    with Steps("diagnose", steps, enabled=progress_enabled(args.quiet)) as bar:
+        result = analyze(args.tracks, args.graph, preset=preset, n_boot=0,
+                         progress=lambda s: s != "bootstrap" and bar.start(s))
+        bar.start("diagnosis")
+        diag = diagnose_result(result, effects=names, seed=args.seed, n_folds=args.folds)
+        data = cli_wording_json(diagnosis_json(diag, result))
+        view = cli_wording_json(diagnosis_for_viz(diag, result)) if (args.figures or args.rerun) else None
+        # write every optional output first, the JSON last: a failure leaves no partial set of new files
+        if args.figures is not None:
+            bar.start("figures")
+            _write_figures_atomic(result, view, args.figures)
+        if args.rerun is not None:
+            bar.start("recording")
+            from ..viz.rerun_log import save_recording
+            save_recording(result, args.rerun, diagnosis=view)
+        write_json_atomic(data, args.json_path)
+    print(cli_wording(diag.report()))
     print(f"\nwrote {args.json_path}")
     if args.figures is not None:
         print(f"wrote figures to {args.figures}/")
     if args.rerun is not None:
         from ..viewer import open_command
         print(f"wrote Rerun recording {args.rerun} (open it with: {open_command(args.rerun)})")
+    print(f"total {process_seconds():.2f} s wall, from the command's start")
     return 0
 
 
 def _write_figures_atomic(result, view, out_dir: Path) -> None:
     """Analysis + diagnosis figures into ``out_dir`` through a temporary sibling folder."""
+    from ..fileio import publish, temp_dir_beside
     from ..viz.figures import write_figures
 
-    out_dir = Path(out_dir)
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    tmp = temp_dir_beside(out_dir)
     try:
-        written = write_figures(result, tmp, diagnosis=view)
-        out_dir.mkdir(exist_ok=True)
-        for name in written:
-            (tmp / name).replace(out_dir / name)
-    finally:
+        write_figures(result, tmp, diagnosis=view)
+    except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    publish(tmp, out_dir)
 

@@ -16,13 +16,16 @@ def add_preset_arguments(p: argparse.ArgumentParser) -> None:
                         "fields are documented in rce_gtsam/presets.py)")
 
 
-def add_run_options(p: argparse.ArgumentParser) -> None:
-    """``--seed``, ``--bootstrap`` and ``--effects`` (diagnosis candidates) of ``rce run`` and ``rce batch``."""
-    p.add_argument("--seed", type=int, default=None, help="bootstrap / cross-validation seed")
+def add_run_options(p: argparse.ArgumentParser, command: str = "run") -> None:
+    """``--seed``, ``--bootstrap`` and ``--candidates`` (the effects the diagnosis tests; ``--effects`` is its
+    deprecated old name here) of ``rce run`` and ``rce batch``."""
+    from .wording import add_candidates_argument
+
+    p.add_argument("--seed", type=int, default=None,
+                   help="seed of every random step of this command: kappa's bootstrap resamples, the motion "
+                        "figure's CIs and the diagnosis' cross-validation split (default: the preset's, 0)")
     p.add_argument("--bootstrap", type=int, default=None, metavar="N", help="bootstrap resamples")
-    p.add_argument("--effects", default=None, metavar="A,B",
-                   help="diagnosis candidates, comma-separated (default: delay,dynamics,second_mode,offset,"
-                        "nonlinear)")
+    add_candidates_argument(p, command)
 
 
 def preset_from_args(args: argparse.Namespace) -> Preset:

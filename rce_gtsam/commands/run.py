@@ -9,6 +9,8 @@ from pathlib import Path
 
 from .live_args import add_live_arguments
 from .preset_args import add_preset_arguments, add_run_options, preset_from_args
+from .progress import add_quiet_argument
+from .wording import candidates_from_args, cli_wording, cli_wording_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -19,32 +21,49 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("video", type=Path, help="video file (mp4/avi/...) or RealSense recording (.bag, .db3)")
     p.add_argument("annotations", type=Path, help='first-frame points JSON {"points": [[x, y], ...]} (pixels)')
     p.add_argument("graph", type=Path, help='branch graph JSON {"root": id, "edges": [[parent, child], ...]}')
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--out", type=Path, required=True,
+                   help="output folder (created; the files this command writes are replaced, others left alone)")
     p.add_argument("--model", type=Path, default=None, metavar="DIR_OR_ONNX",
                    help="TAPIR ONNX export (default: the OpenCV tracker)")
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="use only the first N frames")
     add_preset_arguments(p)
-    add_run_options(p)
+    add_run_options(p, "run")
     p.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd", help="also save a Rerun recording")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_quiet_argument(p, "--no-progress")
     add_live_arguments(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..diagnosis_io import parse_effect_names
+    from .figure_worker import FigureWorker
+    from .progress import Steps, process_seconds, progress_enabled
+
+    worker = None if args.no_figures else FigureWorker()  # forks just before the bootstrap
+    try:
+        return _run(args, worker, Steps, process_seconds, progress_enabled(args.quiet))
+    finally:
+        if worker:
+            worker.close()
+
+
+def _run(args, worker, Steps, process_seconds, show: bool) -> int:
+    import shutil
+    import tempfile
+
+    from ..diagnosis_io import diagnose_result, diagnosis_for_viz, diagnosis_json, parse_effect_names
     from ..graph import load_graph
-    from ..pipeline import analyze
+    from ..pipeline import ANALYSIS_STEPS, analyze
     from ..track import load_annotations, make_tracker, open_video
-    from ..tracks import tracks_from_table
+    from ..quality import OFF_STRUCTURE_KEY
+    from ..tracks import load_tracks
+    from ..validate import check_bends_observed, check_clip_length, check_command_options, check_graph_has_bend
+    from .analyze import (FiguresInBackground, first_video_frame, format_summary, quality_exit_code,
+                          record_wall_time, save_recording)
     from .track import print_visibility, start_live, track_with_progress, warn_annotations
 
-    from ..quality import OFF_STRUCTURE_KEY
-    from ..validate import check_bends_observed, check_clip_length, check_command_options, check_graph_has_bend
-
     check_command_options(args)
-    args.effects = parse_effect_names(args.effects)  # fail on a bad name before tracking
+    candidates = parse_effect_names(candidates_from_args(args), source="--candidates")  # before tracking
     preset = preset_from_args(args)
     t0 = time.perf_counter()
     graph = load_graph(args.graph)
@@ -58,40 +77,67 @@ def run(args: argparse.Namespace) -> int:
         check_clip_length(n_clip, args.video, preset.compliance.block_length)
         off_structure = warn_annotations(args.video, points, graph)
         live = start_live(args, src, f"rce run {args.video}")
-        tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress,
+        tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=show,
                                       on_frame=live.frame if live else None)
     t_track = time.perf_counter() - t0
     print_visibility(tracked.visible)
-    table = tracked.to_frame()
-    tracks = tracks_from_table(table, graph, source=f"tracks of {args.video}")
-    check_bends_observed(table, graph, f"tracks of {args.video}", preset.compliance.block_length)
-    result = analyze(tracks, graph, preset=preset, seed=args.seed, n_boot=args.bootstrap)
-    result.timings_s["track"] = t_track
-    result.inputs.update(video=str(args.video), annotations=str(args.annotations), graph=str(args.graph))
-    if live:
-        live.analysis(result)
-    if off_structure:
-        result.inputs[OFF_STRUCTURE_KEY] = ",".join(map(str, off_structure))
+    check_bends_observed(tracked.to_frame(), graph, f"tracks of {args.video}", preset.compliance.block_length)
+    scratch = Path(tempfile.mkdtemp(prefix="rce_run_"))
+    figures = None
+    try:
+        # analyse the tracks exactly as `rce track` writes them, so track + analyze + diagnose == run
+        tracks_csv = tracked.write_csv(scratch / "tracks.csv")
+        tracks = load_tracks(tracks_csv, graph)
+        t_start = process_seconds()
+        steps = [*ANALYSIS_STEPS, "diagnosis", "write"] + (["figures"] if worker else []) \
+            + (["recording"] if args.rerun else [])
+        with Steps("run", steps, enabled=show) as bar:
+            figures = FiguresInBackground(worker, first_frame=first_video_frame(args.video)) if worker else None
+            result = analyze(tracks, graph, preset=preset, seed=args.seed, n_boot=args.bootstrap,
+                             progress=bar.callback, before_bootstrap=figures.before_bootstrap if figures else None)
+            if figures:
+                figures.after_bootstrap(result)
+            result.inputs.update(video=str(args.video), annotations=str(args.annotations), graph=str(args.graph),
+                                 tracks=str(args.out / "tracks.csv"))
+            if off_structure:
+                result.inputs[OFF_STRUCTURE_KEY] = ",".join(map(str, off_structure))
+            if live:
+                live.analysis(result)
+            bar.start("diagnosis")
+            diagnosis = diagnose_result(result, effects=candidates,
+                                        seed=args.seed if args.seed is not None else 0)
+            view = cli_wording_json(diagnosis_for_viz(diagnosis, result))
+            if live:
+                live.diagnosis(view)
+                live.close()
+            if figures:
+                figures.diagnosis(view, result)
 
-    from ..diagnosis_io import diagnose_result, diagnosis_for_viz, diagnosis_json
-    diagnosis = diagnose_result(result, effects=args.effects, seed=args.seed if args.seed is not None else 0)
-    view = diagnosis_for_viz(diagnosis, result)
-    if live:
-        live.diagnosis(view)
-        live.close()
+            def write_tracks(_result, tmp: Path) -> dict:
+                shutil.copyfile(tracks_csv, tmp / "tracks.csv")
+                (tmp / "diagnosis.json").write_text(
+                    json.dumps(cli_wording_json(diagnosis_json(diagnosis, result)), indent=1) + "\n")
+                return {}
 
-    def write_tracks(_result, tmp: Path) -> dict:
-        table.to_csv(tmp / "tracks.csv", index=False)
-        (tmp / "diagnosis.json").write_text(json.dumps(diagnosis_json(diagnosis, result), indent=1) + "\n")
-        return {}
-
-    from .analyze import extra_writers, format_summary, quality_exit_code, save_recording
-    files = result.write(args.out, extra_writers=[write_tracks, *extra_writers(args, video=args.video,
-                                                                                diagnosis=view)])
-    save_recording(args, result, video=args.video, diagnosis=view)
+            bar.start("write")
+            files = result.write(args.out,
+                                 extra_writers=[write_tracks, *([figures.writer(bar)] if figures else [])])
+            if args.rerun is not None:
+                bar.start("recording")
+                save_recording(args, result, video=args.video, diagnosis=view, announce=False)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+        if figures:
+            figures.discard()
+    record_wall_time(result, t_start)
+    t = result.timings_s  # the time before the analysis was imports and tracking: split it
+    t.update({"imports": t["imports"] - t_track, "track": t_track, **{k: t.pop(k) for k in list(t)[1:]}})
     print(format_summary(result))
     print()
-    print(diagnosis.report())
+    print(cli_wording(diagnosis.report()))
+    if args.rerun is not None:
+        from ..viewer import open_command
+        print(f"\nwrote Rerun recording {args.rerun} (open it with: {open_command(args.rerun)})")
     print(f"\nwrote {len(files)} files to {args.out}/")
     return quality_exit_code(result, "run")
 

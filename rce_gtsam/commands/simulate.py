@@ -15,11 +15,13 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..errors import InputError
-from ..nuisance import REALISM
-from ..simulate import EFFECT_DEFAULTS, EFFECT_MEANING, EFFECTS, NoiseConfig, SimulationConfig, simulate
+
+# numpy/scipy/pandas come with ..simulate and ..nuisance: they are imported when the command runs or its
+# help is printed, not when the parser is built (``rce --help`` and argument errors answer at once)
 
 
 def _effect_list(values: list[str] | None) -> tuple[str, ...]:
+    from ..simulate import EFFECTS
     out: list[str] = []
     for v in values or []:
         for name in (s.strip() for s in v.split(",")):
@@ -35,6 +37,7 @@ def _effect_list(values: list[str] | None) -> tuple[str, ...]:
 def _strengths(values: list[str] | None) -> dict[str, float] | None:
     if not values:
         return None
+    from ..simulate import EFFECTS
     out = {}
     for v in values:
         name, sep, num = v.partition("=")
@@ -47,19 +50,27 @@ def _strengths(values: list[str] | None) -> dict[str, float] | None:
     return out
 
 
+def _effects_epilog() -> str:
+    from ..simulate import EFFECT_DEFAULTS, EFFECT_MEANING, EFFECTS
+    return "effects and the meaning of their strengths: " + "; ".join(
+        f"{k} (default {EFFECT_DEFAULTS[k]:g}: {EFFECT_MEANING[k]})" for k in EFFECTS)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
-    effects_help = "; ".join(f"{k} (default {EFFECT_DEFAULTS[k]:g}: {EFFECT_MEANING[k]})" for k in EFFECTS)
     p = sub.add_parser(
         "simulate", help="simulate a wind-excited branch with known compliance (and optional hidden effects)",
         description="Simulate a wind-excited branch with known per-edge compliance kappa_true and excitation "
                     "z_true, optional hidden physical effects, tracker-like noisy tracks and, with --video, "
-                    "an H.264 rendering. Every random step follows --seed.",
-        epilog="effects and the meaning of their strengths: " + effects_help)
+                    "an H.264 rendering. Every random step follows --seed.")
+
+    def format_help() -> str:  # the epilog needs ..simulate: build it only when help is printed
+        p.epilog = _effects_epilog()
+        return argparse.ArgumentParser.format_help(p)
+    p.format_help = format_help
     p.add_argument("--out", type=Path, required=True,
-                   help="output folder (created; refused if it holds files this command does not write)")
+                   help="output folder (created; the files this command writes are replaced, other files are left alone)")
     p.add_argument("--effect", action="append", metavar="NAME",
-                   help=f"hidden effect to switch on, repeatable or comma-separated: {', '.join(EFFECTS)} "
-                        "(default: none)")
+                   help="hidden effect to switch on, repeatable or comma-separated (names below; default: none)")
     p.add_argument("--strength", action="append", metavar="NAME=VALUE",
                    help="override an effect's strength, e.g. --strength delay=10 (units: see below)")
     p.add_argument("--seed", type=int, default=0, help="master random seed (default 0)")
@@ -72,7 +83,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--clean", action="store_true", help="noise-free tracks (no jitter, drift, jumps or gaps)")
     p.add_argument("--sigma", action="store_true", help="write a per-observation sigma_px column")
     p.add_argument("--video", action="store_true", help="also render video.mp4 (H.264, 640x480)")
-    p.add_argument("--realism", choices=tuple(REALISM), default="clean",
+    p.add_argument("--realism", choices=("clean", "outdoor"), default="clean",
                    help="camera nuisances of the video: clean (default; crisp, still, constant light) or outdoor "
                         "(180-degree-shutter motion blur, light drift and a moving soft shadow, ~1 px tripod "
                         "shake, crf 28; true_tracks.csv then includes the camera shake)")
@@ -80,6 +91,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..nuisance import REALISM
+    from ..simulate import NoiseConfig, SimulationConfig, simulate
+
     from ..validate import check_output_dir, check_seed
 
     check_seed(args.seed)

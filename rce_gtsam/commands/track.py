@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from .live_args import add_live_arguments, live_from_args
+from .progress import add_quiet_argument, progress_enabled
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -25,7 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="TAPIR ONNX export: folder with tapir.onnx + tapir_pointencoder.onnx "
                         "(see tools/export_tapir_onnx.py); default: the OpenCV tracker")
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="track only the first N frames")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_quiet_argument(p, "--no-progress")
     add_live_arguments(p)
     p.set_defaults(func=run_track)
 
@@ -46,7 +47,7 @@ def run_track(args: argparse.Namespace) -> int:
         points = load_annotations(args.annotations, image_size=src.size)
         warn_annotations(args.video, points, graph)
         live = start_live(args, src, f"tracking {args.video}")
-        result = track_with_progress(tracker, src, points, graph, args.max_frames, show=not args.no_progress,
+        result = track_with_progress(tracker, src, points, graph, args.max_frames, show=progress_enabled(args.quiet),
                                      on_frame=live.frame if live else None)
     result.write_csv(args.out)
     if live:

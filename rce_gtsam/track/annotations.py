@@ -10,13 +10,12 @@ clicked, and :func:`write_annotation_files` writes the annotation and chain-grap
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import InputError
+from ..fileio import write_text_atomic
 from ..graph import BranchGraph
 
 
@@ -103,21 +102,9 @@ def place_nodes_along_polyline(polyline, n_nodes: int) -> tuple[np.ndarray, Bran
     return pts, graph
 
 
-def _write_text_atomic(text: str, path: Path) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
 def write_annotation_files(points, graph: BranchGraph, annotations_path: str | Path, graph_path: str | Path) -> None:
     """Write ``{"points": ...}`` and ``{"root": ..., "edges": ...}`` JSON files, each atomically."""
     pts = validate_points(points)
     rows = ",\n".join(f"  [{round(float(x), 3)}, {round(float(y), 3)}]" for x, y in pts)
-    _write_text_atomic('{"points": [\n' + rows + "\n]}\n", Path(annotations_path))
-    _write_text_atomic(json.dumps(graph.to_json()) + "\n", Path(graph_path))
+    write_text_atomic('{"points": [\n' + rows + "\n]}\n", Path(annotations_path))
+    write_text_atomic(json.dumps(graph.to_json()) + "\n", Path(graph_path))

@@ -68,8 +68,7 @@ class TrackResult:
                              "sigma_px": self.sigma_px.ravel()})
 
     def write_csv(self, path: str | Path) -> Path:
-        """Write :meth:`to_frame` atomically (rounded to 1e-4 px) and return the path."""
-        df = self.to_frame()
-        df[["x", "y", "sigma_px"]] = df[["x", "y", "sigma_px"]].round(4)
-        write_table_atomic(df, path)
+        """Write :meth:`to_frame` atomically at full precision (``rce run`` analyses exactly this file, so
+        ``rce track`` + ``rce analyze`` give what ``rce run`` gives) and return the path."""
+        write_table_atomic(self.to_frame(), path)
         return Path(path)

@@ -6,7 +6,8 @@ Each ``fig_*`` function returns a :class:`matplotlib.figure.Figure` (tests inspe
 Figures of an analysis (file names):
 
 * ``smoothing.png`` — (a) filtered bending RMS per bend and (b) edge-length CV per edge against root
-  distance, raw (moving-average) vs smoothed tracks: what the factor-graph smoother removed;
+  distance, raw (the tracker's output, or its moving average when the preset has one, as in ``paper``) vs
+  smoothed tracks: what the factor-graph smoother removed;
 * ``motion.png`` — (a) root-relative node motion RMS (px) and (b) filtered bending RMS (deg) against root
   distance, with moving-block bootstrap 95 % CIs, coloured by zone;
 * ``compliance.png`` — (a) kappa per edge with its bootstrap 95 % CI against root distance, zone colours,
@@ -62,6 +63,8 @@ def fig_smoothing(result):
     rd_b = np.array([geo.root_distance_px[b.child] for b in result.bending.bends])
     rd_e = np.array([geo.root_distance_px[c] for _, c in g.edges])
     d = sm.as_dict()
+    window = int(result.preset.smoother.presmooth_window)
+    raw_label = f"raw (moving average of {window})" if window > 1 else "raw (tracker output)"
     with _style() as plt:
         fig, axes = plt.subplots(1, 2, figsize=(FIG_WIDTH_IN, 2.6), constrained_layout=True)
         for ax, rd, raw, smo, ylabel, title, red in (
@@ -70,13 +73,13 @@ def fig_smoothing(result):
                 (axes[1], rd_e, sm.edge_cv_raw, sm.edge_cv_smoothed, "edge-length CV (std / mean)",
                  "(b) Segment-length variation", d["edge_length_cv_reduction_pct"])):
             o = np.argsort(rd)
-            for y, lab, col, ls, mk in ((raw, "raw (moving average)", RAW_COLOR, "--", "o"),
+            for y, lab, col, ls, mk in ((raw, raw_label, RAW_COLOR, "--", "o"),
                                         (smo, "smoothed (factor graph)", SMOOTHED_COLOR, "-", "s")):
                 ok = np.isfinite(y[o])
                 ax.plot(rd[o][ok], y[o][ok], ls=ls, marker=mk, color=col, ms=3, label=lab)
             ax.set_xlabel("root distance (px)")
             ax.set_ylabel(ylabel)
-            ax.set_title(f"{title}: mean {red:.0f} % lower")
+            ax.set_title(f"{title}: mean {abs(red):.0f} % {'lower' if red >= 0 else 'higher'}")
             ax.set_ylim(bottom=0)
         h, lab = axes[0].get_legend_handles_labels()
         fig.legend(h, lab, loc="outside upper center", ncol=2)
@@ -263,17 +266,26 @@ def fig_bending_fit(result, n: int = 3):
     return fig
 
 
-def write_figures(result, out_dir: str | Path, diagnosis=None, fps: float | None = None) -> dict[str, Path]:
+#: The analysis figure files :func:`write_figures` writes, and those that need kappa's confidence
+#: intervals (the others can be drawn before the bootstrap).
+FIGURE_FILES = ("smoothing.png", "motion.png", "compliance.png", "excitation.png", "residuals.png",
+                "bending_fit.png")
+CI_FIGURES = ("compliance.png",)
+
+
+def write_figures(result, out_dir: str | Path, diagnosis=None, fps: float | None = None,
+                  names=None) -> dict[str, Path]:
     """Write the analysis figures (and the diagnosis figures when ``diagnosis`` is given) into ``out_dir``.
 
-    Usable as an ``extra_writer`` of :meth:`AnalysisResult.write`. Returns {file name: path}."""
+    ``names``: only these analysis figure files (default: all). Usable as an ``extra_writer`` of
+    :meth:`AnalysisResult.write`. Returns {file name: path}."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    makers = {"smoothing.png": lambda: fig_smoothing(result), "motion.png": lambda: fig_motion(result),
+    makers = {"smoothing.png": lambda: fig_smoothing(result), "motion.png": lambda: fig_motion(result, seed=result.preset.compliance.seed),
               "compliance.png": lambda: fig_compliance(result),
               "excitation.png": lambda: fig_excitation(result, fps=fps),
               "residuals.png": lambda: fig_residuals(result), "bending_fit.png": lambda: fig_bending_fit(result)}
-    written = {name: _save(make(), out / name) for name, make in makers.items()}
+    written = {name: _save(make(), out / name) for name, make in makers.items() if names is None or name in names}
     if diagnosis is not None:
         written.update(write_diagnosis_figures(diagnosis, out, result=result))
     return written

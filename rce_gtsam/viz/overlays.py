@@ -62,8 +62,12 @@ def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.nda
         aspect = (x1 - x0) / max(y1 - y0, 1)
         h = 4.2
         fig, ax = plt.subplots(figsize=(min(7.16, h * aspect + 1.4), h), constrained_layout=True)
-        ax.imshow(bg, extent=(-0.5, W - 0.5, H - 0.5, -0.5), interpolation="bilinear")
-        ax.imshow(np.full((H, W, 4), [1, 1, 1, 0.25]), extent=(-0.5, W - 0.5, H - 0.5, -0.5))  # fade the photo
+        # only the cropped part of the photo, faded toward white once here (two full-frame images, one of
+        # them a float RGBA veil, were most of an overlay's drawing time)
+        r0, r1 = int(max(0, np.floor(y0))), int(min(H, np.ceil(y1) + 1))
+        c0, c1 = int(max(0, np.floor(x0))), int(min(W, np.ceil(x1) + 1))
+        faded = (0.75 * np.asarray(bg[r0:r1, c0:c1], dtype=np.float32) + 0.25 * 255).astype(np.uint8)
+        ax.imshow(faded, extent=(c0 - 0.5, c1 - 0.5, r1 - 0.5, r0 - 0.5), interpolation="bilinear")
         # a dark casing under every segment keeps pale mid-scale colours visible on a light background
         ax.add_collection(LineCollection(segs, colors="0.15", linewidths=8.5, capstyle="round", zorder=1.5))
         ax.add_collection(LineCollection(segs[~ok], colors=MISSING_COLOR, linewidths=6, capstyle="round",
@@ -74,6 +78,7 @@ def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.nda
         ax.scatter(xy[:, 0], xy[:, 1], s=9, c="white", edgecolors="k", linewidths=0.5, zorder=5)
         r = row[result.graph.root]
         ax.scatter([xy[r, 0]], [xy[r, 1]], s=40, facecolors="none", edgecolors="#1a9850", linewidths=1.5, zorder=6)
+        _label_nodes(ax, xy, ids, edges, row)
         ax.set_xlim(x0, x1)
         ax.set_ylim(y1, y0)
         ax.set_aspect("equal")
@@ -93,23 +98,49 @@ def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.nda
     return fig
 
 
-def write_overlays(result, out_dir: str | Path, first_frame: np.ndarray | None = None) -> dict[str, Path]:
+def _label_nodes(ax, xy: np.ndarray, ids, edges, row) -> None:
+    """Each node's id beside it (the ids the tables and the diagnosis name), 12 pt off the branch across
+    the node's own segments, in dark text with a white halo that reads on any photo."""
+    import matplotlib.patheffects as pe
+    tangent = np.zeros_like(xy)
+    for p, c in edges:  # a node's direction: the sum of its segments' unit vectors (root -> tip)
+        d = xy[row[c]] - xy[row[p]]
+        d = d / (np.linalg.norm(d) or 1.0)
+        tangent[row[p]] += d
+        tangent[row[c]] += d
+    for (x, y), t, nid in zip(xy, tangent, ids):
+        if not (np.isfinite(x) and np.isfinite(y)):
+            continue
+        n = np.array([-t[1], t[0]]) / (np.linalg.norm(t) or 1.0)  # perpendicular, image coordinates (y down)
+        if not n.any():
+            n = np.array([1.0, 0.0])
+        ax.annotate(str(int(nid)), (x, y), xytext=(12 * n[0], -12 * n[1]), textcoords="offset points",
+                    ha="center", va="center", fontsize=6, color="0.1", zorder=7,
+                    path_effects=[pe.withStroke(linewidth=2, foreground="white")])
+
+
+#: Overlay files, and the one that needs kappa's confidence intervals.
+OVERLAY_FILES = ("kappa_overlay.png", "uncertainty_overlay.png")
+CI_OVERLAYS = ("uncertainty_overlay.png",)
+
+
+def write_overlays(result, out_dir: str | Path, first_frame: np.ndarray | None = None,
+                   names=None) -> dict[str, Path]:
     """Write ``kappa_overlay.png`` and ``uncertainty_overlay.png`` into ``out_dir``.
 
     ``first_frame``: (H, W, 3) uint8 RGB first video frame, or None for a neutral background.
-    Usable as an ``extra_writer`` through ``lambda r, d: write_overlays(r, d, frame)``."""
+    ``names``: only these files (default: both). Usable as an ``extra_writer`` through
+    ``lambda r, d: write_overlays(r, d, frame)``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     kappa = result.kappa
     U = result.uncertainty
     unc = {} if U is None else {e: float(u) for e, u in zip(result.response.edges, U)}
     where = "first video frame" if first_frame is not None else "first-frame skeleton"
-    written = {
-        "kappa_overlay.png": _save(fig_overlay(result, kappa, "relative compliance κ (log scale)", KAPPA_CMAP,
-                                               first_frame, log=True, title=f"κ per segment on the {where}"),
-                                   out / "kappa_overlay.png"),
-        "uncertainty_overlay.png": _save(fig_overlay(result, unc, "U_e = CI width / κ", UNCERTAINTY_CMAP,
-                                                     first_frame, title=f"Uncertainty U_e on the {where}"),
-                                         out / "uncertainty_overlay.png"),
+    makers = {
+        "kappa_overlay.png": lambda: fig_overlay(result, kappa, "relative compliance κ (log scale)", KAPPA_CMAP,
+                                                 first_frame, log=True, title=f"κ per segment on the {where}"),
+        "uncertainty_overlay.png": lambda: fig_overlay(result, unc, "U_e = CI width / κ", UNCERTAINTY_CMAP,
+                                                       first_frame, title=f"Uncertainty U_e on the {where}"),
     }
-    return written
+    return {name: _save(make(), out / name) for name, make in makers.items() if names is None or name in names}

@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
+from ..fileio import temp_file_beside
 from .scene import AnalysisView, covariance_ellipses
 from .style import (EXCITATION_COLOR, KAPPA_CMAP, PREDICTED_COLOR, RAW_COLOR, RESIDUAL_CMAP,
                     SMOOTHED_COLOR, cmap_rgb, hex_to_rgb, robust_abs_max)
@@ -223,14 +224,10 @@ def save_recording(result, path: str | Path, video_path: str | Path | None = Non
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     view = _as_view(result)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".rrd", dir=path.parent)
-    os.close(fd)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a recording is an ordinary output file
+    tmp = temp_file_beside(path, suffix=".rrd")
     try:
         rec = rr.RecordingStream(APP_ID)
-        rec.save(tmp, default_blueprint=build_blueprint(view, diagnosis, video=video_path is not None))
+        rec.save(str(tmp), default_blueprint=build_blueprint(view, diagnosis, video=video_path is not None))
         log_analysis(view, rec, video_path=video_path, fps=fps)
         if diagnosis is not None:
             log_diagnosis(diagnosis, rec, view=view)

@@ -81,7 +81,9 @@ def mpl_style():
 def save_png(fig, path: Path) -> Path:
     """Save ``fig`` to ``path`` with the shared output settings and close it; returns ``path``."""
     import matplotlib.pyplot as plt
-    # savefig runs outside the rc_context the figure was built in, so pass the output settings here
-    fig.savefig(path, dpi=RC["savefig.dpi"], bbox_inches="tight", pad_inches=RC["savefig.pad_inches"])
+    # savefig runs outside the rc_context the figure was built in, so pass the output settings here. Every
+    # figure is laid out by constrained_layout, which keeps its artists inside the canvas: a "tight" bounding
+    # box would only trim the margin, at the price of drawing the whole figure twice.
+    fig.savefig(path, dpi=RC["savefig.dpi"], bbox_inches=None)
     plt.close(fig)
     return path

@@ -1,0 +1,110 @@
+"""Draw the figures in a second process while the analysis runs, so they do not hold the user up.
+
+:class:`FigureWorker` forks at its first job: ``rce analyze`` submits that job (every figure that needs no
+confidence interval) just before the bootstrap, so the worker inherits the analysis in memory with every
+module already imported, and draws while the main process bootstraps and writes the tables; the main
+process never imports matplotlib. Later jobs (the figures that need the CIs, the diagnosis figures of
+``rce run``) are a module-level function plus its arguments pickled through a pipe (~12 MB for plant 1,
+unpickled without new imports). Jobs run in order; each one's return value or error comes back. Where
+``fork`` is not available the jobs run in the calling process when their results are asked for.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import traceback
+from pathlib import Path
+
+
+def _serve(conn, first) -> None:
+    """Worker loop: run the first job (inherited through the fork), then jobs from the pipe until None."""
+    job = first
+    while True:
+        if job is None:
+            return
+        fn, args, kwargs = job
+        try:
+            conn.send(("ok", fn(*args, **kwargs)))
+        except BaseException as exc:  # noqa: BLE001 - the parent re-raises it
+            conn.send(("error", (exc, traceback.format_exc())))
+        try:
+            job = conn.recv()
+        except EOFError:
+            return
+
+
+class FigureWorker:
+    """A worker process that runs plotting jobs in submission order (see module docstring)."""
+
+    def __init__(self):
+        self._pending = 0
+        self._proc = self._conn = None
+        self._inline: list = []
+
+    def submit(self, fn, *args, **kwargs) -> None:
+        """Queue ``fn(*args, **kwargs)``; its result comes back from :meth:`results`. The first job forks."""
+        if self._proc is None and not self._inline:
+            try:
+                ctx = multiprocessing.get_context("fork")
+            except ValueError:
+                ctx = None
+            if ctx is not None:
+                self._conn, child = ctx.Pipe()
+                self._proc = ctx.Process(target=_serve, args=(child, (fn, args, kwargs)), daemon=True,
+                                         name="rce-figures")
+                self._proc.start()
+                child.close()
+                self._pending += 1
+                return
+        if self._proc is None:
+            self._inline.append((fn, args, kwargs))
+            return
+        self._conn.send((fn, args, kwargs))
+        self._pending += 1
+
+    def results(self) -> list:
+        """Wait for every submitted job; their return values in order. A job's error is raised here."""
+        out = []
+        if self._proc is None:
+            jobs, self._inline = self._inline, []
+            return [fn(*a, **k) for fn, a, k in jobs]
+        while self._pending:
+            try:
+                status, value = self._conn.recv()
+            except EOFError:
+                raise RuntimeError("the figure worker process died") from None
+            self._pending -= 1
+            if status == "error":
+                exc, tb = value
+                raise RuntimeError(f"drawing the figures failed:\n{tb}") from exc
+            out.append(value)
+        return out
+
+    def close(self) -> None:
+        if self._proc is not None:
+            try:
+                self._conn.send(None)
+            except (BrokenPipeError, OSError):
+                pass
+            self._proc.join(timeout=5)
+            if self._proc.is_alive():
+                self._proc.terminate()
+            self._proc = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False
+
+
+def draw_analysis_figures(result, out_dir: str | Path, names, overlay_names, first_frame=None) -> dict[str, str]:
+    """Job: the named analysis figures and overlays of ``result`` into ``out_dir``; {file name: path}."""
+    from ..viz.figures import write_figures
+    from ..viz.overlays import write_overlays
+
+    out = {k: str(v) for k, v in write_figures(result, out_dir, names=names).items()}
+    out.update({k: str(v) for k, v in write_overlays(result, out_dir, first_frame=first_frame,
+                                                         names=overlay_names).items()})
+    return out

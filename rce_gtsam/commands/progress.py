@@ -1,0 +1,113 @@
+"""Progress on stderr for the long commands (``analyze``, ``diagnose``, ``run``) and the wall clock they report.
+
+:class:`Steps` is one tqdm bar over a command's named steps (load, smooth, bending, fit, bootstrap,
+diagnosis, figures, ...): the bar names the step in progress and its elapsed time keeps ticking while a
+step runs (a step such as the diagnosis can take tens of seconds without reporting anything itself).
+It draws nothing with ``--quiet`` or when stderr is not a terminal (a log file or a test capturing output
+gets no carriage-return clutter); ``RCE_PROGRESS=1`` forces it on (tests of the bar itself).
+
+:func:`process_seconds` is the wall time since the Python process started (imports included): the total a
+command prints is the time the user waited.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import threading
+import time
+from contextlib import contextmanager
+
+#: perf_counter() when this module was imported: the fallback start when /proc is not available.
+_IMPORTED_AT = time.perf_counter()
+
+
+def process_seconds() -> float:
+    """Seconds since this process started (Linux: from /proc; elsewhere: since the CLI was imported)."""
+    try:
+        with open("/proc/self/stat") as f:
+            start_ticks = float(f.read().rsplit(")", 1)[1].split()[19])
+        with open("/proc/uptime") as f:
+            uptime = float(f.read().split()[0])
+        return max(uptime - start_ticks / os.sysconf("SC_CLK_TCK"), time.perf_counter() - _IMPORTED_AT)
+    except (OSError, ValueError, IndexError):
+        return time.perf_counter() - _IMPORTED_AT
+
+
+def add_quiet_argument(p: argparse.ArgumentParser, *aliases: str) -> None:
+    """``--quiet`` (and any older ``aliases`` such as ``--no-progress``): no progress bars."""
+    p.add_argument("--quiet", "-q", *aliases, action="store_true", dest="quiet",
+                   help="no progress bars on stderr (they are drawn only when stderr is a terminal)")
+
+
+def progress_enabled(quiet: bool) -> bool:
+    """Whether to draw progress bars: not with ``--quiet``; on a terminal, or when ``RCE_PROGRESS=1``."""
+    if quiet:
+        return False
+    if os.environ.get("RCE_PROGRESS") == "1":
+        return True
+    return sys.stderr.isatty()
+
+
+class Steps:
+    """A tqdm bar over named steps on stderr.
+
+    ``steps``: the step names in order (their count is the bar's total). Use ``with steps.step("smooth"):``
+    around each step, or :meth:`callback` as a ``progress(name)`` hook that starts the named step (the
+    previous one then counts as done). ``enabled=False``: no output at all.
+    """
+
+    def __init__(self, command: str, steps: list[str], enabled: bool = True):
+        self.enabled = enabled
+        self.names = list(steps)
+        self.bar = None
+        self._current: str | None = None
+        self._stop = threading.Event()
+        self._ticker: threading.Thread | None = None
+        if enabled:
+            from tqdm import tqdm
+            self.bar = tqdm(total=len(self.names), desc=command, unit="step", file=sys.stderr, leave=False,
+                            dynamic_ncols=True, bar_format="{desc}: {n_fmt}/{total_fmt} steps |{bar:20}| "
+                                                           "{elapsed}{postfix}")
+            self._command = command
+            self._ticker = threading.Thread(target=self._tick, daemon=True)
+            self._ticker.start()
+
+    def _tick(self) -> None:
+        while not self._stop.wait(0.5):
+            bar = self.bar
+            if bar is not None:
+                bar.refresh()
+
+    def start(self, name: str) -> None:
+        """Mark the previous step done and show ``name`` as the step in progress."""
+        if self.bar is None:
+            return
+        if self._current is not None:
+            self.bar.update(1)
+        self._current = name
+        self.bar.set_description_str(f"{self._command}: {name}", refresh=True)
+
+    def callback(self, name: str) -> None:
+        """``progress(name)`` hook for :func:`rce_gtsam.pipeline.analyze`."""
+        self.start(name)
+
+    @contextmanager
+    def step(self, name: str):
+        self.start(name)
+        yield
+
+    def close(self) -> None:
+        """Finish the bar and erase it (the command's summary follows on stdout)."""
+        self._stop.set()
+        if self.bar is not None:
+            bar, self.bar = self.bar, None
+            bar.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+        return False

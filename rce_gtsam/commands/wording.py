@@ -1,0 +1,56 @@
+"""What the commands say: the diagnosis' advice in command-line words, and the shared ``--candidates`` option.
+
+The diagnosis explains a verdict for Python users ("Fit the model with Delay()"); a command-line user adds
+an effect with ``rce analyze --effects delay``. :func:`cli_wording` rewrites the one into the other (the
+class names come from :data:`rce_gtsam.effects.CANDIDATES`, so a new effect is covered without an edit here).
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+
+_FIT_WITH = re.compile(r"Fit (?:the model )?with (\w+)\(\)")
+
+
+def cli_wording(text: str) -> str:
+    """``text`` with every "Fit [the model] with Name()" replaced by the ``rce analyze --effects`` command."""
+    if not text or "()" not in text:
+        return text
+    from ..effects import CANDIDATES
+    name_of = {factory.__name__: name for name, factory in CANDIDATES.items()}
+
+    def repl(m: re.Match) -> str:
+        name = name_of.get(m.group(1))
+        return f"Fit it with `rce analyze TRACKS GRAPH --effects {name}`" if name else m.group(0)
+    return _FIT_WITH.sub(repl, text)
+
+
+def cli_wording_json(data: dict) -> dict:
+    """The diagnosis JSON / figure mapping with its ``explanation`` and ``report`` texts in CLI wording."""
+    for key in ("explanation", "report"):
+        if isinstance(data.get(key), str):
+            data[key] = cli_wording(data[key])
+    return data
+
+
+def add_candidates_argument(p: argparse.ArgumentParser, command: str) -> None:
+    """``--candidates A,B``: the effects the diagnosis tests (``--effects`` is the deprecated old name here;
+    in ``rce analyze`` ``--effects`` adds terms to the fitted model)."""
+    p.add_argument("--candidates", default=None, metavar="A,B",
+                   help="effects the diagnosis tests, comma-separated (default: all five: delay,dynamics,"
+                        "second_mode,offset,nonlinear)")
+    p.add_argument("--effects", default=None, dest="effects_deprecated", help=argparse.SUPPRESS)
+    p.set_defaults(_command_name=command)
+
+
+def candidates_from_args(args: argparse.Namespace) -> str | None:
+    """The ``--candidates`` value; the deprecated ``--effects`` is accepted with a one-line note on stderr."""
+    old = getattr(args, "effects_deprecated", None)
+    if old is not None:
+        print(f"rce {args._command_name}: note: --effects is now --candidates here (the effects to test); "
+              f"--effects adds effects to the model only in `rce analyze`", file=sys.stderr)
+        if args.candidates is None:
+            return old
+    return args.candidates
