@@ -392,14 +392,36 @@ def block_bootstrap_indices(n_columns: int, block_length: int, n_boot: int,
     Block starts are drawn uniformly from 0..T-L; blocks of L consecutive columns are concatenated
     until at least T indices, then truncated to T.
     """
+    parts = list(iter_block_bootstrap_indices(n_columns, block_length, n_boot, rng, max(n_boot, 1)))
+    return parts[0] if parts else np.empty((0, n_columns), dtype=int)
+
+
+def iter_block_bootstrap_indices(n_columns: int, block_length: int, n_boot: int, rng: np.random.Generator,
+                                 chunk: int):
+    """:func:`block_bootstrap_indices` streamed: yields (<= chunk, T) pieces of the same array (the same
+    random draws in the same order), so a long recording never holds all (n_boot, T) indices."""
     T = n_columns
     L = max(3, min(block_length, T))
     n_blocks = int(np.ceil(T / L))
-    out = np.empty((n_boot, T), dtype=int)
-    for b in range(n_boot):
-        starts = rng.integers(0, T - L + 1, size=n_blocks)
-        out[b] = (starts[:, None] + np.arange(L)[None, :]).ravel()[:T]
-    return out
+    for s in range(0, n_boot, chunk):
+        out = np.empty((min(chunk, n_boot - s), T), dtype=int)
+        for b in range(out.shape[0]):
+            starts = rng.integers(0, T - L + 1, size=n_blocks)
+            out[b] = (starts[:, None] + np.arange(L)[None, :]).ravel()[:T]
+        yield out
+
+
+#: Largest resampled batch the bootstrap refits at once, in array elements per (B, E, T) array
+#: (float64: 16 MB; the fit holds about a dozen such arrays). Fewer resamples are batched on long
+#: recordings: 64 up to E x T = 32,768 (e.g. 20 segments x 1,600 frames), 2 at 20 x 50,000.
+BOOTSTRAP_CHUNK_ELEMENTS = 2 ** 21
+
+
+def bootstrap_chunk(chunk: int, n_edges: int, n_frames: int, per_resample_precision: bool = False) -> int:
+    """Resamples per batch: ``chunk``, fewer where a batch would exceed :data:`BOOTSTRAP_CHUNK_ELEMENTS`
+    (a per-resample (T, E, E) precision counts too), at least 1."""
+    per = n_edges * n_frames * (1 + (n_edges if per_resample_precision else 0))
+    return max(1, min(int(chunk), BOOTSTRAP_CHUNK_ELEMENTS // max(per, 1)))
 
 
 def phase_randomised_residuals(R: np.ndarray, n_boot: int, rng: np.random.Generator) -> np.ndarray:
@@ -496,17 +518,19 @@ def bootstrap_kappa(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
 
 
 def _block_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, precision=None) -> BootstrapCI:
-    """Moving blocks of ``config.block_length`` frames of the data, every resample refitted."""
+    """Moving blocks of ``config.block_length`` frames of the data, every resample refitted; the
+    resamples are drawn and refitted in batches of :func:`bootstrap_chunk` (memory bounded in T)."""
     E, T = Y.shape
     rng = np.random.default_rng(config.seed)
-    idx = block_bootstrap_indices(T, config.block_length, config.n_boot, rng)
+    chunk = bootstrap_chunk(chunk, E, T, per_resample_precision=precision is not None)
     samples = np.empty((config.n_boot, E))
-    for s in range(0, config.n_boot, chunk):
-        cols = idx[s:s + chunk]
+    s = 0
+    for cols in iter_block_bootstrap_indices(T, config.block_length, config.n_boot, rng, chunk):
         Yb = np.transpose(Y[:, cols], (1, 0, 2))
         Wb = None if weights is None else np.transpose(weights[:, cols], (1, 0, 2))
         Pb = None if precision is None else precision[cols]
-        samples[s:s + chunk] = np.abs(_fit_batch(Yb, config, Wb, Pb)[0])
+        samples[s:s + len(cols)] = np.abs(_fit_batch(Yb, config, Wb, Pb)[0])
+        s += len(cols)
     low, high = np.percentile(samples, [2.5, 97.5], axis=0)
     return BootstrapCI(low=low, high=high, samples=samples,
                        block_length=max(3, min(config.block_length, T)), seed=config.seed)
@@ -519,6 +543,7 @@ def _phase_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, fit: Rank
                          "are not a zero-mean series)")
     E, T = Y.shape
     rng = np.random.default_rng(config.seed)
+    chunk = bootstrap_chunk(chunk, E, T)  # the resampled residuals are made batch by batch
     mask = np.isfinite(Y)
     pred = fit.predict()
     R = np.where(mask, Y - pred, np.nan)

@@ -92,7 +92,7 @@ def _tridiagonal_blocks(Lam: sp.spmatrix, m: int, T: int) -> tuple[np.ndarray, n
     return diag, sub
 
 
-def banded_selected_inverse(Lam: sp.spmatrix, block: int) -> np.ndarray:
+def banded_selected_inverse(Lam: sp.spmatrix, block: int, first_frame: int = 0) -> np.ndarray:
     """Within-frame blocks ``Σ_tt`` of ``Σ = Λ⁻¹`` for a symmetric positive-definite block-banded Λ.
 
     Parameters
@@ -100,6 +100,7 @@ def banded_selected_inverse(Lam: sp.spmatrix, block: int) -> np.ndarray:
     Lam: (T·n, T·n) sparse symmetric matrix, frame-major, uniform block size ``block`` = n, with
         any frame bandwidth b (found from the sparsity).
     block: n, scalars per frame.
+    first_frame: frame number of the first block (only for the error message).
 
     Returns
     -------
@@ -131,14 +132,16 @@ def banded_selected_inverse(Lam: sp.spmatrix, block: int) -> np.ndarray:
     if pad:
         Lam = sp.block_diag([Lam, sp.identity(pad)], format="csr")
     with single_threaded_blas():
-        return _block_tridiagonal_selected_inverse(*_tridiagonal_blocks(Lam, m, T), n, T_frames, b)
+        return _block_tridiagonal_selected_inverse(*_tridiagonal_blocks(Lam, m, T), n, T_frames, b, first_frame)
 
 
 def _block_tridiagonal_selected_inverse(diag: np.ndarray, sub: np.ndarray, n: int, T_frames: int,
-                                        b: int) -> np.ndarray:
+                                        b: int, first_frame: int = 0) -> np.ndarray:
+    """The recursions of :func:`banded_selected_inverse`. Memory: ``diag`` and ``sub`` are overwritten
+    by L_tt and C_t (no other (T, m, m) array is made); Σ_tt is carried one super-block at a time and
+    only its b frame blocks (n x n) are kept."""
     T, m, _ = diag.shape
-    L = np.empty_like(diag)      # L[t, t]
-    C = np.empty_like(sub)       # C[t] = L[t+1, t]
+    L, C = diag, sub             # L[t] = L[t, t] and C[t] = L[t+1, t], in place of Λ's blocks
     for t in range(T):
         S = diag[t] - C[t - 1] @ C[t - 1].T if t > 0 else diag[t]
         try:
@@ -149,23 +152,26 @@ def _block_tridiagonal_selected_inverse(diag: np.ndarray, sub: np.ndarray, n: in
             if np.min(np.diag(L[t])) ** 2 <= PIVOT_RTOL * np.max(np.diag(S)):
                 raise np.linalg.LinAlgError
         except np.linalg.LinAlgError:
-            f0 = t * b
+            f0 = first_frame + t * b
             raise SingularInformationError(
                 f"the smoother's information matrix is singular near frame {f0}: some node position "
                 "there is not constrained by any factor") from None
         if t < T - 1:
             # C[t] = sub[t] · L[t]^-T  ⇔  L[t] · C[t]ᵀ = sub[t]ᵀ
             C[t] = scipy.linalg.solve_triangular(L[t], sub[t].T, lower=True, check_finite=False).T
-    G = np.linalg.inv(L)                                  # batched L_tt^-1 (triangular)
-    D = np.matmul(np.swapaxes(G, 1, 2), G)                # G_tᵀ G_t = (L_tt L_ttᵀ)^-1
-    H = np.matmul(np.swapaxes(G[:-1], 1, 2), np.swapaxes(C, 1, 2))
-    Sig = np.empty_like(diag)
-    Sig[T - 1] = D[T - 1]
-    for t in range(T - 2, -1, -1):
-        Sig[t] = D[t] + H[t] @ Sig[t + 1] @ H[t].T
-    # Split each super-block's diagonal into its b frame blocks and drop the padding.
-    frames = Sig.reshape(T, b, n, b, n)[:, np.arange(b), :, np.arange(b), :]  # (b, T, n, n)
-    out = np.swapaxes(frames, 0, 1).reshape(T * b, n, n)[:T_frames]
+    out = np.empty((T * b, n, n))
+    frames = np.arange(b)
+    Sig = None
+    for t in range(T - 1, -1, -1):
+        G = np.linalg.inv(L[t])                           # L_tt^-1 (triangular)
+        Sig_t = G.T @ G                                   # G_tᵀ G_t = (L_tt L_ttᵀ)^-1
+        if Sig is not None:
+            H = G.T @ C[t].T
+            Sig_t = Sig_t + H @ Sig @ H.T
+        Sig = Sig_t
+        # the super-block's b frame blocks on its diagonal
+        out[t * b:(t + 1) * b] = Sig.reshape(b, n, b, n)[frames, :, frames, :]
+    out = out[:T_frames]
     return 0.5 * (out + np.swapaxes(out, 1, 2))
 
 
@@ -194,11 +200,12 @@ class single_threaded_blas:
 
 
 def frame_marginals(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, n_nodes: int,
-                    n_frames: int, jacobian: sp.spmatrix | None = None) -> np.ndarray:
+                    n_frames: int, jacobian: sp.spmatrix | None = None, first_frame: int = 0) -> np.ndarray:
     """(F, 2N, 2N) joint covariance of all nodes at each frame (px²), from GTSAM's linearisation of
     ``graph`` at ``values``. Pass ``jacobian`` (the whitened sparse Jacobian of that linearisation,
     from :func:`whitened_jacobian`) if you already have it. Keys must sort frame-major with 2N
-    scalars per frame (frame states, as :func:`rce_gtsam.factors.frame_key` keys them)."""
+    scalars per frame (frame states, as :func:`rce_gtsam.factors.frame_key` keys them). ``first_frame``:
+    the frame number of the first state (a window of a long recording), for error messages."""
     n = 2 * int(n_nodes)
     if int(values.dim()) != n * int(n_frames):
         raise ValueError(f"values hold {values.dim()} scalars, expected 2·{n_nodes}·{n_frames}")
@@ -206,4 +213,4 @@ def frame_marginals(graph: gtsam.NonlinearFactorGraph, values: gtsam.Values, n_n
         jacobian, _ = whitened_jacobian(graph.linearize(values), n_cols=n * n_frames)
     if jacobian.shape[1] != n * n_frames:
         raise ValueError(f"Jacobian has {jacobian.shape[1]} columns, expected {n * n_frames}")
-    return banded_selected_inverse((jacobian.T @ jacobian).tocsc(), n)
+    return banded_selected_inverse((jacobian.T @ jacobian).tocsc(), n, first_frame)

@@ -155,7 +155,7 @@ def build_response(bending: BendingResult, geometry: Geometry, preset: Preset) -
         variance = bending.variance_deg2[order][:, frames].copy()
         variance[~inlier] = np.nan
     if bending.covariance_deg2 is not None:
-        covariance = bending.covariance_deg2[frames][:, order][:, :, order].copy()
+        covariance = bending.covariance_deg2[np.ix_(frames, order, order)]  # one (T, E, E) copy
         out = ~inlier.T  # (T, E)
         covariance[out[:, :, None] | out[:, None, :]] = np.nan
     rd = np.array([geometry.root_distance_px[bending.bends[k].child] for k in order])
