@@ -412,9 +412,10 @@ def iter_block_bootstrap_indices(n_columns: int, block_length: int, n_boot: int,
 
 
 #: Largest resampled batch the bootstrap refits at once, in array elements per (B, E, T) array
-#: (float64: 16 MB; the fit holds about a dozen such arrays). Fewer resamples are batched on long
-#: recordings: 64 up to E x T = 32,768 (e.g. 20 segments x 1,600 frames), 2 at 20 x 50,000.
-BOOTSTRAP_CHUNK_ELEMENTS = 2 ** 21
+#: (float64: 8 MB; the fit holds about fifteen such arrays). Fewer resamples are batched on long
+#: recordings: 64 up to E x T = 16,384 (e.g. 20 segments x 800 frames), 1 at 18 x 50,000. The resamples
+#: and their random draws do not depend on the batch size.
+BOOTSTRAP_CHUNK_ELEMENTS = 2 ** 20
 
 
 def bootstrap_chunk(chunk: int, n_edges: int, n_frames: int, per_resample_precision: bool = False) -> int:
@@ -438,16 +439,28 @@ def phase_randomised_residuals(R: np.ndarray, n_boot: int, rng: np.random.Genera
     enters kappa through the excitation's mean): the surrogate's mean is drawn with the spectrum at the
     lowest non-zero frequency as its variance, sqrt(2) Re(F_1 exp(i phi_0)), jointly across rows.
     """
+    return surrogate_residuals(R, *draw_phases(rng, n_boot, R.shape[1]))
+
+
+def draw_phases(rng: np.random.Generator, n_boot: int, n_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """The random draws of :func:`phase_randomised_residuals` for ``n_boot`` surrogates of ``n_frames``:
+    (n_boot, K) phases of the K = T // 2 + 1 frequencies, then (n_boot, 1) phases of the mean (radians)."""
+    K = n_frames // 2 + 1
+    phase = rng.uniform(0.0, 2 * np.pi, size=(n_boot, K))
+    dc_phase = rng.uniform(0.0, 2 * np.pi, size=(n_boot, 1)) if K > 1 else None
+    return phase, dc_phase
+
+
+def surrogate_residuals(R: np.ndarray, phase: np.ndarray, dc_phase: np.ndarray | None) -> np.ndarray:
+    """(len(phase), E, T) surrogates of R (E, T) for given :func:`draw_phases` draws (any subset of rows)."""
     E, T = R.shape
     ok = np.isfinite(R)
     X = np.where(ok, R, 0.0)
     X = X - X.mean(axis=1, keepdims=True)
     F = np.fft.rfft(X, axis=1)  # (E, K)
     K = F.shape[1]
-    phase = rng.uniform(0.0, 2 * np.pi, size=(n_boot, K))
     Fs = F[None] * np.exp(1j * phase)[:, None, :]
     if K > 1:
-        dc_phase = rng.uniform(0.0, 2 * np.pi, size=(n_boot, 1))
         Fs[:, :, 0] = math.sqrt(2.0) * np.real(F[None, :, 1] * np.exp(1j * dc_phase))
     if T % 2 == 0 and K > 1:
         Fs[:, :, -1] = np.real(Fs[:, :, -1]) * math.sqrt(2.0)  # the Nyquist term must stay real
@@ -543,17 +556,21 @@ def _phase_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, fit: Rank
                          "are not a zero-mean series)")
     E, T = Y.shape
     rng = np.random.default_rng(config.seed)
-    chunk = bootstrap_chunk(chunk, E, T)  # the resampled residuals are made batch by batch
+    batch = bootstrap_chunk(chunk, E, T)
     mask = np.isfinite(Y)
     pred = fit.predict()
     R = np.where(mask, Y - pred, np.nan)
     samples = np.empty((config.n_boot, E))
+    # phases are drawn ``chunk`` resamples at a time (so the random stream, and the result, do not depend
+    # on the recording's length); the surrogates are made and refitted ``batch`` at a time
     for s in range(0, config.n_boot, chunk):
-        n = min(chunk, config.n_boot - s)
-        Yb = pred[None] + phase_randomised_residuals(R, n, rng)
-        Yb[:, ~mask] = np.nan
-        Wb = None if weights is None else np.broadcast_to(weights, Yb.shape)
-        samples[s:s + n] = np.abs(_fit_batch(Yb, config, Wb, precision)[0])
+        phase, dc_phase = draw_phases(rng, min(chunk, config.n_boot - s), T)
+        for b in range(0, len(phase), batch):
+            sl = slice(b, b + batch)
+            Yb = pred[None] + surrogate_residuals(R, phase[sl], None if dc_phase is None else dc_phase[sl])
+            Yb[:, ~mask] = np.nan
+            Wb = None if weights is None else np.broadcast_to(weights, Yb.shape)
+            samples[s + b:s + b + len(Yb)] = np.abs(_fit_batch(Yb, config, Wb, precision)[0])
     n_eff = excitation_dof(R, fit.z)
     factor = small_sample_factor(n_eff)
     # deviations from the resamples' own median: data made from an already shrunk kappa_hat and shrunk

@@ -29,8 +29,8 @@ class SmootherConfig:
         ``robust_k`` in whitened units (sigmas).
     marginals: compute marginal covariances (per node-frame and joint per frame).
     window_frames: recordings longer than this are solved in overlapping windows of about this many
-        frames (:mod:`rce_gtsam.windowing`), so memory stays bounded (GTSAM and the marginals take
-        ~0.4 MB per frame at 20 nodes, growing as N^2); 0 = always one window (the whole recording).
+        frames (:mod:`rce_gtsam.windowing`), so memory stays bounded (GTSAM's graph and Bayes tree take
+        ~0.25 MB per frame at 20 nodes, growing as N^2); 0 = always one window (the whole recording).
     window_margin: observed frames of every node solved on each side of a window's core and then
         discarded (burn-in; at most ``window_frames`` frames). The estimate at a frame forgets a
         measurement geometrically in the observed frames between them; with 150 the cores match the
@@ -47,7 +47,7 @@ class SmootherConfig:
     robust: Literal["huber", "cauchy"] | None = None
     robust_k: float = 1.345
     marginals: bool = True
-    window_frames: int = 2000
+    window_frames: int = 1200
     window_margin: int = 150
 
 

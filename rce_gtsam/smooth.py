@@ -47,6 +47,7 @@ from .graph import BranchGraph
 from .presets import SmootherConfig
 from .presmooth import moving_average
 from .tracks import Tracks
+from .memory import release_freed_memory
 from .windowing import plan_windows
 
 @dataclass(frozen=True)
@@ -418,6 +419,8 @@ def _smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) -
             cov[:, w.core_lo:w.core_hi] = fc.reshape(-1, N, 2, N, 2)[:, idx, :, idx, :]
             frame_cov[w.core_lo:w.core_hi] = fc
         parts.append(part.report)
+        del part
+        release_freed_memory()  # this window's GTSAM heap (and the loader's), before more arrays are made
     report = SmootherReport(
         iterations=max(r.iterations for r in parts), initial_error=sum(r.initial_error for r in parts),
         final_error=sum(r.final_error for r in parts), n_variables=sum(r.n_variables for r in parts),

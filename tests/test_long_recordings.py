@@ -9,8 +9,9 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from rce_gtsam.compliance import (BOOTSTRAP_CHUNK_ELEMENTS, block_bootstrap_indices, bootstrap_chunk,
-                                  iter_block_bootstrap_indices)
+from rce_gtsam import compliance
+from rce_gtsam.compliance import (BOOTSTRAP_CHUNK_ELEMENTS, block_bootstrap_indices, bootstrap_chunk, bootstrap_kappa,
+                                  fit_rank1, iter_block_bootstrap_indices)
 from rce_gtsam.errors import InputError
 from rce_gtsam.graph import BranchGraph
 from rce_gtsam.presets import get_preset
@@ -120,7 +121,26 @@ def test_block_bootstrap_indices_stream_the_same_draws():
 
 def test_bootstrap_batches_shrink_with_the_recording():
     assert bootstrap_chunk(64, 23, 590) == 64                  # plant 2: unchanged batches
-    assert bootstrap_chunk(64, 18, 50_000) == 2
+    assert bootstrap_chunk(64, 18, 50_000) == 1
     assert bootstrap_chunk(64, 18, 50_000) * 18 * 50_000 <= BOOTSTRAP_CHUNK_ELEMENTS
     assert bootstrap_chunk(64, 20, 10**6) == 1
     assert bootstrap_chunk(64, 23, 590, per_resample_precision=True) < 64
+
+
+@pytest.mark.parametrize("method", ["phase", "block"])
+def test_bootstrap_does_not_depend_on_its_batch_size(monkeypatch, method):
+    """The resamples of a long recording are refitted a few at a time; they, and the intervals, are the
+    ones the 64-resample batches of a short recording give."""
+    rng = np.random.default_rng(4)
+    E, T = 5, 301
+    z = np.convolve(rng.normal(size=T + 20), np.ones(21) / 21, mode="valid")
+    Y = np.exp(rng.normal(0, 0.5, E))[:, None] * z[None] + rng.normal(0, 0.1, (E, T))
+    Y[1, 40:60] = np.nan
+    cfg = dataclasses.replace(get_preset("default").compliance, n_boot=70, bootstrap=method)
+    fit = fit_rank1(Y, cfg)
+    ref = bootstrap_kappa(Y, cfg, fit=fit)
+    monkeypatch.setattr(compliance, "BOOTSTRAP_CHUNK_ELEMENTS", 3 * E * T)  # batches of 3 resamples
+    assert bootstrap_chunk(64, E, T) == 3
+    small = bootstrap_kappa(Y, cfg, fit=fit)
+    np.testing.assert_array_equal(small.samples, ref.samples)
+    np.testing.assert_array_equal(small.low, ref.low)
