@@ -40,8 +40,8 @@ class BendingResult:
     variance_deg2: (B, F) first-order angle variance in deg^2, or None without covariances.
     covariance_deg2: (F, B, B) first-order covariance between the bends at each frame in deg^2 (bends
         that share a node are correlated: a node's error turns one bend one way and the next the other
-        way), or None without covariances; NaN where either angle is missing. Stored as float32 (it is
-        4 B^2 bytes per frame); its diagonal is ``variance_deg2`` (float64).
+        way), or None without covariances; NaN where either angle is missing. Its diagonal is
+        ``variance_deg2``.
     signed: whether angles are signed turning angles (True) or unsigned interior angles.
     """
 
@@ -143,8 +143,7 @@ def compute_bending(xy: np.ndarray, node_ids, graph: BranchGraph, config: Bendin
     covariance = variance = None
     if frame_cov is not None:
         covariance = bend_covariance(xy, row, bends, frame_cov, angle, config.signed)
-        variance = np.diagonal(covariance, axis1=1, axis2=2).T.astype(float)  # NaN where the angle is missing
-        covariance = covariance.astype(np.float32)
+        variance = np.diagonal(covariance, axis1=1, axis2=2).T.copy()  # NaN where the angle is missing
     return BendingResult(bends=bends, angle_deg=angle, rest_deg=rest, delta_deg=delta, inlier=inlier,
                          variance_deg2=variance, signed=config.signed, covariance_deg2=covariance)
 

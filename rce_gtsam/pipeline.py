@@ -32,7 +32,7 @@ class Response:
        otherwise); NaN where the bend is missing or an outlier.
     variance: (E, T) propagated angle variance in deg^2, or None.
     covariance: (T, E, E) propagated covariance between the rows at each frame in deg^2 (NaN where an
-       entry is missing or an outlier), or None; float32 like ``BendingResult.covariance_deg2``.
+       entry is missing or an outlier), or None.
     edges: the downstream edge (joint, child) of each row; rows are ordered by root distance, then
        joint, then child.
     bend_rows: index of each row in ``BendingResult.bends``.
@@ -76,7 +76,7 @@ class Response:
         """
         if self.covariance is None or self.variance is None:
             return None
-        return frame_precisions(self.covariance.astype(float), np.isfinite(self.Y)) / self._inverse_variance()[1]
+        return frame_precisions(self.covariance, np.isfinite(self.Y)) / self._inverse_variance()[1]
 
 
 @dataclass(frozen=True, eq=False)

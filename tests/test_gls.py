@@ -127,8 +127,7 @@ def test_bend_covariance_matches_monte_carlo_and_its_diagonal_is_the_variance():
         emp = np.cov(res.angle_deg)
         pred = np.mean(res.covariance_deg2, axis=0)
         np.testing.assert_allclose(pred, emp, rtol=0.1, atol=0.03 * np.abs(emp).max())
-        # the (F, B, B) covariance is stored in float32, the variances in float64
-        np.testing.assert_allclose(np.diagonal(res.covariance_deg2, axis1=1, axis2=2), res.variance_deg2.T, rtol=1e-6)
+        np.testing.assert_allclose(np.diagonal(res.covariance_deg2, axis1=1, axis2=2), res.variance_deg2.T, rtol=1e-9)
         if signed:  # neighbouring bends share two nodes: a node's error turns them opposite ways
             assert pred[0, 1] < 0
         else:  # the interior angle flips the sign of the gradient with the turn's sign (+30 then -35 deg)
