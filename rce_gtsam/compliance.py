@@ -439,10 +439,10 @@ def phase_randomised_residuals(R: np.ndarray, n_boot: int, rng: np.random.Genera
     enters kappa through the excitation's mean): the surrogate's mean is drawn with the spectrum at the
     lowest non-zero frequency as its variance, sqrt(2) Re(F_1 exp(i phi_0)), jointly across rows.
     """
-    return surrogate_residuals(R, *draw_phases(rng, n_boot, R.shape[1]))
+    return surrogate_residuals(residual_spectrum(R), R.shape[1], *draw_phases(rng, n_boot, R.shape[1]))
 
 
-def draw_phases(rng: np.random.Generator, n_boot: int, n_frames: int) -> tuple[np.ndarray, np.ndarray]:
+def draw_phases(rng: np.random.Generator, n_boot: int, n_frames: int) -> tuple[np.ndarray, np.ndarray | None]:
     """The random draws of :func:`phase_randomised_residuals` for ``n_boot`` surrogates of ``n_frames``:
     (n_boot, K) phases of the K = T // 2 + 1 frequencies, then (n_boot, 1) phases of the mean (radians)."""
     K = n_frames // 2 + 1
@@ -451,14 +451,16 @@ def draw_phases(rng: np.random.Generator, n_boot: int, n_frames: int) -> tuple[n
     return phase, dc_phase
 
 
-def surrogate_residuals(R: np.ndarray, phase: np.ndarray, dc_phase: np.ndarray | None) -> np.ndarray:
-    """(len(phase), E, T) surrogates of R (E, T) for given :func:`draw_phases` draws (any subset of rows)."""
-    E, T = R.shape
-    ok = np.isfinite(R)
-    X = np.where(ok, R, 0.0)
-    X = X - X.mean(axis=1, keepdims=True)
-    F = np.fft.rfft(X, axis=1)  # (E, K)
-    K = F.shape[1]
+def residual_spectrum(R: np.ndarray) -> np.ndarray:
+    """(E, K) Fourier transform of the rows of R (E, T) with NaN set to 0 and each row's mean removed."""
+    X = np.where(np.isfinite(R), R, 0.0)
+    return np.fft.rfft(X - X.mean(axis=1, keepdims=True), axis=1)
+
+
+def surrogate_residuals(F: np.ndarray, n_frames: int, phase: np.ndarray, dc_phase: np.ndarray | None) -> np.ndarray:
+    """(len(phase), E, T) surrogates from a :func:`residual_spectrum` and :func:`draw_phases` draws
+    (any subset of their rows)."""
+    T, K = n_frames, F.shape[1]
     Fs = F[None] * np.exp(1j * phase)[:, None, :]
     if K > 1:
         Fs[:, :, 0] = math.sqrt(2.0) * np.real(F[None, :, 1] * np.exp(1j * dc_phase))
@@ -561,13 +563,14 @@ def _phase_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, fit: Rank
     pred = fit.predict()
     R = np.where(mask, Y - pred, np.nan)
     samples = np.empty((config.n_boot, E))
+    spectrum = residual_spectrum(R)
     # phases are drawn ``chunk`` resamples at a time (so the random stream, and the result, do not depend
     # on the recording's length); the surrogates are made and refitted ``batch`` at a time
     for s in range(0, config.n_boot, chunk):
         phase, dc_phase = draw_phases(rng, min(chunk, config.n_boot - s), T)
         for b in range(0, len(phase), batch):
             sl = slice(b, b + batch)
-            Yb = pred[None] + surrogate_residuals(R, phase[sl], None if dc_phase is None else dc_phase[sl])
+            Yb = pred[None] + surrogate_residuals(spectrum, T, phase[sl], None if dc_phase is None else dc_phase[sl])
             Yb[:, ~mask] = np.nan
             Wb = None if weights is None else np.broadcast_to(weights, Yb.shape)
             samples[s + b:s + b + len(Yb)] = np.abs(_fit_batch(Yb, config, Wb, precision)[0])

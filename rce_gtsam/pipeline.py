@@ -19,6 +19,7 @@ from .compliance import BootstrapCI, Rank1Fit, bootstrap_kappa, fit_rank1, frame
 from .extended_fit import ExtendedBootstrapInfo, ExtendedFit, bootstrap_extended, fit_extended
 from .geometry import Geometry, compute_geometry, edge_lengths
 from .graph import BranchGraph, load_graph
+from .marginals import single_threaded_blas
 from .presets import Preset, get_preset
 from .smooth import SmoothedTracks, smooth_tracks
 from .tracks import Tracks, load_tracks
@@ -274,16 +275,19 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
             raise ValueError(f"preset {preset.name!r}: correlated=True needs the smoother's marginal covariances")
         precision = response.precision
     boot_info = None
-    if effects:
-        fit = fit_extended(response.Y, effects, preset.compliance, weights, response.root_distance)
-    else:
-        fit = fit_rank1(response.Y, preset.compliance, weights, precision)
-    timings["fit"] = time.perf_counter() - t
-    t = time.perf_counter()
-    if effects:
-        ci, boot_info = bootstrap_extended(fit, preset.compliance)
-    else:
-        ci = bootstrap_kappa(response.Y, preset.compliance, weights, fit=fit, precision=precision)
+    # single-threaded BLAS: on a long recording the fits' mat-vecs pass OpenBLAS's threading threshold,
+    # and its threads busy-waiting on a shared machine made them 25x slower (50,000 frames)
+    with single_threaded_blas():
+        if effects:
+            fit = fit_extended(response.Y, effects, preset.compliance, weights, response.root_distance)
+        else:
+            fit = fit_rank1(response.Y, preset.compliance, weights, precision)
+        timings["fit"] = time.perf_counter() - t
+        t = time.perf_counter()
+        if effects:
+            ci, boot_info = bootstrap_extended(fit, preset.compliance)
+        else:
+            ci = bootstrap_kappa(response.Y, preset.compliance, weights, fit=fit, precision=precision)
     timings["bootstrap"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     return AnalysisResult(graph=graph, tracks=tracks, preset=preset, smoothed=smoothed, geometry=geometry,
