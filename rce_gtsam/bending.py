@@ -148,26 +148,35 @@ def compute_bending(xy: np.ndarray, node_ids, graph: BranchGraph, config: Bendin
                          variance_deg2=variance, signed=config.signed, covariance_deg2=covariance)
 
 
+#: Frames per batch of :func:`bend_covariance` (bounds its (frames, B, 2N) Jacobian on long recordings).
+COVARIANCE_BATCH_FRAMES = 2048
+
+
 def bend_covariance(xy: np.ndarray, row: dict[int, int], bends, frame_cov: np.ndarray, angle: np.ndarray,
                     signed: bool) -> np.ndarray:
     """(F, B, B) first-order covariance of all bend angles at each frame, deg^2: J Sigma J^T with J the
-    (B, 2N) angle Jacobian (3 non-zero 2-blocks per row) and Sigma = ``frame_cov`` (F, 2N, 2N) in px^2.
+    (B, 2N) angle Jacobian (3 non-zero 2-blocks per row) and Sigma = ``frame_cov`` (F, 2N, 2N) in px^2
+    (any float dtype; computed in float64), in batches of :data:`COVARIANCE_BATCH_FRAMES` frames.
 
     The unsigned interior angle is 180 - |turning angle|, so its gradient carries the factor
     -sign(turning angle); the variances do not change, the covariances between bends can.
     """
     n_frames = xy.shape[1]
-    J = np.zeros((n_frames, len(bends), frame_cov.shape[1]))
-    for k, bend in enumerate(bends):
-        nodes = [row[n] for n in bend.nodes]
-        grad = angle_gradient(*(xy[i] for i in nodes))  # (F, 6), radians per pixel
-        if not signed:
-            turn = bend_angles(*(xy[i] for i in nodes), True)
-            grad = grad * -np.sign(np.nan_to_num(turn))[:, None]
-        for a, i in enumerate(nodes):
-            J[:, k, 2 * i:2 * i + 2] += grad[:, 2 * a:2 * a + 2]
-    J = np.nan_to_num(J)
-    cov = np.matmul(np.matmul(J, frame_cov), np.transpose(J, (0, 2, 1))) * _RAD2DEG**2
+    cov = np.empty((n_frames, len(bends), len(bends)))
+    for a in range(0, n_frames, COVARIANCE_BATCH_FRAMES):
+        b = min(a + COVARIANCE_BATCH_FRAMES, n_frames)
+        J = np.zeros((b - a, len(bends), frame_cov.shape[1]))
+        for k, bend in enumerate(bends):
+            nodes = [row[n] for n in bend.nodes]
+            grad = angle_gradient(*(xy[i, a:b] for i in nodes))  # (frames, 6), radians per pixel
+            if not signed:
+                turn = bend_angles(*(xy[i, a:b] for i in nodes), True)
+                grad = grad * -np.sign(np.nan_to_num(turn))[:, None]
+            for j, i in enumerate(nodes):
+                J[:, k, 2 * i:2 * i + 2] += grad[:, 2 * j:2 * j + 2]
+        J = np.nan_to_num(J)
+        Sigma = np.asarray(frame_cov[a:b], dtype=float)
+        cov[a:b] = np.matmul(np.matmul(J, Sigma), np.transpose(J, (0, 2, 1))) * _RAD2DEG**2
     missing = ~np.isfinite(angle.T)  # (F, B)
     cov[missing[:, :, None] | missing[:, None, :]] = np.nan
     return cov

@@ -395,14 +395,37 @@ def block_bootstrap_indices(n_columns: int, block_length: int, n_boot: int,
     Block starts are drawn uniformly from 0..T-L; blocks of L consecutive columns are concatenated
     until at least T indices, then truncated to T.
     """
+    parts = list(iter_block_bootstrap_indices(n_columns, block_length, n_boot, rng, max(n_boot, 1)))
+    return parts[0] if parts else np.empty((0, n_columns), dtype=int)
+
+
+def iter_block_bootstrap_indices(n_columns: int, block_length: int, n_boot: int, rng: np.random.Generator,
+                                 chunk: int):
+    """:func:`block_bootstrap_indices` streamed: yields (<= chunk, T) pieces of the same array (the same
+    random draws in the same order), so a long recording never holds all (n_boot, T) indices."""
     T = n_columns
     L = max(3, min(block_length, T))
     n_blocks = int(np.ceil(T / L))
-    out = np.empty((n_boot, T), dtype=int)
-    for b in range(n_boot):
-        starts = rng.integers(0, T - L + 1, size=n_blocks)
-        out[b] = (starts[:, None] + np.arange(L)[None, :]).ravel()[:T]
-    return out
+    for s in range(0, n_boot, chunk):
+        out = np.empty((min(chunk, n_boot - s), T), dtype=int)
+        for b in range(out.shape[0]):
+            starts = rng.integers(0, T - L + 1, size=n_blocks)
+            out[b] = (starts[:, None] + np.arange(L)[None, :]).ravel()[:T]
+        yield out
+
+
+#: Largest resampled batch the bootstrap refits at once, in array elements per (B, E, T) array
+#: (float64: 8 MB; the fit holds about fifteen such arrays). Fewer resamples are batched on long
+#: recordings: 64 up to E x T = 16,384 (e.g. 20 segments x 800 frames), 1 at 18 x 50,000. The resamples
+#: and their random draws do not depend on the batch size.
+BOOTSTRAP_CHUNK_ELEMENTS = 2 ** 20
+
+
+def bootstrap_chunk(chunk: int, n_edges: int, n_frames: int, per_resample_precision: bool = False) -> int:
+    """Resamples per batch: ``chunk``, fewer where a batch would exceed :data:`BOOTSTRAP_CHUNK_ELEMENTS`
+    (a per-resample (T, E, E) precision counts too), at least 1."""
+    per = n_edges * n_frames * (1 + (n_edges if per_resample_precision else 0))
+    return max(1, min(int(chunk), BOOTSTRAP_CHUNK_ELEMENTS // max(per, 1)))
 
 
 def phase_randomised_residuals(R: np.ndarray, n_boot: int, rng: np.random.Generator) -> np.ndarray:
@@ -419,16 +442,30 @@ def phase_randomised_residuals(R: np.ndarray, n_boot: int, rng: np.random.Genera
     enters kappa through the excitation's mean): the surrogate's mean is drawn with the spectrum at the
     lowest non-zero frequency as its variance, sqrt(2) Re(F_1 exp(i phi_0)), jointly across rows.
     """
-    E, T = R.shape
-    ok = np.isfinite(R)
-    X = np.where(ok, R, 0.0)
-    X = X - X.mean(axis=1, keepdims=True)
-    F = np.fft.rfft(X, axis=1)  # (E, K)
-    K = F.shape[1]
+    return surrogate_residuals(residual_spectrum(R), R.shape[1], *draw_phases(rng, n_boot, R.shape[1]))
+
+
+def draw_phases(rng: np.random.Generator, n_boot: int, n_frames: int) -> tuple[np.ndarray, np.ndarray | None]:
+    """The random draws of :func:`phase_randomised_residuals` for ``n_boot`` surrogates of ``n_frames``:
+    (n_boot, K) phases of the K = T // 2 + 1 frequencies, then (n_boot, 1) phases of the mean (radians)."""
+    K = n_frames // 2 + 1
     phase = rng.uniform(0.0, 2 * np.pi, size=(n_boot, K))
+    dc_phase = rng.uniform(0.0, 2 * np.pi, size=(n_boot, 1)) if K > 1 else None
+    return phase, dc_phase
+
+
+def residual_spectrum(R: np.ndarray) -> np.ndarray:
+    """(E, K) Fourier transform of the rows of R (E, T) with NaN set to 0 and each row's mean removed."""
+    X = np.where(np.isfinite(R), R, 0.0)
+    return np.fft.rfft(X - X.mean(axis=1, keepdims=True), axis=1)
+
+
+def surrogate_residuals(F: np.ndarray, n_frames: int, phase: np.ndarray, dc_phase: np.ndarray | None) -> np.ndarray:
+    """(len(phase), E, T) surrogates from a :func:`residual_spectrum` and :func:`draw_phases` draws
+    (any subset of their rows)."""
+    T, K = n_frames, F.shape[1]
     Fs = F[None] * np.exp(1j * phase)[:, None, :]
     if K > 1:
-        dc_phase = rng.uniform(0.0, 2 * np.pi, size=(n_boot, 1))
         Fs[:, :, 0] = math.sqrt(2.0) * np.real(F[None, :, 1] * np.exp(1j * dc_phase))
     if T % 2 == 0 and K > 1:
         Fs[:, :, -1] = np.real(Fs[:, :, -1]) * math.sqrt(2.0)  # the Nyquist term must stay real
@@ -499,17 +536,19 @@ def bootstrap_kappa(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
 
 
 def _block_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, precision=None) -> BootstrapCI:
-    """Moving blocks of ``config.block_length`` frames of the data, every resample refitted."""
+    """Moving blocks of ``config.block_length`` frames of the data, every resample refitted; the
+    resamples are drawn and refitted in batches of :func:`bootstrap_chunk` (memory bounded in T)."""
     E, T = Y.shape
     rng = np.random.default_rng(config.seed)
-    idx = block_bootstrap_indices(T, config.block_length, config.n_boot, rng)
+    chunk = bootstrap_chunk(chunk, E, T, per_resample_precision=precision is not None)
     samples = np.empty((config.n_boot, E))
-    for s in range(0, config.n_boot, chunk):
-        cols = idx[s:s + chunk]
+    s = 0
+    for cols in iter_block_bootstrap_indices(T, config.block_length, config.n_boot, rng, chunk):
         Yb = np.transpose(Y[:, cols], (1, 0, 2))
         Wb = None if weights is None else np.transpose(weights[:, cols], (1, 0, 2))
         Pb = None if precision is None else precision[cols]
-        samples[s:s + chunk] = np.abs(_fit_batch(Yb, config, Wb, Pb)[0])
+        samples[s:s + len(cols)] = np.abs(_fit_batch(Yb, config, Wb, Pb)[0])
+        s += len(cols)
     low, high = np.percentile(samples, [2.5, 97.5], axis=0)
     return BootstrapCI(low=low, high=high, samples=samples,
                        block_length=max(3, min(config.block_length, T)), seed=config.seed)
@@ -522,16 +561,22 @@ def _phase_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, fit: Rank
                          "are not a zero-mean series)")
     E, T = Y.shape
     rng = np.random.default_rng(config.seed)
+    batch = bootstrap_chunk(chunk, E, T)
     mask = np.isfinite(Y)
     pred = fit.predict()
     R = np.where(mask, Y - pred, np.nan)
     samples = np.empty((config.n_boot, E))
+    spectrum = residual_spectrum(R)
+    # phases are drawn ``chunk`` resamples at a time (so the random stream, and the result, do not depend
+    # on the recording's length); the surrogates are made and refitted ``batch`` at a time
     for s in range(0, config.n_boot, chunk):
-        n = min(chunk, config.n_boot - s)
-        Yb = pred[None] + phase_randomised_residuals(R, n, rng)
-        Yb[:, ~mask] = np.nan
-        Wb = None if weights is None else np.broadcast_to(weights, Yb.shape)
-        samples[s:s + n] = np.abs(_fit_batch(Yb, config, Wb, precision)[0])
+        phase, dc_phase = draw_phases(rng, min(chunk, config.n_boot - s), T)
+        for b in range(0, len(phase), batch):
+            sl = slice(b, b + batch)
+            Yb = pred[None] + surrogate_residuals(spectrum, T, phase[sl], None if dc_phase is None else dc_phase[sl])
+            Yb[:, ~mask] = np.nan
+            Wb = None if weights is None else np.broadcast_to(weights, Yb.shape)
+            samples[s + b:s + b + len(Yb)] = np.abs(_fit_batch(Yb, config, Wb, precision)[0])
     n_eff = excitation_dof(R, fit.z)
     factor = small_sample_factor(n_eff)
     # deviations from the resamples' own median: data made from an already shrunk kappa_hat and shrunk

@@ -21,6 +21,7 @@ from .geometry import Geometry, compute_geometry, edge_lengths
 from .graph import BranchGraph, load_graph
 from .model import ResponseModel
 from .model.time_split import TimeSplitCheck, time_split_check, widen
+from .marginals import single_threaded_blas
 from .presets import Preset, get_preset
 from .smooth import SmoothedTracks, smooth_tracks
 from .tracks import Tracks, load_tracks
@@ -160,7 +161,7 @@ def build_response(bending: BendingResult, geometry: Geometry, preset: Preset) -
         variance = bending.variance_deg2[order][:, frames].copy()
         variance[~inlier] = np.nan
     if bending.covariance_deg2 is not None:
-        covariance = bending.covariance_deg2[frames][:, order][:, :, order].copy()
+        covariance = bending.covariance_deg2[np.ix_(frames, order, order)]  # one (T, E, E) copy
         out = ~inlier.T  # (T, E)
         covariance[out[:, :, None] | out[:, None, :]] = np.nan
     rd = np.array([geometry.root_distance_px[bending.bends[k].child] for k in order])
@@ -293,28 +294,31 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
             raise ValueError(f"preset {preset.name!r}: correlated=True needs the smoother's marginal covariances")
         precision = response.precision
     boot_info = None
-    if effects:
-        fit = fit_extended(response.Y, effects, preset.compliance, weights, response.root_distance)
-    else:  # the rank-1 fit is the response model without effects (the diagnosis baseline is the same fit)
-        fit = ResponseModel(config=preset.compliance).fit(response.Y, weights, response.root_distance,
-                                                          precision=precision).core
-    timings["fit"] = time.perf_counter() - t
-    if before_bootstrap is not None:
-        before_bootstrap(AnalysisResult(graph=graph, tracks=tracks, preset=preset, smoothed=smoothed,
-                                        geometry=geometry, bending=bending, raw_bending=raw_bending,
-                                        response=response, fit=fit, ci=None, smoothing=smoothing,
-                                        timings_s=dict(timings), inputs=dict(inputs), effects=tuple(effects)))
-    t = time.perf_counter()
-    step("bootstrap")
-    if effects:
-        ci, boot_info = bootstrap_extended(fit, preset.compliance)
-    else:
-        ci = bootstrap_kappa(response.Y, preset.compliance, weights, fit=fit, precision=precision)
-    time_split = None
-    if preset.compliance.time_split_blocks and not effects and ci is not None and preset.compliance.n_boot > 0:
-        time_split = time_split_check(response.Y, weights, preset.compliance, fit.kappa, ci.low, ci.high,
-                                      preset.compliance.time_split_blocks)
-        ci = widen(ci, fit.kappa, time_split.inflation)
+    # single-threaded BLAS: on a long recording the fits' mat-vecs pass OpenBLAS's threading threshold,
+    # and its threads busy-waiting on a shared machine made them 25x slower (50,000 frames)
+    with single_threaded_blas():
+        if effects:
+            fit = fit_extended(response.Y, effects, preset.compliance, weights, response.root_distance)
+        else:  # the rank-1 fit is the response model without effects (the diagnosis baseline is the same fit)
+            fit = ResponseModel(config=preset.compliance).fit(response.Y, weights, response.root_distance,
+                                                              precision=precision).core
+        timings["fit"] = time.perf_counter() - t
+        if before_bootstrap is not None:
+            before_bootstrap(AnalysisResult(graph=graph, tracks=tracks, preset=preset, smoothed=smoothed,
+                                            geometry=geometry, bending=bending, raw_bending=raw_bending,
+                                            response=response, fit=fit, ci=None, smoothing=smoothing,
+                                            timings_s=dict(timings), inputs=dict(inputs), effects=tuple(effects)))
+        t = time.perf_counter()
+        step("bootstrap")
+        if effects:
+            ci, boot_info = bootstrap_extended(fit, preset.compliance)
+        else:
+            ci = bootstrap_kappa(response.Y, preset.compliance, weights, fit=fit, precision=precision)
+        time_split = None
+        if preset.compliance.time_split_blocks and not effects and ci is not None and preset.compliance.n_boot > 0:
+            time_split = time_split_check(response.Y, weights, preset.compliance, fit.kappa, ci.low, ci.high,
+                                          preset.compliance.time_split_blocks)
+            ci = widen(ci, fit.kappa, time_split.inflation)
     timings["bootstrap"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
     return AnalysisResult(graph=graph, tracks=tracks, preset=preset, smoothed=smoothed, geometry=geometry,

@@ -22,6 +22,10 @@ Levenberg-Marquardt in one exact step (the non-linear options take several itera
 Marginal covariances come from the linearisation at the solution (robust weights included) through
 a block-banded selected inversion (:mod:`rce_gtsam.marginals`), not per-key ``gtsam.Marginals``.
 
+Long recordings (more than ``SmootherConfig.window_frames`` frames) are solved in overlapping windows
+with a burn-in margin each side (:mod:`rce_gtsam.windowing`): time and memory grow linearly with the
+number of frames, and the window cores match the whole-recording solve to ~1e-9 px.
+
 Variable keys are ``gtsam.symbol('x', t)`` (:func:`rce_gtsam.factors.frame_key`); node row ``i``
 (order of ``tracks.node_ids``) occupies entries 2i, 2i+1 of each state. Sorted key order is frame
 order, which the marginal computation relies on.
@@ -43,6 +47,8 @@ from .graph import BranchGraph
 from .presets import SmootherConfig
 from .presmooth import moving_average
 from .tracks import Tracks
+from .memory import release_freed_memory
+from .windowing import plan_windows
 
 @dataclass(frozen=True)
 class SmootherReport:
@@ -54,6 +60,9 @@ class SmootherReport:
     iteration cap and without exhausting its damping range.
     seconds_optimize includes GTSAM's linearisation at the solution (shared with the marginals);
     seconds_marginals is the selected inversion.
+    A long recording is solved in ``n_windows`` overlapping windows (:mod:`rce_gtsam.windowing`): then
+    iterations is the largest over windows, errors / variable and factor counts are sums over windows
+    (a margin frame counts in every window that holds it) and converged means every window converged.
     """
 
     iterations: int
@@ -65,6 +74,7 @@ class SmootherReport:
     seconds_build: float
     seconds_optimize: float
     seconds_marginals: float
+    n_windows: int = 1
 
 
 @dataclass(frozen=True, eq=False)
@@ -76,7 +86,9 @@ class SmoothedTracks:
     presmoothed: the moving-average tracks that were fed to the graph (what the paper calls "raw").
     cov: (N, F, 2, 2) marginal covariance of each node position, px^2 (None if not computed).
     frame_cov: (F, 2N, 2N) joint covariance of all nodes at each frame, px^2, ordered
-        [x0, y0, x1, y1, ...] following ``tracks.node_ids`` (None if not computed).
+        [x0, y0, x1, y1, ...] following ``tracks.node_ids`` (None if not computed). Stored as float32
+        (6e-8 relative rounding; it is 16 N^2 bytes per frame, 640 MB at 50,000 frames x 20 nodes in
+        float64); ``cov`` holds its 2x2 diagonal blocks in float64.
     report: solver diagnostics.
     """
 
@@ -225,13 +237,48 @@ class FactorGraphProblem:
         return X.reshape(self.n_frames, self.n_nodes, 2).transpose(1, 0, 2).copy()
 
 
-def build_problem(pre: Tracks, graph: BranchGraph, config: SmootherConfig) -> FactorGraphProblem:
+@dataclass(frozen=True, eq=False)
+class RestShape:
+    """What the priors take from the whole recording, so that every window of a long one uses the same.
+
+    pairs: (E, 2) node rows (parent, child) of every graph edge.
+    tangents: (N, 2) unit branch directions for the anisotropic measurement noise (None if isotropic).
+    offsets: (E, 2) rest offsets d_ab of the ``"offset"`` edge prior, px (None otherwise).
+    lengths: (E,) rest lengths of the ``"length"`` edge prior, px (None otherwise).
+    """
+
+    pairs: np.ndarray
+    tangents: np.ndarray | None = None
+    offsets: np.ndarray | None = None
+    lengths: np.ndarray | None = None
+
+
+def rest_shape(pre: Tracks, graph: BranchGraph, config: SmootherConfig) -> RestShape:
+    """The :class:`RestShape` of pre-smoothed tracks (first common frames, medians: see the factors)."""
+    rows = _edge_rows(pre, graph)
+    pairs = np.array([(ia, ib) for ia, ib, _ in rows], dtype=np.int64).reshape(-1, 2)
+    tangents = node_tangents(pre, graph) if config.along_across_ratio != 1.0 else None
+    offsets = lengths = None
+    if config.edge_weight > 0 and config.edge_prior == "offset":
+        offsets = np.array([EdgeOffsetFactor.rest_offset(pre.xy[ia], pre.xy[ib]) for ia, ib, _ in rows])
+    elif config.edge_weight > 0:
+        lengths = np.array([EdgeLengthFactor.rest_length(pre.xy[ia], pre.xy[ib]) for ia, ib, _ in rows])
+    return RestShape(pairs=pairs, tangents=tangents, offsets=offsets, lengths=lengths)
+
+
+def build_problem(pre: Tracks, graph: BranchGraph, config: SmootherConfig,
+                  shape: RestShape | None = None) -> FactorGraphProblem:
     """Build the factor graph for already pre-smoothed tracks (no moving average applied here).
+
+    ``shape``: rest shape and tangents to use (a window of a long recording passes the whole
+    recording's); None = check the inputs and take them from ``pre``.
 
     Weight guards follow the paper (§2.2): the measurement weight is floored at 1e-9; any other
     factor family whose weight is <= 0 is left out.
     """
-    _check_inputs(pre, graph, config)
+    if shape is None:
+        _check_inputs(pre, graph, config)
+        shape = rest_shape(pre, graph, config)
     N, F = pre.n_nodes, pre.n_frames
     K = [frame_key(t) for t in range(F)]
     zeros = zero_values(K, N)
@@ -240,7 +287,7 @@ def build_problem(pre: Tracks, graph: BranchGraph, config: SmootherConfig) -> Fa
     obs = pre.observed
 
     # Measurements: one factor per frame covering its observed nodes, each with its own 2x2 noise.
-    tangents = node_tangents(pre, graph) if config.along_across_ratio != 1.0 else [None] * N
+    tangents = shape.tangents if shape.tangents is not None else [None] * N
     sigma_default = 1.0 / np.sqrt(max(float(config.measurement_weight), MEASUREMENT_WEIGHT_FLOOR))
     sqrt_info = MeasurementFactor.sqrt_information
     if pre.sigma_px is None:
@@ -264,17 +311,12 @@ def build_problem(pre: Tracks, graph: BranchGraph, config: SmootherConfig) -> Fa
             add(AccelerationFactor.create(K[t - 1], K[t], K[t + 1], N, config.acceleration_weight, zeros))
 
     # Edge shape prior at every frame.
-    if config.edge_weight > 0:
-        rows = _edge_rows(pre, graph)
-        pairs = np.array([(ia, ib) for ia, ib, _ in rows], dtype=np.int64).reshape(-1, 2)
-        if config.edge_prior == "offset":
-            d = np.array([EdgeOffsetFactor.rest_offset(pre.xy[ia], pre.xy[ib]) for ia, ib, _ in rows])
-            for t in range(F):
-                add(EdgeOffsetFactor.create(K[t], N, pairs, d, config.edge_weight, zeros))
-        else:
-            L = np.array([EdgeLengthFactor.rest_length(pre.xy[ia], pre.xy[ib]) for ia, ib, _ in rows])
-            for t in range(F):
-                add(EdgeLengthFactor.create(K[t], N, pairs, L, config.edge_weight))
+    if shape.offsets is not None:
+        for t in range(F):
+            add(EdgeOffsetFactor.create(K[t], N, shape.pairs, shape.offsets, config.edge_weight, zeros))
+    elif shape.lengths is not None:
+        for t in range(F):
+            add(EdgeLengthFactor.create(K[t], N, shape.pairs, shape.lengths, config.edge_weight))
 
     init = gtsam.Values()
     x0 = initial_positions(pre).transpose(1, 0, 2).reshape(F, 2 * N)
@@ -355,13 +397,80 @@ def smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) ->
 
 
 def _smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) -> SmoothedTracks:
-    from .marginals import frame_marginals, whitened_jacobian  # local: marginals uses this key layout
-
     _check_inputs(tracks, graph, config)
     pre = moving_average(tracks, config.presmooth_window)
     linear = is_linear(config)
+    shape = rest_shape(pre, graph, config)
+    windows = plan_windows(pre.observed, config.window_frames, config.window_margin)
+    _check_windows(pre, windows, config)
+    N, F = pre.n_nodes, pre.n_frames
+    xy = np.empty((N, F, 2))
+    cov = frame_cov = None
+    if config.marginals:
+        cov = np.empty((N, F, 2, 2))
+        frame_cov = np.empty((F, 2 * N, 2 * N), dtype=np.float32)
+    parts = []
+    for w in windows:
+        part = _solve_window(_frames(pre, w.lo, w.hi), graph, config, shape, linear, w.lo)
+        xy[:, w.core_lo:w.core_hi] = part.xy[:, w.core]
+        if config.marginals:
+            fc = part.frame_cov[w.core]
+            idx = np.arange(N)
+            cov[:, w.core_lo:w.core_hi] = fc.reshape(-1, N, 2, N, 2)[:, idx, :, idx, :]
+            frame_cov[w.core_lo:w.core_hi] = fc
+        parts.append(part.report)
+        del part
+        release_freed_memory()  # this window's GTSAM heap (and the loader's), before more arrays are made
+    report = SmootherReport(
+        iterations=max(r.iterations for r in parts), initial_error=sum(r.initial_error for r in parts),
+        final_error=sum(r.final_error for r in parts), n_variables=sum(r.n_variables for r in parts),
+        n_factors=sum(r.n_factors for r in parts), converged=all(r.converged for r in parts),
+        seconds_build=sum(r.seconds_build for r in parts), seconds_optimize=sum(r.seconds_optimize for r in parts),
+        seconds_marginals=sum(r.seconds_marginals for r in parts), n_windows=len(windows))
+    out = Tracks(node_ids=tracks.node_ids.copy(), xy=xy, sigma_px=None, source=tracks.source)
+    return SmoothedTracks(tracks=out, observed=tracks.observed.copy(), presmoothed=pre, cov=cov,
+                          frame_cov=frame_cov, report=report)
+
+
+def _frames(tracks: Tracks, lo: int, hi: int) -> Tracks:
+    """Frames lo:hi of ``tracks`` (views, no copy)."""
+    if lo == 0 and hi == tracks.n_frames:
+        return tracks
+    sigma = None if tracks.sigma_px is None else tracks.sigma_px[:, lo:hi]
+    return Tracks(node_ids=tracks.node_ids, xy=tracks.xy[:, lo:hi], sigma_px=sigma, source=tracks.source)
+
+
+def _check_windows(pre: Tracks, windows, config: SmootherConfig) -> None:
+    """A node needs observations inside every window it is solved in (two with acceleration alone,
+    which leaves a straight-line trend free), unless the offset prior ties it to the other nodes."""
+    if len(windows) == 1 or (config.edge_weight > 0 and config.edge_prior == "offset"):
+        return
+    need = 1 if config.velocity_weight > 0 or config.acceleration_weight <= 0 else 2
+    obs = pre.observed
+    for w in windows:
+        few = np.flatnonzero(obs[:, w.lo:w.hi].sum(axis=1) < need)
+        if few.size:
+            n = pre.node_ids[few[0]]
+            raise InputError(pre.source, f"node {n} is observed in fewer than {need} of frames {w.lo}-{w.hi - 1}; "
+                                         f"recordings longer than {config.window_frames} frames are smoothed in "
+                                         f"windows (smoother.window_frames) and each needs the node",
+                             f"node {n}")
+
+
+@dataclass(frozen=True, eq=False)
+class _WindowResult:
+    xy: np.ndarray                # (N, Fw, 2) px
+    frame_cov: np.ndarray | None  # (Fw, 2N, 2N) px^2, float64
+    report: SmootherReport
+
+
+def _solve_window(pre: Tracks, graph: BranchGraph, config: SmootherConfig, shape: RestShape, linear: bool,
+                  first_frame: int) -> _WindowResult:
+    """Build, solve and (if configured) take the marginals of one window's factor graph."""
+    from .marginals import frame_marginals, whitened_jacobian  # local: marginals uses this key layout
+
     t0 = time.perf_counter()
-    problem = build_problem(pre, graph, config)
+    problem = build_problem(pre, graph, config, shape)
     t1 = time.perf_counter()
     result, diag = optimize(problem, linear)
     jacobian = None
@@ -371,17 +480,13 @@ def _smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) -
         diag["converged"] = normal_equation_residual(jacobian, rhs) < LINEAR_OPTIMALITY_TOL
     t2 = time.perf_counter()
     xy = problem.positions(result)
-    cov = frame_cov = None
+    frame_cov = None
     if config.marginals:
-        frame_cov = frame_marginals(problem.graph, result, problem.n_nodes, problem.n_frames, jacobian=jacobian)
-        N = problem.n_nodes
-        idx = np.arange(N)
-        cov = np.ascontiguousarray(frame_cov.reshape(problem.n_frames, N, 2, N, 2)[:, idx, :, idx, :])
+        frame_cov = frame_marginals(problem.graph, result, problem.n_nodes, problem.n_frames, jacobian=jacobian,
+                                    first_frame=first_frame)
     t3 = time.perf_counter()
     report = SmootherReport(iterations=diag["iterations"], initial_error=diag["initial_error"],
                             final_error=diag["final_error"], n_variables=int(problem.initial.size()),
                             n_factors=int(problem.graph.size()), converged=diag["converged"],
                             seconds_build=t1 - t0, seconds_optimize=t2 - t1, seconds_marginals=t3 - t2)
-    out = Tracks(node_ids=tracks.node_ids.copy(), xy=xy, sigma_px=None, source=tracks.source)
-    return SmoothedTracks(tracks=out, observed=tracks.observed.copy(), presmoothed=pre, cov=cov,
-                          frame_cov=frame_cov, report=report)
+    return _WindowResult(xy=xy, frame_cov=frame_cov, report=report)

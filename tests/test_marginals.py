@@ -96,7 +96,8 @@ def test_marginals_equal_gtsam_marginals(overrides):
     marg = gtsam.Marginals(problem.graph, solution)
     for t in (0, 1, 12, 17, F - 1):
         joint = marg.marginalCovariance(frame_key(t))  # the frame state: all nodes at frame t
-        np.testing.assert_allclose(res.frame_cov[t], joint, rtol=1e-8, atol=1e-8 * np.abs(joint).max())
+        # frame_cov is stored in float32 (rounding 6e-8); the per-node blocks in float64
+        np.testing.assert_allclose(res.frame_cov[t], joint, rtol=3e-7, atol=3e-7 * np.abs(joint).max())
         for i in range(N):
             c = joint[node_columns(i), node_columns(i)]
             np.testing.assert_allclose(res.cov[i, t], c, rtol=1e-8, atol=1e-8 * np.abs(c).max())
@@ -111,4 +112,5 @@ def test_covariance_scales_with_measurement_noise():
                                   acceleration_weight=cfg.acceleration_weight / 4, edge_weight=cfg.edge_weight / 4)
     b = smooth_tracks(tracks, graph, quarter)
     np.testing.assert_allclose(b.tracks.xy, a.tracks.xy, atol=1e-8)
-    np.testing.assert_allclose(b.frame_cov, 4 * a.frame_cov, rtol=1e-8)
+    np.testing.assert_allclose(b.cov, 4 * a.cov, rtol=1e-8)
+    np.testing.assert_allclose(b.frame_cov, 4 * a.frame_cov, rtol=3e-7)  # float32
