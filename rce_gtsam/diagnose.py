@@ -700,8 +700,8 @@ def explain(diag: Diagnosis) -> str:
     eff = next((e for e in c.fit.model.effects if e.name == c.effect), None)
     if eff is not None:
         lines.append(eff.explain(c.fit.effect_summary().get(c.effect, {}), c.statistics))
-        lines.append(f"What it means: {eff.physics} Add it to the model (command line: --effects {c.effect}; "
-                     f"Python: ResponseModel() + {type(eff).__name__}()) and read kappa from the extended fit.")
+        lines.append(f"What it means: {eff.physics} Fit the model with {type(eff).__name__}() and read kappa "
+                     "from the extended fit.")
     par = diag.settings.get("parsimony") or {}
     if par.get("preferred_simpler") == c.effect:
         lo = diag.candidate(par["lowest_heldout"])

@@ -22,7 +22,9 @@ interruption leaves the previous results as they were and no half-written files.
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import tempfile
 from dataclasses import asdict
 from pathlib import Path
 
