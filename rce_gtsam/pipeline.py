@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .bending import BendingResult, compute_bending
-from .compliance import BootstrapCI, Rank1Fit, bootstrap_kappa, frame_precisions
+from .compliance import BootstrapCI, Rank1Fit, bootstrap_kappa, fit_rank1, frame_precisions
 from .extended_fit import ExtendedBootstrapInfo, ExtendedFit, bootstrap_extended, fit_extended
 from .geometry import Geometry, compute_geometry, edge_lengths
 from .graph import BranchGraph, load_graph
@@ -299,9 +299,13 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     with single_threaded_blas():
         if effects:
             fit = fit_extended(response.Y, effects, preset.compliance, weights, response.root_distance)
-        else:  # the rank-1 fit is the response model without effects (the diagnosis baseline is the same fit)
+        elif np.isfinite(response.Y).any(axis=1).all():
+            # the rank-1 fit is the response model without effects (the diagnosis baseline is the same fit)
             fit = ResponseModel(config=preset.compliance).fit(response.Y, weights, response.root_distance,
                                                               precision=precision).core
+        else:  # a segment with no usable frame (every bend an outlier): the same solver, which leaves its
+            # kappa at 1; the quality verdict flags it (low_support) and the run exits 3
+            fit = fit_rank1(response.Y, preset.compliance, weights, precision)
         timings["fit"] = time.perf_counter() - t
         if before_bootstrap is not None:
             before_bootstrap(AnalysisResult(graph=graph, tracks=tracks, preset=preset, smoothed=smoothed,

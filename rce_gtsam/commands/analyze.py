@@ -33,6 +33,22 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def extra_writers(args: argparse.Namespace, video=None, diagnosis=None) -> list:
+    """Figure and overlay writers for ``AnalysisResult.write``, drawn in this process (none with
+    ``no_figures``): for callers that are already parallel, such as ``rce batch``'s workers."""
+    writers = []
+    if not getattr(args, "no_figures", False):
+        from ..viz.figures import write_figures  # a broken install must fail here, not silently skip figures
+        from ..viz.overlays import write_overlays
+
+        def figures(result, tmp):
+            out = dict(write_figures(result, tmp / "figures", diagnosis=diagnosis))
+            out.update(write_overlays(result, tmp / "figures", first_frame=first_video_frame(video)))
+            return out
+        writers.append(figures)
+    return writers
+
+
 def first_video_frame(video):
     """The first frame of ``video`` (RGB array) for the overlays, or None without a video."""
     if video is None:

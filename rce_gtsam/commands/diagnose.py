@@ -24,7 +24,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0,
                    help="seed of every random step of this command: the split of the segments into the two "
                         "node-disjoint halves of the cross-validation (no bootstrap runs here; default 0)")
-    p.add_argument("--folds", type=int, default=8, help="cross-validation blocks (default 8)")
+    p.add_argument("--folds", type=int, default=None,
+                   help="cross-validation blocks (default 8, fewer when the clip is too short for 8 blocks of "
+                        "at least the bootstrap block length)")
     p.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd",
                    help="also save a Rerun recording of the analysis with the diagnosis report")
     p.add_argument("--figures", type=Path, default=None, metavar="DIR",
@@ -46,10 +48,11 @@ def run(args: argparse.Namespace) -> int:
     check_command_options(args, out_dir_option=None)
     names = parse_effect_names(candidates_from_args(args), source="--candidates")  # before the slow part
     preset = preset_from_args(args)
-    if args.folds < 2:
+    if args.folds is not None and args.folds < 2:
         raise InputError("--folds", f"need at least 2 cross-validation blocks, got {args.folds}")
     _, table = check_analysis_inputs(args.tracks, args.graph, preset)
-    check_folds(args.folds, int(table["frame"].max()) + 1, preset.compliance.block_length)
+    if args.folds is not None:  # an explicit value is checked; the default adapts to a short clip
+        check_folds(args.folds, int(table["frame"].max()) + 1, preset.compliance.block_length)
     steps = ["load", "smooth", "bending", "fit", "diagnosis"] + (["figures"] if args.figures else []) \
         + (["recording"] if args.rerun else [])
     with Steps("diagnose", steps, enabled=progress_enabled(args.quiet)) as bar:

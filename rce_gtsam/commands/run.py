@@ -60,7 +60,8 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
     from ..validate import check_bends_observed, check_clip_length, check_command_options, check_graph_has_bend
     from .analyze import (FiguresInBackground, first_video_frame, format_summary, quality_exit_code,
                           record_wall_time, save_recording)
-    from .track import print_visibility, start_live, track_with_progress, warn_annotations
+    from .live_args import live_from_args
+    from .track import print_visibility, send_live_video, track_with_progress, warn_annotations
 
     check_command_options(args)
     candidates = parse_effect_names(candidates_from_args(args), source="--candidates")  # before tracking
@@ -69,6 +70,7 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
     graph = load_graph(args.graph)
     check_graph_has_bend(graph)
     tracker = make_tracker(args.model)
+    live = live_from_args(args, f"rce run {args.video}")  # a bad address or no display: before any work
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
         _check_graph_matches_points(graph, points, args)
@@ -76,7 +78,7 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
             if (src.n_frames, args.max_frames) != (None, None) else None
         check_clip_length(n_clip, args.video, preset.compliance.block_length)
         off_structure = warn_annotations(args.video, points, graph)
-        live = start_live(args, src, f"rce run {args.video}")
+        send_live_video(live, src)
         tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=show,
                                       on_frame=live.frame if live else None)
     t_track = time.perf_counter() - t0

@@ -43,10 +43,11 @@ def run_track(args: argparse.Namespace) -> int:
     check_output_file(args.out, "--out")
     graph = load_graph(args.graph) if args.graph else None
     tracker = make_tracker(args.model)
+    live = live_from_args(args, f"tracking {args.video}")  # a bad address or no display: before any work
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
         warn_annotations(args.video, points, graph)
-        live = start_live(args, src, f"tracking {args.video}")
+        send_live_video(live, src)
         result = track_with_progress(tracker, src, points, graph, args.max_frames, show=progress_enabled(args.quiet),
                                      on_frame=live.frame if live else None)
     result.write_csv(args.out)
@@ -61,12 +62,10 @@ def run_track(args: argparse.Namespace) -> int:
     return 0
 
 
-def start_live(args: argparse.Namespace, src, title: str):
-    """The live viewer stream of ``--spawn`` / ``--connect`` (None without them), with the video sent."""
-    live = live_from_args(args, title)
-    if live is not None and Path(src.path).suffix.lower() not in (".bag", ".db3"):  # RealSense: points only
+def send_live_video(live, src) -> None:
+    """Send the video of ``src`` to the live viewer stream (nothing without one; RealSense: points only)."""
+    if live is not None and Path(src.path).suffix.lower() not in (".bag", ".db3"):
         live.video(src.path, src.n_frames, src.fps)
-    return live
 
 
 def warn_annotations(video, points, graph) -> list[int]:
