@@ -122,9 +122,9 @@ def cases(f: dict, work: Path) -> list[tuple[str, list[str], int | set]]:
     T, G, V, A = str(f["tracks"]), str(f["graph"]), str(f["video"]), str(f["ann"])
     out = str(work / "out")
     an = lambda tracks=T, graph=G, *extra: ["analyze", str(tracks), str(graph), "--out", out, *FAST, *extra]  # noqa: E731
-    dg = lambda *extra: ["diagnose", T, G, "--json", str(work / "d.json"), "--effects", "offset", *extra]  # noqa: E731
+    dg = lambda *extra: ["diagnose", T, G, "--json", str(work / "d.json"), "--candidates", "offset", *extra]  # noqa: E731
     run = lambda *extra, ann=A, video=V: ["run", str(video), str(ann), G, "--out", out, "--no-progress",  # noqa: E731
-                                          "--effects", "offset", *FAST, *extra]
+                                          "--candidates", "offset", *FAST, *extra]
     unwritable = "/proc/rce_out" if Path("/proc").is_dir() else str(f["ro"] / "x")
     return [
         ("--seed -1 (analyze)", an(T, G, "--seed", "-1"), 2),
@@ -165,10 +165,10 @@ def cases(f: dict, work: Path) -> list[tuple[str, list[str], int | set]]:
                                                             str(work / "s")], 2),
         ("simulate --frames 5", ["simulate", "--frames", "5", "--out", str(work / "s")], 2),
         ("simulate --z-rms 0", ["simulate", "--z-rms", "0", "--out", str(work / "s")], 2),
-        ("diagnose --effects ''", ["diagnose", T, G, "--json", str(work / "d.json"), "--effects", ""], 2),
+        ("diagnose --candidates ''", ["diagnose", T, G, "--json", str(work / "d.json"), "--candidates", ""], 2),
         ("analyze --effects ''", an(T, G, "--effects", ""), 2),
         ("analyze --effects bogus", an(T, G, "--effects", "bogus"), 2),
-        ("run --effects ''", ["run", V, A, G, "--out", out, "--effects", ""], 2),
+        ("run --candidates ''", ["run", V, A, G, "--out", out, "--candidates", ""], 2),
         ("tracks start at frame 50000", an(f["start50000"]), 2),
         ("tracks start at frame 1000", an(f["start1000"]), 2),
         ("10-frame tracks", an(f["short"]), 2),

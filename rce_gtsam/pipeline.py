@@ -299,12 +299,12 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     with single_threaded_blas():
         if effects:
             fit = fit_extended(response.Y, effects, preset.compliance, weights, response.root_distance)
-        elif np.isfinite(response.Y).any(axis=1).all():
+        elif response.Y.shape[0] >= 2 and np.isfinite(response.Y).any(axis=1).all():
             # the rank-1 fit is the response model without effects (the diagnosis baseline is the same fit)
             fit = ResponseModel(config=preset.compliance).fit(response.Y, weights, response.root_distance,
                                                               precision=precision).core
-        else:  # a segment with no usable frame (every bend an outlier): the same solver, which leaves its
-            # kappa at 1; the quality verdict flags it (low_support) and the run exits 3
+        else:  # a single bend, or a segment with no usable frame (every bend an outlier): the same solver,
+            # which leaves such a kappa at 1; the quality verdict flags it (single_bend / low_support), exit 3
             fit = fit_rank1(response.Y, preset.compliance, weights, precision)
         timings["fit"] = time.perf_counter() - t
         if before_bootstrap is not None:

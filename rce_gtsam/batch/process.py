@@ -101,6 +101,7 @@ def run_pipeline(recording: Recording, options: BatchOptions, folder: Path) -> l
     """Track (video rows), analyze and diagnose one recording; write its folder like ``rce run`` does.
     Returns the written file names (relative to ``folder``)."""
     from ..commands.analyze import extra_writers
+    from ..commands.wording import cli_wording_json
     from ..diagnosis_io import diagnose_result, diagnosis_for_viz, diagnosis_json
     from ..pipeline import analyze
 
@@ -118,12 +119,14 @@ def run_pipeline(recording: Recording, options: BatchOptions, folder: Path) -> l
         result = analyze(recording.tracks, recording.graph, preset=preset, seed=options.seed,
                          n_boot=options.n_boot)
     diagnosis = diagnose_result(result, effects=options.effects, seed=options.seed or 0)
-    view = diagnosis_for_viz(diagnosis, result) if options.figures else None
+    # a command-line tool: the advice in command-line words, as `rce diagnose` / `rce run` write it
+    view = cli_wording_json(diagnosis_for_viz(diagnosis, result)) if options.figures else None
 
     def write_inputs_and_diagnosis(_result, tmp: Path) -> dict:
         if table is not None:
             table.to_csv(tmp / "tracks.csv", index=False)
-        (tmp / "diagnosis.json").write_text(json.dumps(diagnosis_json(diagnosis, result), indent=1) + "\n")
+        (tmp / "diagnosis.json").write_text(
+            json.dumps(cli_wording_json(diagnosis_json(diagnosis, result)), indent=1) + "\n")
         return {}
 
     written = result.write(folder, extra_writers=[write_inputs_and_diagnosis, *extra_writers(
