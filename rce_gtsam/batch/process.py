@@ -108,13 +108,19 @@ def run_pipeline(recording: Recording, options: BatchOptions, folder: Path) -> l
     preset = options.preset_for(recording)
     table = None
     if recording.kind == "video":
+        import tempfile
+
+        from ..tracks import load_tracks, write_table_atomic
         table, graph, t_track = _track(recording, options)
-        from ..tracks import tracks_from_table
-        tracks = tracks_from_table(table, graph, source=f"tracks of {recording.video}")
+        # analyse the tracks exactly as `rce run` does: from the CSV as written (full precision)
+        with tempfile.TemporaryDirectory(prefix="rce_batch_") as scratch:
+            csv = Path(scratch) / "tracks.csv"
+            write_table_atomic(table, csv)
+            tracks = load_tracks(csv, graph)
         result = analyze(tracks, graph, preset=preset, seed=options.seed, n_boot=options.n_boot)
         result.timings_s["track"] = t_track
         result.inputs.update(video=str(recording.video), annotations=str(recording.annotations),
-                             graph=str(recording.graph))
+                             graph=str(recording.graph), tracks=str(folder / "tracks.csv"))
     else:
         result = analyze(recording.tracks, recording.graph, preset=preset, seed=options.seed,
                          n_boot=options.n_boot)

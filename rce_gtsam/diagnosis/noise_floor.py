@@ -25,7 +25,8 @@ of the raw bend angles) passed through the smoother's transfer function — a lo
 is invisible at high frequencies.
 
 Which one is used, per row: the inextensibility estimate, unless it exceeds the row's whole bending variance
-by more than its sampling error allows (then the segments stretch by more than across-branch tracking noise
+(or its spectrum exceeds the bending's own in any frequency band, :func:`spectrum_below`) by more than its
+sampling error allows (then the segments stretch by more than across-branch tracking noise
 could — out-of-plane swing, or a tracker sliding along the stem at low frequency — and the row falls back to
 the white lower bound, flagged). On the project's simulator it is within 3-12 % of the true angle noise
 (``benchmarks/bench_noise_floor.py``).
@@ -206,6 +207,39 @@ def incoherent_part(D: np.ndarray, Y: np.ndarray, shared: np.ndarray, n_componen
     return out
 
 
+def spectrum_below(D: np.ndarray, Y: np.ndarray, z_crit: float = 2.0, n_bands: int = 4,
+                   nperseg: int = 64) -> np.ndarray:
+    """(E,) bool: each row's noise spectrum (of D) stays below the bending's own spectrum (of Y) in every one of
+    ``n_bands`` equal frequency bands, up to the sampling error of Welch estimates.
+
+    Noise independent of the motion cannot carry more power than the measured bending at any frequency
+    (S_Y = S_signal + S_noise >= S_noise). Many frequency bins make this a strict check where a variance
+    comparison has few effective samples: at high frequency the bending is nearly all noise, so an
+    inextensibility estimate that overshoots there (a tracker sliding along the stem, which leaves the angle
+    alone) is caught. Band sums of K-segment Welch estimates over m bins have a relative SE ~ sqrt(1 / (K m));
+    a band fails when the noise exceeds the bending by more than z_crit (Bonferroni over bands) of that for
+    both estimates together."""
+    from scipy import signal
+
+    E, T = Y.shape
+    n = int(max(16, min(nperseg, T // 4)))
+    K = max(1, 2 * T // n - 1)
+
+    def psd(X):
+        Xf = np.where(np.isfinite(X), X - np.nanmean(X, axis=1, keepdims=True), 0.0)
+        return signal.welch(Xf, nperseg=n, axis=1)[1][:, 1:]  # drop the mean bin
+
+    Pd, Py = psd(D), psd(Y)
+    edges = np.linspace(0, Pd.shape[1], n_bands + 1).round().astype(int)
+    z = z_crit + 0.5 * math.log(n_bands)  # ~Bonferroni over the bands
+    ok = np.ones(E, bool)
+    for a, b in zip(edges[:-1], edges[1:]):
+        m = max(b - a, 1)
+        sd, sy = Pd[:, a:b].sum(axis=1), Py[:, a:b].sum(axis=1)
+        ok &= sd <= sy * (1.0 + z * math.sqrt(2.0 / (K * m)))
+    return ok
+
+
 def estimate_noise_floor(raw_xy: np.ndarray, smoothed_xy: np.ndarray, node_ids, edges, bends,
                          Y: np.ndarray, frames: np.ndarray, raw_angle_deg: np.ndarray,
                          smoother_gain: float, shared: np.ndarray | None = None,
@@ -252,7 +286,8 @@ def estimate_noise_floor(raw_xy: np.ndarray, smoothed_xy: np.ndarray, node_ids, 
     # the branch's motion (out of plane, or a tracker sliding with the motion), not by tracking noise
     chance = 2.0 / np.maximum(n_eff, 1.0)
     incoherent_ok = coherent <= chance + z_crit * chance
-    valid = np.isfinite(inext) & incoherent_ok & (inext <= total * (1.0 + z_crit * se_total))
+    spectral_ok = spectrum_below(D, Y, z_crit)
+    valid = np.isfinite(inext) & incoherent_ok & spectral_ok & (inext <= total * (1.0 + z_crit * se_total))
     var = np.where(valid, inext, white)
     return NoiseFloor(variance_deg2=var, inextensible_deg2=inext, white_deg2=white, valid=valid,
                       across_over_along=q, smoother_gain=smoother_gain, series_deg=D, n_eff=n_eff,

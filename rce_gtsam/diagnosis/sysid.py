@@ -13,8 +13,9 @@ y_e(t) = kappa_e z(t). Five views test that, each with a null band from the data
   *rises* with frequency toward resonance (|H| ~ 1 + (1 - 2 zeta^2) (f / f_n)^2) and a phase lag growing faster
   than linearly. The two are told apart by the gain's curvature with frequency (its t statistic from the
   coherence-based variance of Welch estimates, Bendat & Piersol), not by a threshold tuned to a simulator.
-  Frequencies count only where coherence is significant: above 1 - alpha^(1 / (K - 1)) for K averaged
-  segments (the null distribution of Welch coherence of independent series).
+  Frequencies count only where coherence is significant: above 1 - (alpha / n_f)^(1 / (K - 1)) for K
+  averaged segments and n_f frequencies (the null distribution of Welch coherence of independent series,
+  Bonferroni over frequencies).
 * **Cross-spectral singular values** of the residuals across segments (operational modal analysis'
   frequency-domain decomposition): one dominant singular value over a band where the noise's own (from the
   model-free noise series, :mod:`.noise_floor`) is lower means a second excitation with its own shape.
@@ -196,7 +197,10 @@ def residual_analysis(Y: np.ndarray, kappa: np.ndarray, z: np.ndarray, noise_ser
     R = Y - kappa[:, None] * z[None, :]
     lags, xc, band = cross_correlation(R, z, max_lag=int(min(60, max(5, T // 10))))
     f, gain, phase, coh, K = frequency_response(Y, excitation_without(Y, kappa, shared), kappa, nperseg)
-    thr = 1.0 - alpha ** (1.0 / max(K - 1, 1))
+    # Welch coherence of independent series exceeds 1 - a^(1 / (K - 1)) with probability a; a = alpha over the
+    # number of frequencies (Bonferroni), so that a few coherent-looking bins are not noise by chance
+    n_freq = max(int(np.sum(f > 0)), 1)
+    thr = 1.0 - (alpha / n_freq) ** (1.0 / max(K - 1, 1))
     delay = np.full(E, np.nan)
     delay_se = np.full(E, np.nan)
     curv = np.full(E, np.nan)

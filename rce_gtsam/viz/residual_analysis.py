@@ -42,7 +42,7 @@ def fig_residual_analysis(ra, labels, fps: float | None = None):
             a.plot(f[1:], np.where(coh, y, np.nan)[1:], color=colors[k], lw=1.6, label=f"{labels[e]}")
     coherent_any = (ra.coherence > ra.coherence_threshold).any(axis=0) & (ra.freqs > 0)
     fmax = 1.5 * float(f[coherent_any].max()) if coherent_any.any() else float(f[-1])
-    fmax = max(fmax, float(f[min(len(f) - 1, 8)]))
+    fmax = min(max(fmax, float(f[min(len(f) - 1, 8)])), float(f[-1]))
     for a in (axs[0, 1], axs[0, 2]):
         a.set_xlim(0, fmax)
     axs[0, 1].axhline(1.0, color="k", lw=0.8, ls="--")
