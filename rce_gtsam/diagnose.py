@@ -468,7 +468,10 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8
                      residual_summary=summary, settings=settings, edge_labels=labels, budget=budget,
                      baseline_frame_loss=b_loss,
                      residual_analysis=residual_analysis(
-                         Y, base.kappa, base.z, noise_floor.series_deg if noise_floor is not None else None,
+                         Y, base.kappa, base.z,
+                         # the noise realisation of the segments where the estimate holds (zero elsewhere)
+                         np.where(noise_floor.valid[:, None], noise_floor.series_deg, 0.0)
+                         if noise_floor is not None else None,
                          shared=shared, root_distance=s),
                      noise_floor=noise_floor)
     object.__setattr__(diag, "explanation", explain(diag))

@@ -59,7 +59,8 @@ def fig_residual_analysis(ra, labels, fps: float | None = None):
     ax.semilogy(f[1:], ra.sv_residual[1:, 0], color="tab:purple", label="residual s1")
     ax.semilogy(f[1:], np.maximum(ra.sv_residual[1:, 1], 1e-12), color="tab:purple", ls=":", label="residual s2")
     if ra.sv_noise is not None:
-        ax.semilogy(f[1:], ra.sv_noise[1:, 0], color="0.4", label="noise floor s1")
+        ax.semilogy(f[1:], np.maximum(ra.sv_noise[1:, 0], 1e-12), color="0.4",
+                    label="noise floor s1 (segments where it holds)")
     ax.set_xlabel(f"frequency ({unit})")
     ax.set_ylabel("singular value (deg^2 per frequency unit)")
     ax.set_title("cross-spectral singular values of the residuals\ns1 >> noise and >> s2 = a second excitation")
