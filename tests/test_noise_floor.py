@@ -130,3 +130,19 @@ def test_diagnosis_json_carries_the_budget(tmp_path):
     assert "[[Variance budget]]" in d.report()
     parts = b["rank1"] + sum(b["effects"].values()) + b["noise_floor"] + b["unexplained"]
     assert parts == pytest.approx(b["total"], rel=0.05)
+
+
+@pytest.mark.slow
+def test_real_plant_budgets_are_what_the_readme_says(shared_data):
+    """README, "On the two real plants": shares of the rank-1 variance budget (default preset)."""
+    from rce_gtsam.diagnosis.budget import budget_of
+    quoted = {"plant_1": (19, 19, 4, 63, 14), "plant_2": (41, 18, -4, 41, 16)}
+    for name, (rank1, floor, low, high, bound) in quoted.items():
+        d = shared_data / name
+        res = analyze(d / "tapir_tracks.csv", d / "branch_graph.json", preset="default", n_boot=0)
+        b = budget_of(res)
+        pc = lambda v: 100 * b.share(v)  # noqa: E731
+        assert b.status == "inconclusive"
+        assert abs(pc(b.rank1) - rank1) <= 1 and abs(pc(b.noise_floor) - floor) <= 1
+        assert abs(pc(b.unexplained_range[0]) - low) <= 1 and abs(pc(b.unexplained_range[1]) - high) <= 1
+        assert len(b.floor_is_bound) == bound
