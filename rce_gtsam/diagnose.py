@@ -50,7 +50,7 @@ from scipy import signal, stats
 from . import effects as effects_mod
 from .diagnosis.budget import VarianceBudget, variance_budget
 from .diagnosis.noise_floor import NoiseFloor
-from .diagnosis.statistics import ResidualContext
+from .diagnosis.statistics import ResidualContext, autocorrelation
 from .diagnosis.sysid import ResidualAnalysis, residual_analysis
 from .model import ModelFit, ResponseModel, render_fit_report, validate_inputs
 from .presets import ComplianceConfig
@@ -79,7 +79,6 @@ class CandidateResult:
     supported: bool
     statistics: dict
     extra: dict = field(default_factory=dict)  # effective-sample IC terms, likelihood-ratio test
-    frame_loss: np.ndarray | None = None  # (T,) held-out MSE per frame (deg^2), NaN where not scored
 
     def as_dict(self) -> dict:
         return {**_jsonable(self.extra), "effect": self.effect, "heldout_rmse": _num(self.heldout_rmse), "evidence": _num(self.evidence),
@@ -445,7 +444,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8
         supported = bool(np.isfinite(ev) and ev > t_crit and rmse < b_rmse and daic < 0)
         results.append(CandidateResult(effect=eff.name, fit=full, heldout_rmse=rmse, fold_mse=mse, evidence=ev,
                                        improvement_pct=imp, delta_aic=daic, delta_bic=dbic, supported=supported,
-                                       statistics=stats_all.get(eff.name, {}), extra=extra, frame_loss=loss))
+                                       statistics=stats_all.get(eff.name, {}), extra=extra))
     results.sort(key=lambda c: c.heldout_rmse)
     verdict, parsimony = choose_verdict(results, t_crit)
     worst_e, worst_f, summary = worst_edges_and_frames(base, labels, block_length, frames)
@@ -487,13 +486,10 @@ def frame_loss(sse_t: np.ndarray, cnt_t: np.ndarray) -> np.ndarray:
 def integrated_time(d: np.ndarray) -> float:
     """Integrated autocorrelation time (frames) of a series: 1 + 2 sum of its autocorrelations, summed in
     pairs while positive (Geyer's initial positive sequence); >= 1."""
-    x = d - d.mean()
-    n = len(x)
-    if n < 8 or not np.any(x):
+    n = len(d)
+    if n < 8 or not np.any(d - d.mean()):
         return 1.0
-    f = np.fft.rfft(x, 2 * n)
-    ac = np.fft.irfft(f * np.conj(f))[:n]
-    ac = ac / ac[0]
+    ac = autocorrelation(d, n - 1)
     tau = 1.0
     for k in range(1, n - 1, 2):
         pair = ac[k] + ac[k + 1]

@@ -80,11 +80,6 @@ class NoiseFloor:
         """Overall RMS angle noise over rows (deg)."""
         return float(math.sqrt(np.mean(self.variance_deg2))) if len(self.variance_deg2) else float("nan")
 
-    @property
-    def relative_se(self) -> np.ndarray:
-        """(E,) approximate relative standard error of each row's variance estimate: sqrt(2 / n_eff)."""
-        return np.sqrt(2.0 / np.maximum(self.n_eff, 1.0))
-
     def as_dict(self) -> dict:
         return {"rms_deg": self.rms_deg,
                 "per_row_deg2": self.variance_deg2.tolist(),

@@ -13,6 +13,16 @@ from dataclasses import dataclass
 import numpy as np
 
 
+def autocorrelation(x: np.ndarray, nlags: int) -> np.ndarray:
+    """(nlags + 1,) sample autocorrelation of the series x (mean removed) at lags 0..nlags, by FFT (zeros for a
+    constant series)."""
+    x = x - x.mean()
+    n = len(x)
+    f = np.fft.rfft(x, 2 * n)
+    ac = np.fft.irfft(f * np.conj(f))[: nlags + 1]
+    return ac / ac[0] if ac[0] > 0 else np.zeros(nlags + 1)
+
+
 def ar1_inflation(R: np.ndarray) -> float:
     """(1 + rho) / (1 - rho) for the pooled lag-1 autocorrelation rho >= 0 (clipped at 0.98) of the residuals."""
     a, b = R[:, :-1], R[:, 1:]

@@ -35,6 +35,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import signal
 
+from .statistics import autocorrelation
+
 
 @dataclass(frozen=True, eq=False)
 class ResidualAnalysis:
@@ -81,14 +83,6 @@ class ResidualAnalysis:
                 "coherence_threshold": self.coherence_threshold}
 
 
-def _acf(x: np.ndarray, nlags: int) -> np.ndarray:
-    x = x - x.mean()
-    n = len(x)
-    f = np.fft.rfft(x, 2 * n)
-    ac = np.fft.irfft(f * np.conj(f))[: nlags + 1]
-    return ac / ac[0] if ac[0] > 0 else np.zeros(nlags + 1)
-
-
 def cross_correlation(R: np.ndarray, z: np.ndarray, max_lag: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(lags, (E, L) corr(r_e(t), z(t - lag)), (E,) 2-SE band from Bartlett's formula)."""
     E, T = R.shape
@@ -96,14 +90,14 @@ def cross_correlation(R: np.ndarray, z: np.ndarray, max_lag: int) -> tuple[np.nd
     out = np.zeros((E, len(lags)))
     band = np.zeros(E)
     zc = z - z.mean()
-    rho_z = _acf(zc, min(T - 1, 4 * max_lag))
+    rho_z = autocorrelation(zc, min(T - 1, 4 * max_lag))
     for e in range(E):
         r = np.where(np.isfinite(R[e]), R[e], 0.0)
         r = r - r.mean()
         den = math.sqrt(float(np.sum(r * r) * np.sum(zc * zc))) or 1.0
         full = np.correlate(r, zc, mode="full") / den  # index T - 1 is lag 0; lag L pairs r(t) with z(t - L)
         out[e] = full[T - 1 + lags]
-        rho_r = _acf(r, len(rho_z) - 1)
+        rho_r = autocorrelation(r, len(rho_z) - 1)
         var = (1.0 + 2.0 * float(np.sum(rho_r[1:] * rho_z[1:]))) / T
         band[e] = 2.0 * math.sqrt(max(var, 1.0 / T))
     return lags, out, band
@@ -230,7 +224,7 @@ def residual_analysis(Y: np.ndarray, kappa: np.ndarray, z: np.ndarray, noise_ser
         X = np.stack([np.ones(ok.sum()), tt[ok]], axis=1)
         beta, *_ = np.linalg.lstsq(X, R[e, ok], rcond=None)
         res = R[e, ok] - X @ beta
-        rho = float(np.clip(_acf(res, 1)[1], 0.0, 0.99))
+        rho = float(np.clip(autocorrelation(res, 1)[1], 0.0, 0.99))
         s2 = float(np.sum(res ** 2) / max(ok.sum() - 2, 1)) * (1 + rho) / (1 - rho)
         se = math.sqrt(s2 * np.linalg.inv(X.T @ X)[1, 1])
         trend[e], trend_t[e] = beta[1], beta[1] / se if se > 0 else 0.0
