@@ -72,18 +72,6 @@ def block_rms_z(Y: np.ndarray, weights, config, kappa: np.ndarray, s: np.ndarray
     return (float(math.sqrt(np.mean(z ** 2))) if z.size else float("nan")), int(z.size)
 
 
-def phase_surrogate(R: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Residual rows with every frequency's phase rotated by one random angle shared by all rows: each row's
-    spectrum and the cross-spectra between rows are kept, the relation to the excitation is not."""
-    E, T = R.shape
-    F = np.fft.rfft(np.where(np.isfinite(R), R, 0.0), axis=1)
-    ph = np.exp(2j * np.pi * rng.uniform(size=F.shape[1]))
-    ph[0] = 1.0
-    if T % 2 == 0:
-        ph[-1] = 1.0
-    return np.fft.irfft(F * ph[None, :], n=T, axis=1)
-
-
 def time_split_check(Y: np.ndarray, weights, config, kappa: np.ndarray, low: np.ndarray, high: np.ndarray,
                      n_blocks: int, n_null: int = 12, seed: int = 0) -> TimeSplitCheck:
     """Batch-means check of kappa's intervals (see the module docstring). Y: (E, T) deg; weights: (E, T) or
@@ -102,10 +90,11 @@ def time_split_check(Y: np.ndarray, weights, config, kappa: np.ndarray, low: np.
     full = ResponseModel(config=config).fit(Y, weights=weights)
     pred = full.predict()
     R = Y - pred
-    rng = np.random.default_rng(seed)
+    from ..compliance import phase_randomised_residuals  # the phase bootstrap's own noise model
+
     null = []
-    for _ in range(int(n_null)):
-        Ys = np.where(np.isfinite(Y), pred + phase_surrogate(R, rng), np.nan)
+    for Rs in phase_randomised_residuals(R, int(n_null), np.random.default_rng(seed)):
+        Ys = np.where(np.isfinite(Y), pred + Rs, np.nan)
         ks = ResponseModel(config=config).fit(Ys, weights=weights).kappa
         null.append(block_rms_z(Ys, weights, config, ks, s, n_blocks)[0])
     rms0 = float(np.sqrt(np.nanmean(np.square(null)))) if null else 1.0
