@@ -111,3 +111,34 @@ def test_no_false_second_mode_on_effect_free_pipeline_data():
         assert d.settings["node_disjoint_halves"]
         assert d.verdict is None, d.report()
         assert d.settings["n_eff"] < 0.5 * d.settings["n_obs"]  # tracking noise is serially correlated
+
+
+def test_oracle_is_a_ceiling_that_does_not_fire_without_an_effect():
+    """The oracle (the hidden effect's candidate with its true shared parameters, run through the same folds)
+    fires on a strong offset and stays silent on effect-free data, where the old "knows z" prediction of the
+    noise-free truth fires anyway (it skips estimating the excitation, so it is no ceiling)."""
+    from rce_gtsam.diagnose import oracle_test
+    nodes = [{i} for i in range(16)]
+    Y, s, _, _, y = synth("offset", seed=0, E=16)
+    d = diagnose(Y, root_distance=s, effects=FAST, edge_nodes=nodes)
+    o = oracle_test(d, Y, y, "offset")
+    assert o["supported"] and o["t"] > d.settings["evidence_threshold_t"]
+    Y, s, _, _, y = synth(None, seed=2, E=16)
+    d = diagnose(Y, root_distance=s, effects=FAST, edge_nodes=nodes)
+    o = oracle_test(d, Y, y, None)
+    assert not o["supported"]
+    assert o["knows_z"]["improvement_pct"] > 0  # knowing z beats estimating it, effect or not
+
+
+def test_no_effect_named_below_the_resolution_on_noise_free_data():
+    """Noise-free effect-free data: whatever tiny structure is left (here a second mode worth 3e-4 of the
+    variance) is significant at any size, but below the resolution nothing is named; a real effect is."""
+    Y, s, *_ = synth(None, seed=1, E=16, noise=0.0)
+    rng = np.random.default_rng(0)
+    Y = Y + 1e-3 * np.outer(rng.standard_normal(16), np.sin(np.arange(Y.shape[1]) / 7.0))
+    d = diagnose(Y, root_distance=s, effects=FAST, edge_nodes=[{i} for i in range(16)])
+    assert d.verdict is None
+    assert all(c.extra["heldout_gain_share"] < d.settings["resolution"] for c in d.candidates)
+    Y, s, *_ = synth("offset", seed=1, E=16, noise=0.0)
+    d = diagnose(Y, root_distance=s, effects=FAST, edge_nodes=[{i} for i in range(16)])
+    assert d.verdict == "offset"
