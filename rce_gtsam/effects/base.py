@@ -106,9 +106,15 @@ class Effect:
         """Operator effects: the transpose (adjoint) of :meth:`apply`, row by row."""
         return R
 
-    def output(self, U: np.ndarray, state: dict) -> tuple[np.ndarray, np.ndarray]:
-        """Output effects: g(U) and g'(U) elementwise for U = kappa * x (degrees)."""
+    def output(self, U: np.ndarray, state: dict, kappa: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Output effects: g(U) and g'(U) elementwise for U = kappa * x (degrees); ``kappa`` (E,) for maps
+        that also depend on each edge's gain on its own (a reference pose, :class:`~.nonlinear.Nonlinear`)."""
         return U, np.ones_like(U)
+
+    def output_kappa_term(self, dG: np.ndarray, state: dict, kappa: np.ndarray) -> np.ndarray | float:
+        """Output effects: d g / d kappa_e minus g'(U) x (what the Gauss-Newton kappa step adds to its
+        Jacobian g'(U) x when g depends on kappa also outside U; default 0)."""
+        return 0.0
 
     def additive(self, state: dict, view: "FitView") -> np.ndarray | None:
         """Additive effects: the (E, T) term added to the prediction (degrees)."""

@@ -31,6 +31,9 @@ def kappa_step(view: FitView) -> None:
     pred, X, dG = view.parts()
     r = view.Y0 - pred
     J = dG * X
+    for eff, st in zip(view.effects, view.states):
+        if eff.kind == "output":
+            J = J + eff.output_kappa_term(dG, st, view.kappa)
     used = (view.W > 0) & (np.abs(X) > EPS)
     Wm = np.where(used, view.W, 0.0)
     num = np.sum(Wm * J * r, axis=1)

@@ -61,7 +61,7 @@ class FitView:
         G, dG = U, None
         for eff, st in zip(self.effects, states):
             if eff.kind == "output":
-                G, dG = eff.output(U, st)
+                G, dG = eff.output(U, st, kappa)
         for i, (eff, st) in enumerate(zip(self.effects, states)):
             if eff.kind == "additive" and i != skip_additive:
                 a = eff.additive(st, self)
