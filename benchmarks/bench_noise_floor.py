@@ -7,7 +7,7 @@ each row is RMS(Y - truth) with the truth on the pipeline's rest reference (per-
 removed). Printed per seed: true and estimated overall RMS (deg), their ratio, the share of rows whose own
 estimate is within 25 %, and the across/along ratio q found vs set.
 
-Usage: python benchmarks/bench_noise_floor.py [--seeds 20] [--frames 900]
+Usage: python benchmarks/bench_noise_floor.py [--seeds 20] [--first-seed 0] [--frames 900]
 """
 
 from __future__ import annotations
@@ -51,13 +51,14 @@ def one(seed: int, frames: int) -> dict:
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--frames", type=int, default=900)
     a = ap.parse_args()
     t0 = time.perf_counter()
     rows = []
     print(f"{'seed':>4} {'sigma x':>7} {'drift x':>7} {'along':>5} {'true deg':>8} {'est deg':>8} {'ratio':>6} "
           f"{'rows<=25%':>9} {'q':>6} {'q set':>6} {'consistent':>10}")
-    for s in range(a.seeds):
+    for s in range(a.first_seed, a.first_seed + a.seeds):
         r = one(s, a.frames)
         rows.append(r)
         print(f"{s:>4} {r['sigma_mult']:>7.1f} {r['drift_mult']:>7.1f} {r['along_ratio']:>5.1f} {r['true_rms']:>8.3f} "

@@ -51,7 +51,11 @@ MAD_SD = 1.4826
 class NoiseFloor:
     """Model-free angle-noise estimate for the rows of a response matrix (degrees).
 
-    variance_deg2: (E,) the angle-noise variance used for each row (deg^2).
+    variance_deg2: (E,) the point estimate of each row's angle-noise variance (deg^2): the inextensibility
+        estimate where it holds (``valid``); elsewhere the white-noise lower bound times the median full / white
+        ratio of the valid rows (the drift a tracker adds to its white noise is a property of the tracker and
+        the footage, not of one segment), capped at the row's own stretch estimate and bending variance. The
+        variance budget uses ``white_deg2`` on those rows (the floor there is only bounded).
     inextensible_deg2: (E,) q var(d_j): the inextensibility estimate (deg^2).
     white_deg2: (E,) the white part of the raw angle noise after smoothing: a lower bound (deg^2).
     valid: (E,) bool — the inextensibility estimate is consistent with the row's bending variance; False rows
@@ -309,7 +313,15 @@ def estimate_noise_floor(raw_xy: np.ndarray, smoothed_xy: np.ndarray, node_ids, 
     incoherent_ok = coherent <= chance + z_crit * chance
     spectral_ok = spectrum_below(D, Y, z_crit)
     valid = np.isfinite(inext) & incoherent_ok & spectral_ok & (inext <= total * (1.0 + z_crit * se_total))
-    var = np.where(valid, inext, white)
+    # point estimate where inextensibility fails: the white-noise lower bound misses drift, so scale it by the
+    # full / white ratio of the rows where the estimate holds (how much drift a tracker adds to its white noise
+    # is a property of the tracker and the footage, not of one segment), capped by what the row's own stretch
+    # and bending allow; the variance budget keeps the plain lower bound on these rows (they stay "bounded")
+    ratio = inext[valid] / np.maximum(white[valid], 1e-300)
+    drift_factor = float(np.median(ratio)) if valid.sum() >= 3 else 1.0
+    cap = np.minimum(np.where(np.isfinite(inext), inext, np.inf), np.where(np.isfinite(total), total, np.inf))
+    transferred = np.clip(white * max(drift_factor, 1.0), white, np.maximum(cap, white))
+    var = np.where(valid, inext, transferred)
     return NoiseFloor(variance_deg2=var, inextensible_deg2=inext, white_deg2=white, valid=valid,
                       across_over_along=q, smoother_gain=smoother_gain, series_deg=D, n_eff=n_eff,
                       coherent_share=coherent)

@@ -53,8 +53,21 @@ class Delay(Effect):
 
     # operator ---------------------------------------------------------------------------------------
     def _taps(self, tau, view):
-        T = view.T
-        lag = scalar(tau) * view.s  # (E,)
+        # the same (tau, s, T) is asked for many times per solve (every transform, adjoint and error): keep the
+        # last few taps, keyed by their exact inputs
+        key = (scalar(tau), view.T, view.s.tobytes())
+        cache = self.__dict__.setdefault("_tap_cache", {})
+        hit = cache.get(key)
+        if hit is None:
+            if len(cache) >= 8:
+                cache.pop(next(iter(cache)))
+            hit = cache[key] = self._compute_taps(scalar(tau), view.T, view.s)
+        return hit
+
+    @staticmethod
+    def _compute_taps(tau: float, T: int, s: np.ndarray):
+        """Catmull-Rom interpolation taps of z(t - tau s_e): (E, T, 4) frame indices and weights."""
+        lag = tau * s  # (E,)
         src = np.arange(T)[None, :] - lag[:, None]
         i0 = np.floor(src)
         f = src - i0
