@@ -119,7 +119,7 @@ def main() -> int:
     ap.add_argument("--effects", default="none,delay,dynamics,second_mode,offset,nonlinear")
     ap.add_argument("--folds", type=int, default=8, help="cross-validation blocks of diagnose (default 8)")
     a = ap.parse_args()
-    from rce_gtsam.diagnose import diagnose, oracle_test
+    from rce_gtsam.diagnose import choose_verdict, diagnose, oracle_test
     mults = [float(m) for m in a.strength_mult.split(",")]
     print(f"input: {'matrices (simulator equations + noise)' if a.matrices else 'full pipeline (simulate -> analyze default preset)'}; "
           f"{a.seeds} seeds from {a.first_seed}, {a.frames} frames, effect strength {a.strength_mult} x default; "
@@ -128,7 +128,7 @@ def main() -> int:
     for eff in a.effects.split(","):
         hidden = None if eff == "none" else eff
         for mult in (mults if hidden is not None else [1.0]):
-            okz = 0
+            okz, ok2, conf2 = 0, 0, 0
             okf, orcf, ok, orc, conf, imp_v, imp_h, ceil, kb, ka, ts, tps, tru, nsr = 0, 0, 0, 0, 0, [], [], [], [], [], [], [], [], []
             for sd in range(a.first_seed, a.first_seed + a.seeds):
                 Y, W, s, k, y, tp, labels = case(hidden, sd, a.frames, a.matrices, mult, a.noise_free)
@@ -140,6 +140,9 @@ def main() -> int:
                 fv = full_data_verdict(d)
                 okf += fv == hidden
                 conf += {d.verdict, hidden} == {"delay", "dynamics"}
+                v2 = choose_verdict(d.candidates, d.settings["evidence_threshold_t"], same_kind=True)[0]
+                ok2 += v2 == hidden
+                conf2 += {v2, hidden} == {"delay", "dynamics"}
                 o = oracle_test(d, Y, y, hidden)
                 orc += bool(o["supported"])
                 okz += bool(o["knows_z"]["supported"])
@@ -156,7 +159,7 @@ def main() -> int:
                     ceil.append(ceiling(Y, y))
                     tru.append(truth_gain(Y, y, d.baseline, d.candidate(hidden).fit))
                 nsr.append(noise_to_signal(Y, y))
-                print(f"  {eff} x{mult:g} seed {sd}: verdict {d.verdict} (full-data test: {fv}), oracle t={o['t']:.1f}"
+                print(f"  {eff} x{mult:g} seed {sd}: verdict {d.verdict} (same-kind parsimony: {v2}; full-data test: {fv}), oracle t={o['t']:.1f}"
                       f"{'*' if o['supported'] else ''} (knows z t={o['knows_z']['t']:.1f}"
                       f"{'*' if o['knows_z']['supported'] else ''}) ft={o.get('full_data_t', float('nan')):.1f}; " + ", ".join(
                     f"{c.effect} {c.improvement_pct:+.1f}% t={c.evidence:.1f}{'*' if c.supported else ''} "
@@ -165,27 +168,29 @@ def main() -> int:
             med = lambda v: float(np.median(v)) if v else float("nan")  # noqa: E731
             n = a.seeds
             rows.append(f"{eff:<12} {mult:>5g} {ok:>5}/{n} {orc:>5}/{n} {okz:>5}/{n} {okf:>5}/{n} "
-                        f"{orcf:>5}/{n} {conf:>5} {med(imp_v):14.1f} "
+                        f"{orcf:>5}/{n} {conf:>5} {ok2:>5}/{n} {conf2:>5} {med(imp_v):14.1f} "
                         f"{med(imp_h):13.1f} {med(ceil):9.1f} {med(tru):7.1f} {med(nsr):9.2f} {med(kb):8.3f} -> "
                         f"{med(ka):.3f} {med(ts):7.1f} {med(tps):6.1f}")
-            table.append({"effect": eff, "mult": mult, "right": ok, "oracle": orc, "knows_z": okz, "n": n, "right_full": okf,
+            table.append({"effect": eff, "mult": mult, "right": ok, "oracle": orc, "knows_z": okz, "n": n, "right_full": okf, "right2": ok2,
                           "oracle_full": orcf})
             print(rows[-1], flush=True)
-    print(f"\n{'effect':<12} {'x':>5} {'right':>8} {'oracle':>8} {'knows z':>8} {'right*':>8} {'oracle*':>8} {'d<->d':>5} {'dRMSE% verdict':>14} {'dRMSE% hidden':>13} "
+    print(f"\n{'effect':<12} {'x':>5} {'right':>8} {'oracle':>8} {'knows z':>8} {'right*':>8} {'oracle*':>8} {'d<->d':>5} {'right2':>8} {'d<->d2':>6} {'dRMSE% verdict':>14} {'dRMSE% hidden':>13} "
           f"{'ceiling%':>9} {'truth%':>7} {'noise/sig':>9} {'klog before -> after':>20} {'s':>7} {'pipe s':>6}")
     print("\n".join(rows))
     print("(right/oracle/knows z: the verdict's fold-paired t rule; right*/oracle*: the full-data Diebold-Mariano rule;"
-          " for effect-free rows 'right' counts no verdict and 'oracle'/'knows z' count false firings)")
+          " for effect-free rows 'right' counts no verdict and 'oracle'/'knows z' count false firings;"
+          " right2 / d<->d2: the verdict with same-kind parsimony, choose_verdict(same_kind=True))")
     # the strength at which each is right >= 90 %: project vs oracle
     for eff in sorted({r["effect"] for r in table if r["effect"] != "none"}):
         pr = [r for r in table if r["effect"] == eff]
         p90 = next((r["mult"] for r in pr if r["right"] >= 0.9 * r["n"]), None)
         o90 = next((r["mult"] for r in pr if r["oracle"] >= 0.9 * r["n"]), None)
         p90f = next((r["mult"] for r in pr if r["right_full"] >= 0.9 * r["n"]), None)
+        p902 = next((r["mult"] for r in pr if r["right2"] >= 0.9 * r["n"]), None)
         o90f = next((r["mult"] for r in pr if r["oracle_full"] >= 0.9 * r["n"]), None)
         print(f"{eff:<12} right >= 90 % from strength x{p90 if p90 is not None else '>max'}; "
               f"oracle from x{o90 if o90 is not None else '>max'}; full-data rule x{p90f if p90f is not None else '>max'}, "
-              f"its oracle x{o90f if o90f is not None else '>max'}")
+              f"its oracle x{o90f if o90f is not None else '>max'}; same-kind parsimony x{p902 if p902 is not None else '>max'}")
     return 0
 
 

@@ -97,6 +97,27 @@ def test_parsimony_prefers_the_simpler_effect_unless_the_complex_one_is_signific
     assert choose_verdict([], t_crit=3.0) == (None, {})
 
 
+def test_same_kind_parsimony_weighs_an_unsupported_simpler_operator():
+    """Dynamics supported, delay not (but lowering the held-out error, and not significantly worse): by default
+    the verdict is dynamics; with same_kind=True, delay. An unsupported simpler effect of another kind is
+    never taken."""
+    from types import SimpleNamespace as C
+    from rce_gtsam.diagnose import choose_verdict
+    from rce_gtsam.effects import make
+    fit = lambda name: C(model=C(effects=(make(name),)))  # noqa: E731
+    rng = np.random.default_rng(1)
+    base = 1 + 0.05 * rng.standard_normal(8)
+    dyn = C(effect="dynamics", supported=True, heldout_rmse=0.99, fold_mse=base * 0.98, extra={"k_eff": 40.0},
+            improvement_pct=1.0, fit=fit("dynamics"))
+    dly = C(effect="delay", supported=False, heldout_rmse=0.995, improvement_pct=0.5, fit=fit("delay"),
+            fold_mse=base * 0.98 * (1 + 0.02 * rng.standard_normal(8)), extra={"k_eff": 38.0})
+    off = C(effect="offset", supported=False, heldout_rmse=0.996, improvement_pct=0.4, fit=fit("offset"),
+            fold_mse=base * 0.98 * (1 + 0.02 * rng.standard_normal(8)), extra={"k_eff": 30.0})
+    assert choose_verdict([dyn, dly, off], t_crit=3.0)[0] == "dynamics"
+    v, info = choose_verdict([dyn, dly, off], t_crit=3.0, same_kind=True)
+    assert v == "delay" and info["preferred_simpler"] == "delay"
+
+
 def test_no_false_second_mode_on_effect_free_pipeline_data():
     """Full pipeline (simulate -> analyze), no hidden effect: neighbouring bends share tracked nodes and so
     carry anti-correlated noise, which a free second mode used to 'predict' across interleaved edge halves
