@@ -119,7 +119,7 @@ def main() -> int:
     ap.add_argument("--effects", default="none,delay,dynamics,second_mode,offset,nonlinear")
     ap.add_argument("--folds", type=int, default=8, help="cross-validation blocks of diagnose (default 8)")
     a = ap.parse_args()
-    from rce_gtsam.diagnose import choose_verdict, diagnose, oracle_test
+    from rce_gtsam.diagnose import choose_verdict, diagnose, maxt_verdict, oracle_test
     mults = [float(m) for m in a.strength_mult.split(",")]
     print(f"input: {'matrices (simulator equations + noise)' if a.matrices else 'full pipeline (simulate -> analyze default preset)'}; "
           f"{a.seeds} seeds from {a.first_seed}, {a.frames} frames, effect strength {a.strength_mult} x default; "
@@ -128,7 +128,7 @@ def main() -> int:
     for eff in a.effects.split(","):
         hidden = None if eff == "none" else eff
         for mult in (mults if hidden is not None else [1.0]):
-            okz, ok2, conf2 = 0, 0, 0
+            okz, ok2, conf2, ok3, orc3, conf3 = 0, 0, 0, 0, 0, 0
             okf, orcf, ok, orc, conf, imp_v, imp_h, ceil, kb, ka, ts, tps, tru, nsr = 0, 0, 0, 0, 0, [], [], [], [], [], [], [], [], []
             for sd in range(a.first_seed, a.first_seed + a.seeds):
                 Y, W, s, k, y, tp, labels = case(hidden, sd, a.frames, a.matrices, mult, a.noise_free)
@@ -143,8 +143,14 @@ def main() -> int:
                 v2 = choose_verdict(d.candidates, d.settings["evidence_threshold_t"], same_kind=True)[0]
                 ok2 += v2 == hidden
                 conf2 += {v2, hidden} == {"delay", "dynamics"}
+                v3 = maxt_verdict(d)
+                ok3 += v3 == hidden
+                conf3 += {v3, hidden} == {"delay", "dynamics"}
                 o = oracle_test(d, Y, y, hidden)
                 orc += bool(o["supported"])
+                o3 = bool(o["t"] > d.settings["maxt_critical_t"] and o["improvement_pct"] > 0
+                          and (hidden is not None))
+                orc3 += o3
                 okz += bool(o["knows_z"]["supported"])
                 if True:
                     from scipy import stats
@@ -159,7 +165,7 @@ def main() -> int:
                     ceil.append(ceiling(Y, y))
                     tru.append(truth_gain(Y, y, d.baseline, d.candidate(hidden).fit))
                 nsr.append(noise_to_signal(Y, y))
-                print(f"  {eff} x{mult:g} seed {sd}: verdict {d.verdict} (same-kind parsimony: {v2}; full-data test: {fv}), oracle t={o['t']:.1f}"
+                print(f"  {eff} x{mult:g} seed {sd}: verdict {d.verdict} (same-kind parsimony: {v2}; max-T: {v3}{'' if not o3 else ', oracle max-T*'}; full-data test: {fv}), oracle t={o['t']:.1f}"
                       f"{'*' if o['supported'] else ''} (knows z t={o['knows_z']['t']:.1f}"
                       f"{'*' if o['knows_z']['supported'] else ''}) ft={o.get('full_data_t', float('nan')):.1f}; " + ", ".join(
                     f"{c.effect} {c.improvement_pct:+.1f}% t={c.evidence:.1f}{'*' if c.supported else ''} "
@@ -168,18 +174,19 @@ def main() -> int:
             med = lambda v: float(np.median(v)) if v else float("nan")  # noqa: E731
             n = a.seeds
             rows.append(f"{eff:<12} {mult:>5g} {ok:>5}/{n} {orc:>5}/{n} {okz:>5}/{n} {okf:>5}/{n} "
-                        f"{orcf:>5}/{n} {conf:>5} {ok2:>5}/{n} {conf2:>5} {med(imp_v):14.1f} "
+                        f"{orcf:>5}/{n} {conf:>5} {ok2:>5}/{n} {conf2:>5} {ok3:>5}/{n} {orc3:>5}/{n} {conf3:>5} {med(imp_v):14.1f} "
                         f"{med(imp_h):13.1f} {med(ceil):9.1f} {med(tru):7.1f} {med(nsr):9.2f} {med(kb):8.3f} -> "
                         f"{med(ka):.3f} {med(ts):7.1f} {med(tps):6.1f}")
             table.append({"effect": eff, "mult": mult, "right": ok, "oracle": orc, "knows_z": okz, "n": n, "right_full": okf, "right2": ok2,
                           "oracle_full": orcf})
             print(rows[-1], flush=True)
-    print(f"\n{'effect':<12} {'x':>5} {'right':>8} {'oracle':>8} {'knows z':>8} {'right*':>8} {'oracle*':>8} {'d<->d':>5} {'right2':>8} {'d<->d2':>6} {'dRMSE% verdict':>14} {'dRMSE% hidden':>13} "
+    print(f"\n{'effect':<12} {'x':>5} {'right':>8} {'oracle':>8} {'knows z':>8} {'right*':>8} {'oracle*':>8} {'d<->d':>5} {'right2':>8} {'d<->d2':>6} {'right3':>8} {'oracle3':>8} {'d<->d3':>6} {'dRMSE% verdict':>14} {'dRMSE% hidden':>13} "
           f"{'ceiling%':>9} {'truth%':>7} {'noise/sig':>9} {'klog before -> after':>20} {'s':>7} {'pipe s':>6}")
     print("\n".join(rows))
     print("(right/oracle/knows z: the verdict's fold-paired t rule; right*/oracle*: the full-data Diebold-Mariano rule;"
           " for effect-free rows 'right' counts no verdict and 'oracle'/'knows z' count false firings;"
-          " right2 / d<->d2: the verdict with same-kind parsimony, choose_verdict(same_kind=True))")
+          " right2 / d<->d2: the verdict with same-kind parsimony, choose_verdict(same_kind=True);"
+          " right3 / oracle3 / d<->d3: the family-wise sign-flip max-T test, maxt_verdict)")
     # the strength at which each is right >= 90 %: project vs oracle
     for eff in sorted({r["effect"] for r in table if r["effect"] != "none"}):
         pr = [r for r in table if r["effect"] == eff]

@@ -49,6 +49,7 @@ from scipy import signal, stats
 
 from . import effects as effects_mod
 from .diagnosis.budget import VarianceBudget, variance_budget
+from .diagnosis.maxt import sign_flip_max_t
 from .diagnosis.noise_floor import NoiseFloor
 from .diagnosis.statistics import ResidualContext, autocorrelation
 from .diagnosis.sysid import ResidualAnalysis, residual_analysis
@@ -462,11 +463,16 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8
                                        improvement_pct=imp, delta_aic=daic, delta_bic=dbic, supported=supported,
                                        statistics=stats_all.get(eff.name, {}), extra=extra))
     results.sort(key=lambda c: c.heldout_rmse)
+    mt = sign_flip_max_t(b_mse, [c.fold_mse for c in results], alpha=alpha, seed=seed)
+    for c, p in zip(results, mt.p_adjusted):
+        c.extra["maxt_p"] = float(p)
+        c.extra["supported_maxt"] = bool(p <= alpha and c.heldout_rmse < b_rmse and c.delta_aic < 0
+                                          and c.extra["heldout_gain_share"] >= resolution)
     verdict, parsimony = choose_verdict(results, t_crit)
     worst_e, worst_f, summary = worst_edges_and_frames(base, labels, block_length, frames)
     settings = {"n_folds": len(blocks), "fold_blocks": blocks, "buffer_frames": gap, "block_length": block_length,
                 "seed": seed, "alpha": alpha, "evidence_threshold_t": t_crit, "resolution": resolution,
-                "heldout_total_variance": total_var, "prior_strength": prior_strength,
+                "heldout_total_variance": total_var, "maxt_critical_t": mt.critical_t, "maxt_flips": mt.n_flips, "prior_strength": prior_strength,
                 "response": response, "edge_halves": [halves[0].tolist(), halves[1].tolist()],
                 "node_disjoint_halves": node_disjoint, "weighted": weights is not None,
                 "residual_lag1_autocorrelation": ess["rho"], "n_obs": ess["n"], "n_eff": ess["n_eff"],
@@ -671,6 +677,15 @@ def effective_ic(fit: ModelFit, ess: dict) -> dict:
     n_eff, n = max(ess["n_eff"], 1.0), max(ess["n"], 1.0)
     ll = n_eff * math.log(max(fit.wsse, 1e-300) / n)
     return {"aic": ll + 2 * k_eff, "bic": ll + math.log(n_eff) * k_eff, "k_eff": k_eff, "k_static": k_static}
+
+
+def maxt_verdict(diag: "Diagnosis") -> str | None:
+    """The verdict the family-wise sign-flip max-T test (:mod:`rce_gtsam.diagnosis.maxt`) gives: the same rule
+    as the diagnosis' (lowest held-out RMSE among the supported, parsimony against simpler ones), with
+    "supported" from the max-T p-value and the max-T critical t in place of the Bonferroni t."""
+    from dataclasses import replace
+    swapped = [replace(c, supported=bool(c.extra.get("supported_maxt", False))) for c in diag.candidates]
+    return choose_verdict(swapped, diag.settings["maxt_critical_t"])[0]
 
 
 def _kind(c) -> str | None:
