@@ -86,7 +86,9 @@ class Effect:
 
     # -- fitting ----------------------------------------------------------------------------------
     def init(self, view: "FitView") -> dict:
-        """Initial state given the current core fit (``view.kappa``, ``view.z``)."""
+        """Initial state given the current core fit (``view.kappa``, ``view.z``). The state may carry
+        ``"core_start": (kappa, z)``, a better start for the core than the linear fit (taken out of the state
+        by the solver)."""
         raise NotImplementedError
 
     def update(self, state: dict, view: "FitView", frozen: bool) -> dict:
@@ -110,6 +112,11 @@ class Effect:
         """Output effects: g(U) and g'(U) elementwise for U = kappa * x (degrees); ``kappa`` (E,) for maps
         that also depend on each edge's gain on its own (a reference pose, :class:`~.nonlinear.Nonlinear`)."""
         return U, np.ones_like(U)
+
+    def rescale_z(self, state: dict, factor: float) -> dict:
+        """The state after z is multiplied by ``factor`` and kappa divided by it (the model's normalisation of
+        kappa to geometric mean 1): parameters in units of z scale with it (default: none)."""
+        return state
 
     def output_kappa_term(self, dG: np.ndarray, state: dict, kappa: np.ndarray) -> np.ndarray | float:
         """Output effects: d g / d kappa_e minus g'(U) x (what the Gauss-Newton kappa step adds to its

@@ -23,6 +23,9 @@ from ..model.steps import core_step
 from .base import Effect, Parameter, scalar
 
 
+GRID_CORE_STEPS = 4  # kappa and z steps per grid point before the errors are compared
+
+
 class Nonlinear(Effect):
     """Shared odd output nonlinearity g(kappa_e x_e); form ``"saturation"`` (tanh) or ``"cubic"``."""
 
@@ -83,6 +86,12 @@ class Nonlinear(Effect):
         G, dG = self._g(U + U0, c)
         return G - self._g(U0, c)[0], dG
 
+    def rescale_z(self, state, factor):
+        """z0 is in units of z: kappa (z + z0) must not change when the model normalises kappa."""
+        if "z0" not in state["params"]:
+            return state
+        return {**state, "params": {**state["params"], "z0": np.array(scalar(state["params"]["z0"]) * factor)}}
+
     def output_kappa_term(self, dG, state, kappa):
         U0 = self._reference(state, kappa)
         if U0 is None:
@@ -102,20 +111,23 @@ class Nonlinear(Effect):
             grid += [-g for g in grid[1:3]]
         model = getattr(view, "full_model", view.model)
         sub = model.with_effects(model.effects[: i + 1])
-        best, best_err = (0.0, 0.0), np.inf
+        best, best_err, best_core = (0.0, 0.0), np.inf, None
         for c in grid:
             for z0 in ((0.0,) if c == 0.0 else (0.0, -0.5 * zq, 0.5 * zq, -zq, zq)):
                 # a saturating g needs a larger linear deflection underneath than the linear fit found: a few
                 # kappa and z steps per grid point let kappa * z grow into it before the errors are compared
                 v = view.copy_with(sub, list(view.states)[:i] + [{"params": {"c": np.array(c), "z0": np.array(z0)},
                                                                    "latents": {}}])
-                for _ in range(4):
+                for _ in range(GRID_CORE_STEPS):
                     core_step(v)
                 err = v.wsse()
                 if err < best_err:
-                    best, best_err = (c, z0), err
+                    best, best_err, best_core = (c, z0), err, (v.kappa.copy(), v.z.copy())
+        # the fit goes on from the grid point's own kappa and z: the linear fit's kappa and z are compressed by
+        # the saturation (compliant joints most), and from them the alternating steps settle at a shallower
+        # curvature (noise-free branch: fit RMSE 0.024 deg from the linear start, 0.019 from the grid's)
         return {"params": {"c": np.array(best[0]), "z0": np.array(best[1])}, "latents": {}, "scale": q,
-                "z_scale": zq}
+                "z_scale": zq, "core_start": best_core if best[0] > 0 else None}
 
     def update(self, state, view, frozen):
         if frozen:

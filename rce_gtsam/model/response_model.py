@@ -177,6 +177,11 @@ class ResponseModel:
         states = []
         for eff in self.effects:
             states.append(prev_states[eff.name] if eff.name in prev_states else eff.init(PartialView(view, states)))
+        for st in states:  # an effect's init may hand the core a better start than the linear fit (its state's
+            # "core_start": (kappa, z) it found while choosing its own starting parameters)
+            core_start = st.pop("core_start", None) if isinstance(st, dict) else None
+            if core_start is not None and not frozen:
+                view.kappa, view.z = np.array(core_start[0], dtype=float), np.array(core_start[1], dtype=float)
         view.states = states
         has_latent = any(e.latent_names() for e in self.effects)
         converged = False

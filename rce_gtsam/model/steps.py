@@ -52,6 +52,8 @@ def kappa_step(view: FitView) -> None:
     k_new, _, gm = shrink_and_normalise(k_hat[None], shrink[None], n[None], signed)
     view.kappa = k_new[0]
     view.z = view.z * gm[0]  # keeps kappa * z (and any operator of z) unchanged
+    if gm[0] != 1.0 and view.states:  # and every parameter that is in units of z (Effect.rescale_z)
+        view.states = [eff.rescale_z(st, float(gm[0])) for eff, st in zip(view.effects, view.states)]
     view.shrinkage = np.where(n > 0, shrink, 1.0)
 
 
