@@ -32,8 +32,10 @@ def main(paths: list[str]) -> int:
     for (eff, mult, seed), m in cases.items():
         cells[(eff, mult)].append(m)
     print(f"{'effect':<12} {'x':>4} {'n':>3} {'right':>6} {'oracle':>6} {'right2':>6} {'DM':>5} "
-          f"{'lag<->lag':>9} {'lag<->lag2':>10} {'lag conf. where oracle fires':>28}")
+          f"{'lag<->lag':>9} {'lag<->lag2':>10} {'lag conf. where oracle fires':>28} {'n3':>4} {'right3':>6} "
+          f"{'oracle3':>7} {'lag<->lag3':>10}")
     per_eff = defaultdict(list)
+    per_eff3 = defaultdict(list)
     for (eff, mult) in sorted(cells):
         ms = cells[(eff, mult)]
         hidden = None if eff == "none" else eff
@@ -48,9 +50,14 @@ def main(paths: list[str]) -> int:
         conf2 = sum(hidden in LAG and m["v2"] in LAG - {hidden} for m in ms)
         fired = [m for m in ms if m["ostar"] == "*"]
         conf_o = sum(hidden in LAG and m["v"] in LAG - {hidden} for m in fired)
+        m3 = [m for m in ms if m["v3"] is not None]
+        r3 = sum(right(m["v3"]) for m in m3)
+        o3 = sum(bool(m["o3"]) for m in m3)
+        conf3 = sum(hidden in LAG and m["v3"] in LAG - {hidden} for m in m3)
         print(f"{eff:<12} {mult:>4g} {n:>3} {r:>6} {o:>6} {r2:>6} {dm:>5} {conf:>9} {conf2:>10} "
-              f"{f'{conf_o}/{len(fired)}':>28}")
+              f"{f'{conf_o}/{len(fired)}':>28} {len(m3):>4} {r3:>6} {o3:>7} {conf3:>10}")
         per_eff[eff].append((mult, n, r, o, r2))
+        per_eff3[eff].append((mult, len(m3), r3, o3))
     print()
     for eff, rows in per_eff.items():
         if eff == "none":
@@ -59,8 +66,12 @@ def main(paths: list[str]) -> int:
         o90 = next((m for m, n, r, o, r2 in rows if o >= 0.9 * n), None)
         p902 = next((m for m, n, r, o, r2 in rows if r2 >= 0.9 * n), None)
         ratio = (f"{p90 / o90:.2g}x the oracle's" if p90 is not None and o90 is not None else "n/a")
+        r3 = [(m, n, r, o) for m, n, r, o in per_eff3[eff] if n > 0]
+        p3 = next((m for m, n, r, o in r3 if r >= 0.9 * n), None)
+        o3 = next((m for m, n, r, o in r3 if o >= 0.9 * n), None)
         print(f"{eff:<12} right >= 90 % from x{p90 if p90 is not None else '>3'} (same-kind parsimony "
-              f"x{p902 if p902 is not None else '>3'}); oracle from x{o90 if o90 is not None else '>3'}; {ratio}")
+              f"x{p902 if p902 is not None else '>3'}); oracle from x{o90 if o90 is not None else '>3'}; {ratio}; "
+              f"max-T rule: right from x{p3 if p3 is not None else '>3'}, its oracle from x{o3 if o3 is not None else '>3'}")
     return 0
 
 
