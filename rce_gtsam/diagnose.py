@@ -581,12 +581,17 @@ def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str
     if effect is None:
         return {"t": 0.0, "threshold_t": st["evidence_threshold_t"], "supported": False, "full_data_t": 0.0,
                 "full_data_dof": 0, "improvement_pct": 0.0, "params": {}, "knows_z": knows_z}
-    model = base.model + effects_mod.make(effect)
+    eff = effects_mod.make(effect)
+    model = base.model + eff
     s, W = base.root_distance, base.weights
     ones = np.ones_like(y)
     clean_base = base.model.solve(y, ones, s)
     clean = model.solve(y, ones, s, start=(clean_base.kappa.copy(), clean_base.z.copy(), {}), max_iter=FULL_ITER)
-    full = model.solve(base.Y, W, s, start=clean.warm_start(), refit_shared=False, max_iter=FULL_ITER)
+    if any(not p.per_edge for p in eff.parameters(len(y))):
+        full = model.solve(base.Y, W, s, start=clean.warm_start(), refit_shared=False, max_iter=FULL_ITER)
+    else:  # nothing shared to know: the oracle is the candidate itself (a clean start would carry the noise-
+        # free fit's auxiliaries, e.g. a second mode's noise correlation, into the noisy fit)
+        full = model.solve(base.Y, W, s, start=(base.kappa.copy(), base.z.copy(), {}), max_iter=FULL_ITER)
     gap = max(int(st["buffer_frames"]),
               int(math.ceil(max([0.0] + [e.memory_frames(x) for e, x in zip(full.model.effects, full.states)]))))
     pred = np.full(Y.shape, np.nan)
