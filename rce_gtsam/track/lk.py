@@ -467,7 +467,7 @@ class LKTracker:
 
     # -- measurement against frame 0 ------------------------------------------------------------
     def _template(self, gray0, i, p0, theta, r, seg_theta=None):
-        """Frame-0 appearance of node i posed for this frame: ``(crop, tmpl, wts)``.
+        """Frame-0 appearance of node i posed for this frame: ``(crop, tmpl, wts, weight sum)``.
 
         ``crop`` is the (k, k) frame-0 neighbourhood (k = 2 (h + r) + 1, node at its centre), ``tmpl`` its
         central (2h + 1) square and ``wts`` the template's per-pixel weights. ``seg_theta`` maps each segment
@@ -478,29 +478,25 @@ class LKTracker:
         Otherwise the whole frame-0 patch is rotated by ``theta``.
         """
         h = self.h
-        k = 2 * (h + r) + 1
-        c = float(h + r)
-        wts = None
         px, py = float(p0[0]), float(p0[1])
         if self._band is not None and seg_theta:
             keys = tuple(seg_theta)
             stack = self._band_stacks.get((i, keys))
             if stack is None:  # the incident segments' bands in ``seg_theta``'s order, and the background one
                 bg = max((n for n, (_, sc) in enumerate(keys) if sc == i), default=0)
-                stack = self._band_stacks[(i, keys)] = (np.stack([self._seg_band[(sp, sc, i)] for sp, sc in keys]), bg)
-            prev, wacc = self._kernels.articulated_template(gray0, px, py, np.fromiter(seg_theta.values(), float),
-                                                            stack[0], stack[1], k, gray0.dtype == np.uint8)
-            wts = np.minimum(wacc, 1.0)[r:r + 2 * h + 1, r:r + 2 * h + 1]
-            # fewer pixels than a 2-px-wide strip: use the full patch -- except at a tip, whose band is short
-            # by construction (one segment, the thinnest stem), down to _TIP_MIN_BAND_PX
-            if float(wts.sum()) < (_TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * h + 1)):
-                wts = None
-        else:
-            prev = cv2.warpAffine(gray0, _rotation_about(px, py, theta, c - px, c - py), (k, k),
-                                  flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
+                # fewer pixels than a 2-px-wide strip: use the full patch -- except at a tip, whose band is short
+                # by construction (one segment, the thinnest stem), down to _TIP_MIN_BAND_PX
+                min_band = _TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * h + 1)
+                stack = self._band_stacks[(i, keys)] = (
+                    np.stack([self._seg_band[(sp, sc, i)] for sp, sc in keys]), bg, float(min_band))
+            return self._kernels.articulated_template(gray0, px, py, np.fromiter(seg_theta.values(), float), *stack,
+                                                      h, r, gray0.dtype == np.uint8)
+        c = float(h + r)
+        k = 2 * (h + r) + 1
+        prev = cv2.warpAffine(gray0, _rotation_about(px, py, theta, c - px, c - py), (k, k),
+                              flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
         tmpl = np.ascontiguousarray(prev[r:r + 2 * h + 1, r:r + 2 * h + 1])
-        wts = np.ones_like(tmpl) if wts is None else np.ascontiguousarray(wts, dtype=np.float32)
-        return prev, tmpl, wts
+        return prev, tmpl, np.ones_like(tmpl), float(tmpl.size)
 
     def _anchor(self, gray0, gray, i, p0, q, theta, r, seg_theta=None):
         """Locate node i (frame-0 position p0) near q in ``gray`` within r px (see ``_template``).
@@ -513,14 +509,13 @@ class LKTracker:
         # the frame-0 crop is only searched by the backward LK, which starts at its centre: a margin of
         # ``_rematch_radius`` px around the template suffices, whatever the search radius r in this frame
         margin = self._rematch_radius()
-        prev, tmpl, wts = self._template(gray0, i, p0, theta, margin, seg_theta)
+        prev, tmpl, wts, wsum = self._template(gray0, i, p0, theta, margin, seg_theta)
         cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1]))).astype(np.float32)
         m = self._kernels.match_node(cur, tmpl, wts, prev, r, h, float(h + margin))
         if not m[0]:
             return None
-        xy = np.asarray(q, float) + (m[1:3] - c)
-        xy2 = np.asarray(q, float) + (m[7:9] - c) if m[9] else None
-        return xy, float(m[3]), float(m[4]), float(m[5]), float(m[6]), float(wts.sum()), xy2
+        xy = q + (m[1:3] - c)
+        return xy, m[3], m[4], m[5], m[6], wsum, (q + (m[7:9] - c) if m[9] else None)
 
     def _rematch_radius(self) -> int:
         """Radius (px) of the refinement pass's re-match: max(2, h // 4) (the first pass is within a pixel)."""

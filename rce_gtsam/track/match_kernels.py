@@ -161,60 +161,120 @@ def weighted_lk(tmpl, wts, img, sx0, sy0, iters=20, eps=0.01):
 
 @njit(cache=True, nogil=True)
 def weighted_ncc(img, tmpl, wts):
-    """(H - th + 1, W - tw + 1) float32 map: OpenCV's masked ``TM_CCOEFF_NORMED`` of ``tmpl`` under ``wts``."""
+    """(H - th + 1, W - tw + 1) float32 map: OpenCV's masked ``TM_CCOEFF_NORMED`` of ``tmpl`` under ``wts``.
+
+    With w = ``wts``, mu_t = sum(w t) / sum(w) and mu_I the same weighted mean of the image window:
+    sum(w^2 (t - mu_t)(I - mu_I)) / sqrt(sum(w^2 (t - mu_t)^2) sum(w^2 (I - mu_I)^2)); -1 where the window
+    has no weighted variance. The four window sums are taken over the template pixels of non-zero weight
+    when they are fewer than three quarters (a thin branch band), else over all of them in SIMD-vectorised rows.
+    """
     th, tw = tmpl.shape
     H, W = img.shape
     rh, rw = H - th + 1, W - tw + 1
     out = np.empty((rh, rw), np.float32)
     n = 0
-    for i in range(th):
-        for j in range(tw):
-            if wts[i, j] != 0:
-                n += 1
-    di = np.empty(n, np.int64)
-    dj = np.empty(n, np.int64)
-    m = np.empty(n)
     msum = mt = 0.0
-    k = 0
     for i in range(th):
         for j in range(tw):
-            if wts[i, j] != 0:
-                di[k], dj[k], m[k] = i, j, float(wts[i, j])
-                msum += m[k]
-                mt += m[k] * float(tmpl[i, j])
-                k += 1
-    if n == 0 or msum == 0:
+            w = float(wts[i, j])
+            if w != 0:
+                n += 1
+                msum += w
+                mt += w * float(tmpl[i, j])
+    if n == 0 or msum <= 0:
         out[:] = -1.0
         return out
     mu_t = mt / msum
-    a = np.empty(n)  # m^2 (t - mu_t)
-    m2 = np.empty(n)
+    # per template pixel: m = w, m2 = w^2, a = w^2 (t - mu_t)
+    a = np.zeros((th, tw))
+    m = np.zeros((th, tw))
+    m2 = np.zeros((th, tw))
     asum = m2sum = tnorm = 0.0
-    for k in range(n):
-        d = float(tmpl[di[k], dj[k]]) - mu_t
-        m2[k] = m[k] * m[k]
-        a[k] = m2[k] * d
-        asum += a[k]
-        m2sum += m2[k]
-        tnorm += m2[k] * d * d
+    for i in range(th):
+        for j in range(tw):
+            w = float(wts[i, j])
+            d = float(tmpl[i, j]) - mu_t
+            m[i, j] = w
+            m2[i, j] = w * w
+            a[i, j] = w * w * d
+            asum += a[i, j]
+            m2sum += m2[i, j]
+            tnorm += w * w * d * d
     tnorm = math.sqrt(tnorm)
+    if 4 * n < 3 * th * tw:
+        sums = _window_sums_sparse(img, a, m, m2, n)
+    else:
+        sums = _window_sums_dense(img, a, m, m2)
     for v in range(rh):
         for u in range(rw):
-            s_a = s_m = s_m2 = s_i2 = 0.0
-            for k in range(n):
-                p = float(img[v + di[k], u + dj[k]])
-                s_a += a[k] * p
-                s_m += m[k] * p
-                mp = m2[k] * p
-                s_m2 += mp
-                s_i2 += mp * p
-            mu_i = s_m / msum
-            num = s_a - mu_i * asum
-            den2 = s_i2 - 2.0 * mu_i * s_m2 + mu_i * mu_i * m2sum
+            mu_i = sums[0, v, u] / msum
+            num = sums[1, v, u] - mu_i * asum
+            den2 = sums[3, v, u] - 2.0 * mu_i * sums[2, v, u] + mu_i * mu_i * m2sum
             if den2 <= 0.0 or tnorm <= 0.0:
                 out[v, u] = -1.0
             else:
                 out[v, u] = num / (math.sqrt(den2) * tnorm)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _window_sums_sparse(img, a, m, m2, n):
+    """(4, rh, rw): sum(m I), sum(a I), sum(m2 I), sum(m2 I^2) over each window, from the n pixels with m != 0."""
+    th, tw = a.shape
+    H, W = img.shape
+    rh, rw = H - th + 1, W - tw + 1
+    off = np.empty(n, np.int64)  # flat offset of each weighted pixel in a window
+    fa = np.empty(n)
+    fm = np.empty(n)
+    fm2 = np.empty(n)
+    k = 0
+    for i in range(th):
+        for j in range(tw):
+            if m[i, j] != 0:
+                off[k], fa[k], fm[k], fm2[k] = i * W + j, a[i, j], m[i, j], m2[i, j]
+                k += 1
+    flat = img.ravel()
+    out = np.empty((4, rh, rw))
+    for v in range(rh):
+        for u in range(rw):
+            base = v * W + u
+            s_a = s_m = s_m2 = s_i2 = 0.0
+            for k in range(n):
+                p = float(flat[base + off[k]])
+                s_a += fa[k] * p
+                s_m += fm[k] * p
+                mp = fm2[k] * p
+                s_m2 += mp
+                s_i2 += mp * p
+            out[0, v, u], out[1, v, u], out[2, v, u], out[3, v, u] = s_m, s_a, s_m2, s_i2
+    return out
+
+
+@njit(cache=True, nogil=True, fastmath=True)
+def _window_sums_dense(img, a, m, m2):
+    """As :func:`_window_sums_sparse` over every template pixel (row sums reassociated for SIMD)."""
+    th, tw = a.shape
+    H, W = img.shape
+    rh, rw = H - th + 1, W - tw + 1
+    imgd = np.empty((H, W))
+    for v in range(H):
+        for u in range(W):
+            imgd[v, u] = img[v, u]
+    out = np.empty((4, rh, rw))
+    for v in range(rh):
+        for u in range(rw):
+            s_a = s_m = s_m2 = s_i2 = 0.0
+            for i in range(th):
+                row = imgd[v + i, u:u + tw]
+                ai, mi, m2i = a[i], m[i], m2[i]
+                for j in range(tw):
+                    p = row[j]
+                    s_a += ai[j] * p
+                    s_m += mi[j] * p
+                    q = m2i[j] * p
+                    s_m2 += q
+                    s_i2 += q * p
+            out[0, v, u], out[1, v, u], out[2, v, u], out[3, v, u] = s_m, s_a, s_m2, s_i2
     return out
 
 
@@ -330,21 +390,24 @@ def segment_ncc(img, x0, y0, ex, ey, uu, vv, strip, round_out):
 
 
 @njit(cache=True, nogil=True)
-def articulated_template(gray0, px, py, thetas, bands, bg, k, round_out):
-    """Frame-0 neighbourhood of a node at (px, py), posed per incident segment: ``(crop, weight)`` (k, k) float32.
+def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, round_out):
+    """Frame-0 neighbourhood of a node at (px, py), posed per incident segment.
 
     Segment s's band ``bands[s]`` (centred on the node) and the frame-0 image are rotated about the node by
     ``thetas[s]`` (radians) -- ``cv2.warpAffine`` with bilinear sampling, replicated borders for the image
     (rounded to integers when ``round_out``: a uint8 image) and zeros outside the band -- and composited by
-    weight; where no band reaches, segment ``bg``'s rotated image. ``weight`` is the summed band weight.
+    weight; where no band reaches, segment ``bg``'s rotated image. Returns ``(crop, tmpl, wts, wsum)``: the
+    (k, k) float32 crop (k = 2 (h + margin) + 1, node at its centre), its central (2h + 1) square, that
+    square's weights (band weight clipped at 1; all ones when they sum to less than ``min_band``) and their sum.
     """
     H, W = gray0.shape
     S = thetas.shape[0]
     bs = bands.shape[1]
+    k = 2 * (h + margin) + 1
     c = (k - 1) * 0.5
     cs = (bs - 1) * 0.5
     crop = np.empty((k, k), np.float32)
-    wsum = np.empty((k, k), np.float32)
+    wacc_all = np.empty((k, k), np.float32)
     cos_t = np.cos(thetas)
     sin_t = np.sin(thetas)
     for y in range(k):
@@ -389,6 +452,18 @@ def articulated_template(gray0, px, py, thetas, bands, bg, k, round_out):
                 wf = np.float32(w)
                 acc += wf * gf
                 wacc += wf
-            wsum[y, x] = wacc
+            wacc_all[y, x] = wacc
             crop[y, x] = acc / max(wacc, np.float32(1e-3)) if wacc > 1e-3 else back
-    return crop, wsum
+    n = 2 * h + 1
+    tmpl = np.empty((n, n), np.float32)
+    wts = np.empty((n, n), np.float32)
+    wsum = 0.0
+    for y in range(n):
+        for x in range(n):
+            tmpl[y, x] = crop[y + margin, x + margin]
+            wts[y, x] = min(wacc_all[y + margin, x + margin], np.float32(1.0))
+            wsum += wts[y, x]
+    if wsum < min_band:
+        wts[:] = 1.0
+        wsum = float(n * n)
+    return crop, tmpl, wts, wsum
