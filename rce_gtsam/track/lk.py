@@ -117,24 +117,34 @@ What hurts is compression: at x264 crf 28 the median is 0.19 px and 83 % of poin
 away, and the tracker marks those nodes invisible rather than guess.
 
 Speed (``benchmarks/bench_track.py``, which runs this tracker and the one of revision 7f3b223 on the same
-frames in one process): most of the time went to numpy calls on small arrays, one node at a time, not to
-pixels. The weighted LK now gets every sum from matrix products (one (3, N) product per iteration instead
-of a dozen reductions), the frame-0 crop is only as large as the backward LK needs (the template plus the
-re-match radius) rather than the search window, rotation matrices are built directly, the segment search
-samples with float32 maps and no per-angle mean pass, and frames are decoded in a thread while the previous
-one is tracked (:func:`~rce_gtsam.track.sources.prefetched`; no gain measurable on the shared machine, where
-no core is idle: 27.9 vs 27.5 frames/s from the mp4, best of 6). Measured on the shared 2-core machine
-(120-frame seed-0 render, best of 5-7, two runs): 1.19-1.31x wall, 1.22-1.34x CPU time, far from the
-2.5x the issue asks for; on the 600-frame clips of seeds 0-4 (seed 1:
-400) median, largest visible error, visible share and Spearman of kappa equal the old tracker's at the
-README's precision (p99 0.69/1.69 -> 0.70/1.71 px on seeds 0/1, the rest equal). Tried and not kept (measured on the simulator clips):
+frames in one process): the time went to per-node work on small arrays, not to pixels -- OpenCV's masked
+``matchTemplate`` (several DFT correlations for a 19x19 result), a dozen numpy calls per Lucas-Kanade
+iteration, two warps per incident segment for each template. The node measurement (weighted correlation
+map, peak and second peak, forward LK, forward-backward LK), the articulated template and the segment
+search's sampling and correlation are now compiled kernels (:mod:`~rce_gtsam.track.match_kernels`, numba),
+each one call per node doing the same arithmetic as the OpenCV/numpy code it replaced (equal to float
+rounding; the kernels are tested against OpenCV). What is left in Python is the per-node decision logic;
+the two ``calcOpticalFlowPyrLK`` calls (all points at once, forward and backward) are ~1 ms of a frame, most
+of it building the pyramids. Frames are decoded in a thread (:func:`~rce_gtsam.track.sources.prefetched`).
+Measured on the shared 2-core machine (120-frame seed-0 render, 20 nodes, best of 3-5, baseline and current
+alternating): 3.9x / 3.7x wall, 3.3x / 3.6x CPU time, 3.3x tracking straight from the mp4 (two runs, the
+second with the machine's load average at 7-10, so absolute frame rates there mean little: 117 frames/s
+tracking alone in the first). The kernels are compiled once per machine (cached next to the module, or in
+numba's user cache if that is read-only) and loaded at the first ``track`` of a process. Accuracy: on the
+600-frame clips of seeds 0-4 (seed 1: 400) the figures move by as much as the 7f3b223 tracker's own move
+when every annotation is shifted by 0.001 px (``baseline~`` in the benchmark): the tracker's output depends
+on rounding (the search crop and the frame-0 template are cut as uint8 images at sub-pixel positions), and a
+99th percentile or Spearman of kappa at two decimals flips under such a perturbation; medians, largest errors
+and visible shares are equal. Tried and not kept (measured on the simulator clips):
 re-matching by LK alone without the correlation search in the refinement pass, deferring the first pass's
 forward-backward check to the refinement pass (the first moved the largest visible error on seed 0 from 1.6
 to 3.9 px, the second that on seed 1 from 7.8 to 8.5 px), and skipping the re-match when the re-measured rotations moved the template
 by less than 0.05 px (median error 0.038 -> 0.039 px, largest 4.2 -> 6.9 px on a 150-frame seed-2 clip: the
-re-match gains by re-centring the search crop on the match, not only by re-posing the template). Batching
-the refinement pass's LK over nodes saved only ~20 % of its CPU time (the arithmetic, not the per-call
-overhead, dominates at 20 nodes), not worth a second LK implementation.
+re-match gains by re-centring the search crop on the match, not only by re-posing the template; with the
+compiled kernels the refinement pass is a sixth of the time, and on seed 0 a 0.02-px threshold would skip only
+a third of the re-matches). Cutting the search crop at an integer position or as float (no uint8 rounding), or
+the frame-0 template without rounding, changed the 99th percentile on 400 frames of seeds 1 / 3 by -0.24 to
++0.06 px, i.e. within the figures' resolution, and was not kept.
 
 Limits: the template is rotated, not scaled (a branch that moves a lot toward the camera changes scale);
 a node hidden from frame 0 onwards cannot be tracked.

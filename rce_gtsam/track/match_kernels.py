@@ -34,6 +34,19 @@ def _clamp(i: int, n: int) -> int:
 
 
 @njit(cache=True, nogil=True)
+def _bilinear(img, x, y):
+    """``img`` at (x, y) px, bilinear, replicated borders."""
+    H, W = img.shape
+    fx0, fy0 = math.floor(x), math.floor(y)
+    ix, iy = int(fx0), int(fy0)
+    fx, fy = x - fx0, y - fy0
+    c0, c1 = _clamp(ix, W), _clamp(ix + 1, W)
+    r0, r1 = _clamp(iy, H), _clamp(iy + 1, H)
+    return ((1 - fx) * (1 - fy) * img[r0, c0] + fx * (1 - fy) * img[r0, c1]
+            + (1 - fx) * fy * img[r1, c0] + fx * fy * img[r1, c1])
+
+
+@njit(cache=True, nogil=True)
 def sample_patch(img, cx, cy, out):
     """Fill ``out`` (th, tw) with ``img`` sampled bilinearly on the grid centred at (cx, cy) px, replicated
     borders (``cv2.getRectSubPix`` of a float image)."""
@@ -165,8 +178,8 @@ def weighted_ncc(img, tmpl, wts):
 
     With w = ``wts``, mu_t = sum(w t) / sum(w) and mu_I the same weighted mean of the image window:
     sum(w^2 (t - mu_t)(I - mu_I)) / sqrt(sum(w^2 (t - mu_t)^2) sum(w^2 (I - mu_I)^2)); -1 where the window
-    has no weighted variance. The four window sums are taken over the template pixels of non-zero weight
-    when they are fewer than three quarters (a thin branch band), else over all of them in SIMD-vectorised rows.
+    has no weighted variance. The four window sums run over the template pixels of non-zero weight only (a
+    thin branch band is a third to a half of its patch).
     """
     th, tw = tmpl.shape
     H, W = img.shape
@@ -201,10 +214,7 @@ def weighted_ncc(img, tmpl, wts):
             m2sum += m2[i, j]
             tnorm += w * w * d * d
     tnorm = math.sqrt(tnorm)
-    if 4 * n < 3 * th * tw:
-        sums = _window_sums_sparse(img, a, m, m2, n)
-    else:
-        sums = _window_sums_dense(img, a, m, m2)
+    sums = _window_sums(img, a, m, m2, n)
     for v in range(rh):
         for u in range(rw):
             mu_i = sums[0, v, u] / msum
@@ -218,7 +228,7 @@ def weighted_ncc(img, tmpl, wts):
 
 
 @njit(cache=True, nogil=True)
-def _window_sums_sparse(img, a, m, m2, n):
+def _window_sums(img, a, m, m2, n):
     """(4, rh, rw): sum(m I), sum(a I), sum(m2 I), sum(m2 I^2) over each window, from the n pixels with m != 0."""
     th, tw = a.shape
     H, W = img.shape
@@ -246,34 +256,6 @@ def _window_sums_sparse(img, a, m, m2, n):
                 mp = fm2[k] * p
                 s_m2 += mp
                 s_i2 += mp * p
-            out[0, v, u], out[1, v, u], out[2, v, u], out[3, v, u] = s_m, s_a, s_m2, s_i2
-    return out
-
-
-@njit(cache=True, nogil=True, fastmath=True)
-def _window_sums_dense(img, a, m, m2):
-    """As :func:`_window_sums_sparse` over every template pixel (row sums reassociated for SIMD)."""
-    th, tw = a.shape
-    H, W = img.shape
-    rh, rw = H - th + 1, W - tw + 1
-    imgd = np.empty((H, W))
-    for v in range(H):
-        for u in range(W):
-            imgd[v, u] = img[v, u]
-    out = np.empty((4, rh, rw))
-    for v in range(rh):
-        for u in range(rw):
-            s_a = s_m = s_m2 = s_i2 = 0.0
-            for i in range(th):
-                row = imgd[v + i, u:u + tw]
-                ai, mi, m2i = a[i], m[i], m2[i]
-                for j in range(tw):
-                    p = row[j]
-                    s_a += ai[j] * p
-                    s_m += mi[j] * p
-                    q = m2i[j] * p
-                    s_m2 += q
-                    s_i2 += q * p
             out[0, v, u], out[1, v, u], out[2, v, u], out[3, v, u] = s_m, s_a, s_m2, s_i2
     return out
 
@@ -372,13 +354,7 @@ def segment_ncc(img, x0, y0, ex, ey, uu, vv, strip, round_out):
                     p = ((1 - fx) * (1 - fy) * img[iy, ix] + fx * (1 - fy) * img[iy, ix + 1]
                          + (1 - fx) * fy * img[iy + 1, ix] + fx * fy * img[iy + 1, ix + 1])
                 else:
-                    fix, fiy = math.floor(mx), math.floor(my)
-                    ix, iy = int(fix), int(fiy)
-                    fx, fy = mx - fix, my - fiy
-                    c0, c1 = _clamp(ix, W), _clamp(ix + 1, W)
-                    r0, r1 = _clamp(iy, H), _clamp(iy + 1, H)
-                    p = ((1 - fx) * (1 - fy) * img[r0, c0] + fx * (1 - fy) * img[r0, c1]
-                         + (1 - fx) * fy * img[r1, c0] + fx * fy * img[r1, c1])
+                    p = _bilinear(img, mx, my)
                 if round_out:
                     p = math.floor(p + 0.5)
                 p -= 128.0
@@ -400,7 +376,6 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
     (k, k) float32 crop (k = 2 (h + margin) + 1, node at its centre), its central (2h + 1) square, that
     square's weights (band weight clipped at 1; all ones when they sum to less than ``min_band``) and their sum.
     """
-    H, W = gray0.shape
     S = thetas.shape[0]
     bs = bands.shape[1]
     k = 2 * (h + margin) + 1
@@ -419,15 +394,7 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
             for s in range(S):
                 ox = cos_t[s] * dx + sin_t[s] * dy
                 oy = -sin_t[s] * dx + cos_t[s] * dy
-                # image: replicated border
-                gx, gy = px + ox, py + oy
-                fx0, fy0 = math.floor(gx), math.floor(gy)
-                ix, iy = int(fx0), int(fy0)
-                fx, fy = gx - fx0, gy - fy0
-                c0, c1 = _clamp(ix, W), _clamp(ix + 1, W)
-                r0, r1 = _clamp(iy, H), _clamp(iy + 1, H)
-                g = ((1 - fx) * (1 - fy) * gray0[r0, c0] + fx * (1 - fy) * gray0[r0, c1]
-                     + (1 - fx) * fy * gray0[r1, c0] + fx * fy * gray0[r1, c1])
+                g = _bilinear(gray0, px + ox, py + oy)  # image: replicated border
                 if round_out:
                     g = math.floor(g + 0.5)
                 gf = np.float32(g)
