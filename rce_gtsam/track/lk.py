@@ -117,24 +117,34 @@ What hurts is compression: at x264 crf 28 the median is 0.19 px and 83 % of poin
 away, and the tracker marks those nodes invisible rather than guess.
 
 Speed (``benchmarks/bench_track.py``, which runs this tracker and the one of revision 7f3b223 on the same
-frames in one process): most of the time went to numpy calls on small arrays, one node at a time, not to
-pixels. The weighted LK now gets every sum from matrix products (one (3, N) product per iteration instead
-of a dozen reductions), the frame-0 crop is only as large as the backward LK needs (the template plus the
-re-match radius) rather than the search window, rotation matrices are built directly, the segment search
-samples with float32 maps and no per-angle mean pass, and frames are decoded in a thread while the previous
-one is tracked (:func:`~rce_gtsam.track.sources.prefetched`; no gain measurable on the shared machine, where
-no core is idle: 27.9 vs 27.5 frames/s from the mp4, best of 6). Measured on the shared 2-core machine
-(120-frame seed-0 render, best of 5-7, two runs): 1.19-1.31x wall, 1.22-1.34x CPU time, far from the
-2.5x the issue asks for; on the 600-frame clips of seeds 0-4 (seed 1:
-400) median, largest visible error, visible share and Spearman of kappa equal the old tracker's at the
-README's precision (p99 0.69/1.69 -> 0.70/1.71 px on seeds 0/1, the rest equal). Tried and not kept (measured on the simulator clips):
+frames in one process): the time went to per-node work on small arrays, not to pixels -- OpenCV's masked
+``matchTemplate`` (several DFT correlations for a 19x19 result), a dozen numpy calls per Lucas-Kanade
+iteration, two warps per incident segment for each template. The node measurement (weighted correlation
+map, peak and second peak, forward LK, forward-backward LK), the articulated template and the segment
+search's sampling and correlation are now compiled kernels (:mod:`~rce_gtsam.track.match_kernels`, numba),
+each one call per node doing the same arithmetic as the OpenCV/numpy code it replaced (equal to float
+rounding; the kernels are tested against OpenCV). What is left in Python is the per-node decision logic;
+the two ``calcOpticalFlowPyrLK`` calls (all points at once, forward and backward) are ~1 ms of a frame, most
+of it building the pyramids. Frames are decoded in a thread (:func:`~rce_gtsam.track.sources.prefetched`).
+Measured on the shared 2-core machine (120-frame seed-0 render, 20 nodes, best of 3-5, baseline and current
+alternating): 3.9x / 3.7x wall, 3.3x / 3.6x CPU time, 3.3x tracking straight from the mp4 (two runs, the
+second with the machine's load average at 7-10, so absolute frame rates there mean little: 117 frames/s
+tracking alone in the first). The kernels are compiled once per machine (cached next to the module, or in
+numba's user cache if that is read-only) and loaded at the first ``track`` of a process. Accuracy: on the
+600-frame clips of seeds 0-4 (seed 1: 400) the figures move by as much as the 7f3b223 tracker's own move
+when every annotation is shifted by 0.001 px (``baseline~`` in the benchmark): the tracker's output depends
+on rounding (the search crop and the frame-0 template are cut as uint8 images at sub-pixel positions), and a
+99th percentile or Spearman of kappa at two decimals flips under such a perturbation; medians, largest errors
+and visible shares are equal. Tried and not kept (measured on the simulator clips):
 re-matching by LK alone without the correlation search in the refinement pass, deferring the first pass's
 forward-backward check to the refinement pass (the first moved the largest visible error on seed 0 from 1.6
 to 3.9 px, the second that on seed 1 from 7.8 to 8.5 px), and skipping the re-match when the re-measured rotations moved the template
 by less than 0.05 px (median error 0.038 -> 0.039 px, largest 4.2 -> 6.9 px on a 150-frame seed-2 clip: the
-re-match gains by re-centring the search crop on the match, not only by re-posing the template). Batching
-the refinement pass's LK over nodes saved only ~20 % of its CPU time (the arithmetic, not the per-call
-overhead, dominates at 20 nodes), not worth a second LK implementation.
+re-match gains by re-centring the search crop on the match, not only by re-posing the template; with the
+compiled kernels the refinement pass is a sixth of the time, and on seed 0 a 0.02-px threshold would skip only
+a third of the re-matches). Cutting the search crop at an integer position or as float (no uint8 rounding), or
+the frame-0 template without rounding, changed the 99th percentile on 400 frames of seeds 1 / 3 by -0.24 to
++0.06 px, i.e. within the figures' resolution, and was not kept.
 
 Limits: the template is rotated, not scaled (a branch that moves a lot toward the camera changes scale);
 a node hidden from frame 0 onwards cannot be tracked.
@@ -143,7 +153,6 @@ a node hidden from frame 0 onwards cannot be tracked.
 from __future__ import annotations
 
 import contextlib
-import functools
 import math
 import time
 from collections.abc import Callable
@@ -235,88 +244,6 @@ class LKConfig:
 _TIP_MIN_BAND_PX = 16.0
 
 _LK_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01)
-
-
-def _parabola_peak(m: np.ndarray, u: int, v: int) -> tuple[float, float]:
-    """Sub-pixel offset of a 2-D peak at column u, row v by separable parabola fits."""
-    def fit(a, b, c):
-        den = a - 2 * b + c
-        return 0.0 if den >= 0 else min(max(0.5 * (a - c) / den, -0.5), 0.5)
-    b = float(m[v, u])
-    du = fit(float(m[v, u - 1]), b, float(m[v, u + 1])) if 0 < u < m.shape[1] - 1 else 0.0
-    dv = fit(float(m[v - 1, u]), b, float(m[v + 1, u])) if 0 < v < m.shape[0] - 1 else 0.0
-    return du, dv
-
-
-@functools.lru_cache(maxsize=64)
-def _grid(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """Row and column index grids (``np.ogrid``) of an array of ``shape``, built once per shape."""
-    return tuple(np.ogrid[:shape[0], :shape[1]])
-
-
-def _weighted_lk(tmpl, wts, img, start, iters: int = 20, eps: float = 0.01):
-    """Weighted inverse-compositional Lucas-Kanade (translation, gain/bias-normalised).
-
-    Finds the position (x, y) in ``img`` (pixel centres at integers) whose neighbourhood best matches
-    ``tmpl`` (odd-sized, centred) under per-pixel weights ``wts``, starting at ``start``. Returns
-    ``(position, standard_error_px)`` -- the LK least-squares standard error
-    sqrt(weighted residual variance / lambda_min(weighted structure tensor)) -- or None if ill-posed
-    (textureless template: weighted variance below 1e-3 grey levels^2, or a singular structure tensor).
-
-    Every weighted sum is a dot product with the flattened patch: one (3, N) @ (N,) product per iteration
-    gives the weighted mean of the patch and its projections on the weighted template gradients, and the
-    gain/bias-compensated residual enters only through them (sum w g e = gain * (sum w g p - mu_p sum w g)
-    - sum w g t0), so the residual image itself is formed once, at the end.
-    """
-    t = np.ascontiguousarray(tmpl, dtype=np.float32)
-    n = t.size
-    # proj rows: w, w gx, w gy; cols: gx, gy, 1, t, t^2 -- one product gives every sum the set-up needs
-    cols = np.empty((n, 5))
-    cols[:, 0] = cv2.Sobel(t, cv2.CV_32F, 1, 0, ksize=3, scale=0.125).ravel()
-    cols[:, 1] = cv2.Sobel(t, cv2.CV_32F, 0, 1, ksize=3, scale=0.125).ravel()
-    cols[:, 2] = 1.0
-    cols[:, 3] = t.ravel()
-    np.multiply(cols[:, 3], cols[:, 3], out=cols[:, 4])
-    proj = np.empty((3, n))
-    proj[0] = np.asarray(wts, dtype=np.float64).ravel()
-    np.multiply(cols[:, :2].T, proj[0], out=proj[1:])
-    (_, _, wsum, swt, swtt), (hxx, hxy, gsum_x, gxt, _), (_, hyy, gsum_y, gyt, _) = (proj @ cols).tolist()
-    w = proj[0]
-    det = hxx * hyy - hxy * hxy
-    if det <= 1e-9:
-        return None
-    mu_t = swt / wsum
-    var_t = swtt / wsum - mu_t * mu_t
-    if var_t < 1e-3:
-        return None  # textureless template: nothing to match
-    sd_t = math.sqrt(var_t) + 1e-6
-    gt_x, gt_y = gxt - mu_t * gsum_x, gyt - mu_t * gsum_y  # sum w g (t - mu_t)
-    t0 = cols[:, 3] - mu_t
-    x0, y0 = float(start[0]), float(start[1])
-    x, y = x0, y0
-    size = (t.shape[1], t.shape[0])
-    pf = mu_p = gain = None
-    for _ in range(iters):
-        pf = cv2.getRectSubPix(img, size, (x, y)).ravel().astype(np.float64)
-        sw, sx, sy = (proj @ pf).tolist()
-        mu_p = sw / wsum
-        var_p = max(float(w @ (pf * pf)) / wsum - mu_p * mu_p, 0.0)
-        gain = sd_t / (math.sqrt(var_p) + 1e-6)
-        bx = gain * (sx - mu_p * gsum_x) - gt_x
-        by = gain * (sy - mu_p * gsum_y) - gt_y
-        dx = (hyy * bx - hxy * by) / det
-        dy = (hxx * by - hxy * bx) / det
-        x -= dx
-        y -= dy
-        if not (math.isfinite(x) and math.isfinite(y)) or abs(x - x0) > t.shape[1] or abs(y - y0) > t.shape[0]:
-            return None
-        if dx * dx + dy * dy < eps * eps:
-            break
-    e = (pf - mu_p) * gain - t0  # residual after gain/bias compensation, at the last patch sampled
-    lam_min = 0.5 * (hxx + hyy - math.sqrt((hxx - hyy) ** 2 + 4 * hxy * hxy))
-    res_var = float(w @ (e * e)) / wsum
-    s_lk = math.sqrt(res_var / max(lam_min, 1e-9))
-    return np.array([x, y]), s_lk
 
 
 def _rotation_about(cx: float, cy: float, theta: float, dx: float, dy: float) -> np.ndarray:
@@ -424,6 +351,7 @@ class LKTracker:
         fg = self._branch_colour_mask(rgb, q, graph) if self.config.mask_off_colour else None
         # one band per segment, cropped around each of its two end nodes (only those crops are used)
         self._seg_band = {}
+        self._band_stacks = {}
         size = 2 * (h + 2 * h) + 1
         for p, c in graph.edges:
             for node in (p, c):
@@ -513,18 +441,9 @@ class LKTracker:
         a0 = math.atan2(q0[c][1] - q0[p][1], q0[c][0] - q0[p][0])
         ang = a0 + phis
         ex, ey = np.cos(ang).astype(np.float32), np.sin(ang).astype(np.float32)  # (A,)
-        # sample positions (A * V, U): rows are (angle, across-offset) pairs
-        A, V, U = len(phis), len(vv), len(uu)
-        mx = (np.multiply.outer(ex, uu)[:, None, :] - np.multiply.outer(ey, vv)[:, :, None]).reshape(A * V, U)
-        my = (np.multiply.outer(ey, uu)[:, None, :] + np.multiply.outer(ex, vv)[:, :, None]).reshape(A * V, U)
-        mx += np.float32(xp[0])
-        my += np.float32(xp[1])
-        smp = cv2.remap(gray, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).reshape(A, V * U)
-        smp = smp.astype(np.float32) - np.float32(128.0)  # centred near 0 so the sums below keep precision
-        # zero-mean NCC with the (zero-mean, unit-norm) strip: the sample's mean drops out of the numerator
-        s1 = smp.sum(axis=1)
-        nrm = np.sqrt(np.maximum(np.einsum("ij,ij->i", smp, smp) - s1 * s1 / smp.shape[1], 0.0)) + 1e-6
-        ncc = (smp @ st0.ravel()) / nrm
+        ncc = self._kernels.segment_ncc(gray, float(xp[0]), float(xp[1]), ex, ey, uu, vv, st0,
+                                        gray.dtype == np.uint8)
+        A = len(phis)
         k = int(np.argmax(ncc))
         dk = 0.0
         if 0 < k < A - 1:
@@ -558,7 +477,7 @@ class LKTracker:
 
     # -- measurement against frame 0 ------------------------------------------------------------
     def _template(self, gray0, i, p0, theta, r, seg_theta=None):
-        """Frame-0 appearance of node i posed for this frame: ``(crop, tmpl, wts)``.
+        """Frame-0 appearance of node i posed for this frame: ``(crop, tmpl, wts, weight sum)``.
 
         ``crop`` is the (k, k) frame-0 neighbourhood (k = 2 (h + r) + 1, node at its centre), ``tmpl`` its
         central (2h + 1) square and ``wts`` the template's per-pixel weights. ``seg_theta`` maps each segment
@@ -569,39 +488,25 @@ class LKTracker:
         Otherwise the whole frame-0 patch is rotated by ``theta``.
         """
         h = self.h
-        k = 2 * (h + r) + 1
-        c = float(h + r)
-        wts = None
         px, py = float(p0[0]), float(p0[1])
         if self._band is not None and seg_theta:
-            cs = float(3 * h)
-            acc = wacc = prev = None
-            for (sp, sc), th in seg_theta.items():
-                img_k = cv2.warpAffine(gray0, _rotation_about(px, py, th, c - px, c - py), (k, k),
-                                       flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-                w_k = cv2.warpAffine(self._seg_band[(sp, sc, i)], _rotation_about(cs, cs, th, c - cs, c - cs), (k, k),
-                                     flags=cv2.INTER_LINEAR, borderValue=0)
-                if acc is None:
-                    acc, wacc = w_k * img_k, w_k
-                else:
-                    acc += w_k * img_k
-                    wacc = wacc + w_k
-                if prev is None or sc == i:  # outside every band: the parent-side warp (background)
-                    prev = img_k
-            inside = wacc > 1e-3
-            prev = np.where(inside, acc / np.maximum(wacc, 1e-3), prev).astype(np.float32)
-            wts = np.minimum(wacc, 1.0)[r:r + 2 * h + 1, r:r + 2 * h + 1]
-            # fewer pixels than a 2-px-wide strip: use the full patch -- except at a tip, whose band is short
-            # by construction (one segment, the thinnest stem), down to _TIP_MIN_BAND_PX
-            if float(wts.sum()) < (_TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * h + 1)):
-                wts = None
-        else:
-            prev = cv2.warpAffine(gray0, _rotation_about(px, py, theta, c - px, c - py), (k, k),
-                                  flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
+            keys = tuple(seg_theta)
+            stack = self._band_stacks.get((i, keys))
+            if stack is None:  # the incident segments' bands in ``seg_theta``'s order, and the background one
+                bg = max((n for n, (_, sc) in enumerate(keys) if sc == i), default=0)
+                # fewer pixels than a 2-px-wide strip: use the full patch -- except at a tip, whose band is short
+                # by construction (one segment, the thinnest stem), down to _TIP_MIN_BAND_PX
+                min_band = _TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * h + 1)
+                stack = self._band_stacks[(i, keys)] = (
+                    np.stack([self._seg_band[(sp, sc, i)] for sp, sc in keys]), bg, float(min_band))
+            return self._kernels.articulated_template(gray0, px, py, np.fromiter(seg_theta.values(), float), *stack,
+                                                      h, r, gray0.dtype == np.uint8)
+        c = float(h + r)
+        k = 2 * (h + r) + 1
+        prev = cv2.warpAffine(gray0, _rotation_about(px, py, theta, c - px, c - py), (k, k),
+                              flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
         tmpl = np.ascontiguousarray(prev[r:r + 2 * h + 1, r:r + 2 * h + 1])
-        if wts is None:
-            wts = np.ones_like(tmpl)
-        return prev, tmpl, wts
+        return prev, tmpl, np.ones_like(tmpl), float(tmpl.size)
 
     def _anchor(self, gray0, gray, i, p0, q, theta, r, seg_theta=None):
         """Locate node i (frame-0 position p0) near q in ``gray`` within r px (see ``_template``).
@@ -614,41 +519,17 @@ class LKTracker:
         # the frame-0 crop is only searched by the backward LK, which starts at its centre: a margin of
         # ``_rematch_radius`` px around the template suffices, whatever the search radius r in this frame
         margin = self._rematch_radius()
-        prev, tmpl, wts = self._template(gray0, i, p0, theta, margin, seg_theta)
+        prev, tmpl, wts, wsum = self._template(gray0, i, p0, theta, margin, seg_theta)
         cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1]))).astype(np.float32)
-        res = cv2.matchTemplate(cur, tmpl, cv2.TM_CCOEFF_NORMED, mask=wts)
-        if not np.isfinite(res).all():
-            res = np.nan_to_num(res, nan=-1.0, posinf=-1.0, neginf=-1.0)
-        _, score, _, (u, v) = cv2.minMaxLoc(res)
-        # best correlation away from the peak (outside a disc of radius h/2, the width of one match's
-        # correlation peak): a second knot of a self-similar stem shows up here
-        yy, xx = _grid(res.shape)
-        far = (xx - u) ** 2 + (yy - v) ** 2 > (h / 2.0) ** 2
-        second, xy2 = -1.0, None
-        if far.any():
-            v2, u2 = np.unravel_index(int(np.argmax(np.where(far, res, -2.0))), res.shape)
-            second = float(res[v2, u2])
-            xy2 = np.asarray(q, float) + (float(u2 - r), float(v2 - r))
-        du, dv = _parabola_peak(res, u, v)
-        guess = np.array([c + u - r + du, c + v - r + dv])
-        fwd = _weighted_lk(tmpl, wts, cur, guess)
-        if fwd is None or float(np.hypot(*(fwd[0] - guess))) > 2.0:
+        m = self._kernels.match_node(cur, tmpl, wts, prev, r, h, float(h + margin))
+        if not m[0]:
             return None
-        loc, s_lk = fwd
-        fb = self._fb_error(cur, loc, tmpl, wts, prev, float(h + margin))
-        xy = np.asarray(q, float) + (loc - c)
-        return xy, float(score), fb, s_lk, second, float(wts.sum()), xy2
+        xy = q + (m[1:3] - c)
+        return xy, m[3], m[4], m[5], m[6], wsum, (q + (m[7:9] - c) if m[9] else None)
 
     def _rematch_radius(self) -> int:
         """Radius (px) of the refinement pass's re-match: max(2, h // 4) (the first pass is within a pixel)."""
         return max(2, self.h // 4)
-
-    @staticmethod
-    def _fb_error(cur, loc, tmpl, wts, prev, c) -> float:
-        """Forward-backward error (px): the matched patch (same weights) searched for in the frame-0 crop."""
-        back_t = cv2.getRectSubPix(cur, tmpl.shape[::-1], (float(loc[0]), float(loc[1])))
-        bwd = _weighted_lk(back_t, wts, prev, np.array([c, c]))
-        return math.inf if bwd is None else float(np.hypot(*(bwd[0] - c)))
 
     def _refine(self, gray0, gray, q0, est, vis, sig, fb_max, pred=None, counts=None, borrowed=None):
         """Second pass: re-match every visible node with segment rotations from this frame's matches.
@@ -706,6 +587,8 @@ class LKTracker:
         if q0.ndim != 2 or q0.shape[1] != 2 or len(q0) == 0:
             raise InputError("query points", f"expected a (P, 2) array, got {q0.shape}")
         self._setup(q0, graph, src_name)
+        from . import match_kernels  # numba: imported (and compiled, once per machine) only when tracking
+        self._kernels = match_kernels
         h, n = self.h, len(q0)
         fb_max = max(cfg.min_fb_px, cfg.max_fb_fraction * h)
         lk_params = dict(winSize=(2 * h + 1, 2 * h + 1), maxLevel=cfg.pyr_levels, criteria=_LK_CRITERIA)
@@ -757,11 +640,11 @@ class LKTracker:
                     theta_now = np.zeros(n)
                     preds = prev_est.copy()
                     wide = np.zeros(n, bool)  # searched in the wide window: template posed by a borrowed rotation
+                    # latest estimates (this frame's where already done): new_est holds prev_est until a node
+                    # is done, so only the visibility needs its own merged copy
+                    cur_vis = prev_vis.copy()
                     for i in self.order:
-                        # rotation from the latest estimates (this frame's where already done)
-                        cur_est = np.where(done[:, None], new_est, prev_est)
-                        cur_vis = np.where(done, new_vis, prev_vis)
-                        theta = self._rotation(i, cur_est, cur_vis, q0, theta_last, theta_now, done)
+                        theta = self._rotation(i, new_est, cur_vis, q0, theta_last, theta_now, done)
                         theta_now[i] = theta
                         p = self.parent[i]
                         seg = None
@@ -813,7 +696,7 @@ class LKTracker:
                                 ok = False
                                 counts["rejected_ambiguous"] += 1
                             elif (cfg.distinct_follow and ambiguous and xy2 is not None
-                                  and np.hypot(*(xy2 - pred)) < np.hypot(*(xy - pred))):
+                                  and math.hypot(*(xy2 - pred)) < math.hypot(*(xy - pred))):
                                 # followed (not re-acquired), two indistinguishable peaks, and the prediction
                                 # points at the other one: which of the two the node is would be a guess
                                 ok = False
@@ -828,7 +711,7 @@ class LKTracker:
                                 ok = False
                                 counts["rejected_unanchored"] += 1
                             elif p >= 0 and new_vis[p]:
-                                d = float(np.hypot(*(xy - new_est[p])))
+                                d = math.hypot(*(xy - new_est[p]))
                                 l0 = self.rest_len[i]
                                 if d > (1 + cfg.max_stretch) * l0 + cfg.length_tol_px or d < cfg.min_length_fraction * l0 - cfg.length_tol_px:
                                     ok = False
@@ -855,6 +738,7 @@ class LKTracker:
                             new_est[i], new_vis[i], sig[i] = pred, False, float(r)
                             counts["invisible"] += 1
                         done[i] = True
+                        cur_vis[i] = new_vis[i]
                     if self._band is not None and cfg.refine_pass:
                         self._refine(gray0, ga, q0, new_est, new_vis, sig, fb_max, preds, counts, wide)
                     hh, ww = gray.shape
