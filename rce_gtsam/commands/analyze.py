@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     from .figure_worker import FigureWorker
     from .progress import Steps, process_seconds, progress_enabled
 
-    # the figure worker forks at its first job, just before the bootstrap (see figure_worker)
+    # the figure worker forks at its first job, once the inputs are checked (see figure_worker)
     worker = None if args.no_figures else FigureWorker()
     figures = None
     try:
@@ -141,14 +141,18 @@ def record_wall_time(result, t_start: float) -> None:
 
 
 class FiguresInBackground:
-    """The analysis figures drawn by a :class:`~.figure_worker.FigureWorker`: those that need no CI while
-    the bootstrap runs, the rest right after it, collected into the output's ``figures/``."""
+    """The analysis figures drawn by a :class:`~.figure_worker.FigureWorker`: matplotlib made ready as
+    soon as this is made (before the smoothing), the figures that need no CI while the bootstrap runs,
+    the rest right after it, collected into the output's ``figures/``."""
 
     def __init__(self, worker, first_frame=None):
         import tempfile
+
+        from .figure_worker import prepare_figures
         self.worker = worker
         self.first_frame = first_frame
         self.dir = Path(tempfile.mkdtemp(prefix="rce_figures_"))  # scratch: files are moved out of it
+        worker.submit(prepare_figures)
 
     def discard(self) -> None:
         """Remove the scratch folder (after a failure; :meth:`writer` removes it on success)."""

@@ -1,11 +1,12 @@
 """Draw the figures in a second process while the analysis runs, so they do not hold the user up.
 
-:class:`FigureWorker` forks at its first job: ``rce analyze`` submits that job (every figure that needs no
-confidence interval) just before the bootstrap, so the worker inherits the analysis in memory with every
-module already imported, and draws while the main process bootstraps and writes the tables; the main
-process never imports matplotlib. Later jobs (the figures that need the CIs, the diagnosis figures of
-``rce run``) are a module-level function plus its arguments pickled through a pipe (~12 MB for plant 1,
-unpickled without new imports). Jobs run in order; each one's return value or error comes back. Where
+:class:`FigureWorker` forks at its first job: ``rce analyze`` submits that job (:func:`prepare_figures`:
+import matplotlib and the figure modules, load the fonts) once the inputs are checked, so the worker
+inherits the pipeline's modules and gets matplotlib ready while the main process loads and smooths the
+tracks; the main process never imports matplotlib. Later jobs (every figure that needs no confidence
+interval, sent just before the bootstrap; the figures that need the CIs; the diagnosis figures of
+``rce run``) are a module-level function plus its arguments pickled through a pipe (~16 MB for plant 1,
+a few ms, unpickled without new imports). Jobs run in order; each one's return value or error comes back. Where
 ``fork`` is not available the jobs run in the calling process when their results are asked for.
 """
 
@@ -97,6 +98,21 @@ class FigureWorker:
     def __exit__(self, *exc):
         self.close()
         return False
+
+
+def prepare_figures() -> dict[str, str]:
+    """Job: import matplotlib (Agg) and the figure modules and draw one throw-away figure with text into
+    memory (font loading, caches), so the figures proper start at once when the data arrive; {}."""
+    import io
+
+    from ..viz import figures, metrics, overlays, scene  # noqa: F401 - imported for the later jobs
+    from ..viz.style import mpl_style, save_png
+    with mpl_style() as plt:
+        fig, ax = plt.subplots(figsize=(1, 1), constrained_layout=True)
+        ax.set_title("κ")
+        ax.set_xlabel("frame")
+    save_png(fig, io.BytesIO())
+    return {}
 
 
 def draw_analysis_figures(result, out_dir: str | Path, names, overlay_names, first_frame=None) -> dict[str, str]:
