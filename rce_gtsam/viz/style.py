@@ -99,6 +99,7 @@ def save_png(fig, path: Path) -> Path:
     # savefig runs outside the rc_context the figure was built in, so pass the output settings here. Every
     # figure is laid out (constrained layout or :func:`fixed_margins`) to keep its artists inside the canvas:
     # a "tight" bounding box would only trim the margin, at the price of drawing the whole figure twice.
-    fig.savefig(path, dpi=RC["savefig.dpi"], bbox_inches=None)
+    # zlib level 1: a third of the PNG encoding time of the default 6, the same pixels, files ~1.3x larger
+    fig.savefig(path, dpi=RC["savefig.dpi"], bbox_inches=None, pil_kwargs={"compress_level": 1})
     plt.close(fig)
     return path
