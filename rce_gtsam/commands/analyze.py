@@ -86,13 +86,16 @@ def run(args: argparse.Namespace) -> int:
         check_command_options(args)
         effects = parse_effect_names(args.effects) or ()  # fail on a bad name before the (slow) analysis
         preset = preset_from_args(args)
-        check_analysis_inputs(args.tracks, args.graph, preset)
+        graph, table = check_analysis_inputs(args.tracks, args.graph, preset)
+        from ..tracks import tracks_from_table
+        tracks = tracks_from_table(table, graph, source=str(args.tracks))  # the CSV is read once
         t_start = process_seconds()
         steps = [*ANALYSIS_STEPS, "write"] + (["figures"] if worker else []) + (["recording"] if args.rerun else [])
         with Steps("analyze", steps, enabled=progress_enabled(args.quiet)) as bar:
             figures = FiguresInBackground(worker) if worker else None
-            result = analyze(args.tracks, args.graph, preset=preset, seed=args.seed, n_boot=args.bootstrap,
+            result = analyze(tracks, graph, preset=preset, seed=args.seed, n_boot=args.bootstrap,
                              effects=effects, progress=bar.callback,
+                             inputs={"graph": str(args.graph), "tracks": str(args.tracks)},
                              before_bootstrap=figures.before_bootstrap if figures else None)
             if figures:
                 figures.after_bootstrap(result)
