@@ -45,15 +45,21 @@ def _zone_legend(ax, zones, loc="upper left", ncol=1):
 
 
 def _errorbars(ax, x, v, lo, hi, zones, marker="o"):
-    """One errorbar per entity (so a figure has exactly one container per entity)."""
-    for xi, vi, l, h, z in zip(x, v, lo, hi, zones):
-        if not np.isfinite(vi):
-            continue
-        yerr = None
-        if np.isfinite(l) and np.isfinite(h):
-            yerr = np.array([[max(vi - l, 0.0)], [max(h - vi, 0.0)]])
-        ax.errorbar([xi], [vi], yerr=yerr, fmt=marker, color=ZONE_COLORS.get(str(z), "#777777"), ms=3.5,
-                    elinewidth=0.9, capsize=1.5, zorder=3)
+    """Points ``v`` at ``x`` with their intervals [lo, hi] (no bar where an end is not finite), in zone
+    colours: one ``errorbar`` container per zone and kind (with / without an interval), since every call
+    costs as much as drawing many points (the figures wait on it)."""
+    x, v, lo, hi = (np.asarray(a, dtype=float) for a in (x, v, lo, hi))
+    zones = np.array([str(z) for z in zones], dtype=object)
+    ok = np.isfinite(v)
+    has_ci = np.isfinite(lo) & np.isfinite(hi)
+    for zone in dict.fromkeys(zones[ok]):
+        for with_ci in (True, False):
+            sel = ok & (zones == zone) & (has_ci == with_ci)
+            if not sel.any():
+                continue
+            yerr = np.vstack([np.maximum(v[sel] - lo[sel], 0.0), np.maximum(hi[sel] - v[sel], 0.0)]) if with_ci else None
+            ax.errorbar(x[sel], v[sel], yerr=yerr, fmt=marker, color=ZONE_COLORS.get(zone, "#777777"), ms=3.5,
+                        elinewidth=0.9, capsize=1.5, zorder=3)
 
 
 # ------------------------------------------------------------------------------------------- analysis
@@ -183,7 +189,8 @@ def fig_excitation(result, fps: float | None = None):
         ax.set_ylabel("excitation z (deg)")
         rms = float(np.sqrt(np.mean(fit.z ** 2))) if fit.z.size else float("nan")
         kind = "signed" if result.preset.compliance.response == "signed" else "|Δβ|-based, ≥ 0"
-        ax.set_title(f"Shared excitation z_t ({kind}); RMS {rms:.2f} deg")
+        # above the seconds axis when there is one (titles are not moved automatically, style.RC)
+        ax.set_title(f"Shared excitation z_t ({kind}); RMS {rms:.2f} deg", pad=26 if fps else None)
         ax.set_xlim(resp.frames.min(), resp.frames.max())
         if fps:
             sec = ax.secondary_xaxis("top", functions=(lambda f: f / fps, lambda s: s * fps))

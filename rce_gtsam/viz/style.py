@@ -32,6 +32,9 @@ RC = {
     "axes.titleweight": "bold", "axes.titlelocation": "left", "figure.dpi": 100, "savefig.dpi": 150,
     "savefig.bbox": "tight", "savefig.pad_inches": 0.05, "lines.linewidth": 1.0, "axes.grid": True,
     "grid.alpha": 0.25, "grid.linewidth": 0.5,
+    # titles sit at the top of their axes (no figure here has tick labels above an axes): matplotlib's
+    # automatic placement measured every tick label of every axes at each draw, a sixth of the figures' time
+    "axes.titley": 1.0,
 }
 FIG_WIDTH_IN = 7.16  # two-column figure width in inches
 
