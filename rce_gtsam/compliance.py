@@ -121,7 +121,8 @@ def _matvec_t(M: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 class _PrecisionTerms:
-    """Products of the data that the precision shrinkage needs, computed once per batch (B, E, T)."""
+    """Products of the data that the precision shrinkage needs, computed once per batch (B, E, T); those
+    of the mask alone are (1, E, T) when every resample shares it (``W`` given as (1, E, T))."""
 
     def __init__(self, Y0: np.ndarray, W: np.ndarray, Wf: np.ndarray):
         Wc = W.astype(float)
@@ -133,9 +134,11 @@ class _PrecisionTerms:
         self.pair = pair
 
     def take(self, a: np.ndarray) -> "_PrecisionTerms":
+        """The rows ``a`` of every per-resample product (shared (1, E, T) ones are kept as they are)."""
         out = object.__new__(_PrecisionTerms)
+        shared = self.WY.shape[0] > 1 and self.Wc.shape[0] == 1
         for k, v in vars(self).items():
-            setattr(out, k, v[a])
+            setattr(out, k, v if shared and v.shape[0] == 1 else v[a])
         return out
 
 
@@ -199,10 +202,17 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
     signed = config.response == "signed"
     W = np.isfinite(Y)
     Y0 = np.where(W, Y, 0.0)
-    Wf = W.astype(float) if weights is None else np.where(W, weights, 0.0)
     B, E, T = Y.shape
     lam = float(config.prior_strength)
     z = initial_z(Y, W)
+    # Resamples that share the missing-data mask and the weights (the phase bootstrap's) share the arrays
+    # made of them: (1, E, T), broadcast by every mat-vec below (each resample's product is computed
+    # exactly as before; one copy instead of B is less memory to stream through)
+    shared = B > 1 and not (W != W[:1]).any() and (weights is None or not (
+        np.where(W, weights, 0.0) != np.where(W[:1], weights[:1], 0.0)).any())
+    if shared:
+        W = W[:1]
+    Wf = W.astype(float) if weights is None else np.where(W, weights[:1] if shared else weights, 0.0)
     kappa = np.ones((B, E))
     active = np.ones(B, dtype=bool)
     iterations = np.zeros(B, dtype=int)
@@ -224,7 +234,9 @@ def fit_rank1_batch(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray
         # out once half of the held ones have converged (each row's fit is independent of the others).
         if 2 * a.size <= rows.size:
             keep = np.searchsorted(rows, a)
-            WYa, Wfa, Wca = WYa[keep], Wfa[keep], Wca[keep]
+            WYa = WYa[keep]
+            if not shared:
+                Wfa, Wca = Wfa[keep], Wca[keep]
             terms_a = terms_a.take(keep) if precision else None
             rows = a
         full = a.size == rows.size
