@@ -94,3 +94,22 @@ def test_figures_as_extra_writer(analysis, tmp_path):
     _, result = analysis
     files = result.write(tmp_path / "out", extra_writers=[lambda r, d: write_figures(r, d)])
     assert "compliance.png" in files and (tmp_path / "out" / "compliance_summary.csv").is_file()
+
+
+def test_figures_split_between_two_processes(analysis, tmp_path):
+    """The figure worker's job draws half of the figures in a forked child: all files, real PNGs, in order;
+    a failure is raised in the caller (and the child is reaped, not left behind)."""
+    from pathlib import Path
+
+    from rce_gtsam.commands.figure_worker import draw_analysis_figures, split_by_cost
+    from rce_gtsam.viz.figures import FIGURE_FILES
+    from rce_gtsam.viz.overlays import OVERLAY_FILES
+    _, result = analysis
+    a, b = split_by_cost([*FIGURE_FILES, *OVERLAY_FILES])
+    assert a and b and not set(a) & set(b)
+    out = draw_analysis_figures(result, tmp_path, FIGURE_FILES, OVERLAY_FILES, processes=2)
+    assert list(out) == [*FIGURE_FILES, *OVERLAY_FILES]
+    for p in out.values():
+        _png_ok(Path(p), min_bytes=5_000)
+    with pytest.raises(Exception):
+        draw_analysis_figures(None, tmp_path / "bad", FIGURE_FILES, OVERLAY_FILES, processes=2)

@@ -149,11 +149,14 @@ class FiguresInBackground:
     the rest right after it, collected into the output's ``figures/``."""
 
     def __init__(self, worker, first_frame=None):
+        import os
         import tempfile
 
         from .figure_worker import prepare_figures
         self.worker = worker
         self.first_frame = first_frame
+        # the worker splits each batch of figures with a second process where there is a second core
+        self.processes = 2 if (os.cpu_count() or 1) >= 2 else 1
         self.dir = Path(tempfile.mkdtemp(prefix="rce_figures_"))  # scratch: files are moved out of it
         worker.submit(prepare_figures)
 
@@ -168,14 +171,14 @@ class FiguresInBackground:
         from .figure_worker import draw_analysis_figures
         self.worker.submit(draw_analysis_figures, partial, self.dir,
                            [n for n in FIGURE_FILES if n not in CI_FIGURES],
-                           [n for n in OVERLAY_FILES if n not in CI_OVERLAYS], self.first_frame)
+                           [n for n in OVERLAY_FILES if n not in CI_OVERLAYS], self.first_frame, self.processes)
 
     def after_bootstrap(self, result) -> None:
         from ..viz.figures import CI_FIGURES
         from ..viz.overlays import CI_OVERLAYS
         from .figure_worker import draw_analysis_figures
         self.worker.submit(draw_analysis_figures, result, self.dir, list(CI_FIGURES), list(CI_OVERLAYS),
-                           self.first_frame)
+                           self.first_frame, self.processes)
 
     def diagnosis(self, view, result) -> None:
         """Also draw the diagnosis figures (``view``: :func:`~rce_gtsam.diagnosis_io.diagnosis_for_viz`)."""
