@@ -6,7 +6,8 @@ inherits the pipeline's modules and gets matplotlib ready while the main process
 tracks; the main process never imports matplotlib. Later jobs (every figure that needs no confidence
 interval, sent just before the bootstrap; the figures that need the CIs; the diagnosis figures of
 ``rce run``) are a module-level function plus its arguments pickled through a pipe (~16 MB for plant 1,
-a few ms, unpickled without new imports). Jobs run in order; each one's return value or error comes back. Where
+a few ms, unpickled without new imports), sent from a thread so the main process never waits for the
+worker to be free. Jobs run in order; each one's return value or error comes back. Where
 ``fork`` is not available the jobs run in the calling process when their results are asked for.
 """
 
@@ -15,6 +16,7 @@ from __future__ import annotations
 import multiprocessing
 import os
 import pickle
+import threading
 import traceback
 from pathlib import Path
 
@@ -43,6 +45,8 @@ class FigureWorker:
         self._pending = 0
         self._proc = self._conn = None
         self._inline: list = []
+        self._sender = None  # the thread sending the latest job (see submit)
+        self._send_error: BaseException | None = None
 
     def submit(self, fn, *args, **kwargs) -> None:
         """Queue ``fn(*args, **kwargs)``; its result comes back from :meth:`results`. The first job forks."""
@@ -62,7 +66,20 @@ class FigureWorker:
         if self._proc is None:
             self._inline.append((fn, args, kwargs))
             return
-        self._conn.send((fn, args, kwargs))
+        # A job (~16 MB for plant 1) goes through a pipe the worker drains only once it is free: send it
+        # from a thread (after the previous one, keeping the order), so the caller never waits for the
+        # worker; the writes release the GIL.
+        previous, job = self._sender, (fn, args, kwargs)
+
+        def send() -> None:
+            if previous is not None:
+                previous.join()
+            try:
+                self._conn.send(job)
+            except BaseException as exc:  # noqa: BLE001 - raised by results()
+                self._send_error = exc
+        self._sender = threading.Thread(target=send, name="rce-figures-send", daemon=True)
+        self._sender.start()
         self._pending += 1
 
     def results(self) -> list:
@@ -71,6 +88,10 @@ class FigureWorker:
         if self._proc is None:
             jobs, self._inline = self._inline, []
             return [fn(*a, **k) for fn, a, k in jobs]
+        if self._sender is not None:
+            self._sender.join()
+        if self._send_error is not None:
+            raise RuntimeError("the figure worker process died") from self._send_error
         while self._pending:
             try:
                 status, value = self._conn.recv()
@@ -85,6 +106,8 @@ class FigureWorker:
 
     def close(self) -> None:
         if self._proc is not None:
+            if self._sender is not None:
+                self._sender.join(timeout=5)
             try:
                 self._conn.send(None)
             except (BrokenPipeError, OSError):
