@@ -13,6 +13,7 @@ worker to be free. Jobs run in order; each one's return value or error comes bac
 
 from __future__ import annotations
 
+import gc
 import multiprocessing
 import os
 import pickle
@@ -56,6 +57,9 @@ class FigureWorker:
             except ValueError:
                 ctx = None
             if ctx is not None:
+                # objects made so far are left out of later garbage collections, which would otherwise
+                # touch (and so copy) every page the two processes still share after the fork
+                gc.freeze()
                 self._conn, child = ctx.Pipe()
                 self._proc = ctx.Process(target=_serve, args=(child, (fn, args, kwargs)), daemon=True,
                                          name="rce-figures")
@@ -168,6 +172,7 @@ def draw_analysis_figures(result, out_dir: str | Path, names, overlay_names, fir
         return _draw(result, out_dir, names, overlay_names, first_frame)
     mine, theirs = split_by_cost(names + overlay_names)
     read_end, write_end = os.pipe()
+    gc.freeze()  # see FigureWorker.submit
     pid = os.fork()
     if pid == 0:  # the child: draw its share, send {name: path} or the error, and leave at once
         status = 1
