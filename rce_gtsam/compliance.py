@@ -103,7 +103,7 @@ def nanmedian_axis1(X: np.ndarray) -> np.ndarray:
     values for an even count, NaN where a column has none) from one sort: numpy's masked-array path for a
     short axis was a fifth of the bootstrap's time."""
     S = np.sort(X, axis=1)  # NaN last
-    n = np.isfinite(X).sum(axis=1, keepdims=True)
+    n = (~np.isnan(X)).sum(axis=1, keepdims=True)
     h = n // 2
     lo = np.take_along_axis(S, np.where(n % 2 == 1, h, np.maximum(h - 1, 0)), axis=1)[:, 0]
     hi = np.take_along_axis(S, np.minimum(h, X.shape[1] - 1), axis=1)[:, 0]
