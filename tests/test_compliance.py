@@ -138,3 +138,20 @@ def test_nanmedian_axis1_equals_numpy():
             warnings.simplefilter("ignore", RuntimeWarning)
             expected = np.nanmedian(X, axis=1)
         assert np.array_equal(nanmedian_axis1(X), expected, equal_nan=True)
+
+
+def test_batch_with_a_shared_mask_fits_each_resample_as_alone():
+    """Resamples sharing the missing-data mask and weights (the phase bootstrap's batches) share the mask's
+    arrays; each one's fit is still exactly the fit of that resample alone."""
+    rng = np.random.default_rng(1)
+    E, T, B = 6, 120, 5
+    z = np.abs(np.sin(np.arange(T) / 9.0)) * 4 + 0.5
+    Y = rng.uniform(0.5, 2.0, E)[None, :, None] * z[None, None, :] + rng.normal(0, 0.4, (B, E, T))
+    Y[:, rng.random((E, T)) < 0.1] = np.nan
+    W = np.broadcast_to(rng.uniform(0.5, 1.5, (E, T)), (B, E, T))
+    cfg = ComplianceConfig(response="signed", shrinkage="precision")
+    batch = fit_rank1_batch(Y, cfg, W)
+    for b in range(B):
+        alone = fit_rank1_batch(Y[b:b + 1], cfg, W[b:b + 1])
+        for x, y in zip(batch, alone):
+            assert np.array_equal(x[b], y[0])
