@@ -202,6 +202,7 @@ def fig_residual_heatmap(R: np.ndarray, frames: np.ndarray, labels: list[str], t
     """Heatmap of residuals R (E, T) in degrees, diverging colours centred at 0 with limits at the 99th
     percentile of |R| (so one outlier does not wash the map out), plus per-frame and per-edge RMS."""
     from matplotlib.colors import Normalize
+    from matplotlib.ticker import NullLocator
     E, T = R.shape
     lim = robust_abs_max(R)
     with np.errstate(invalid="ignore"):
@@ -219,7 +220,7 @@ def fig_residual_heatmap(R: np.ndarray, frames: np.ndarray, labels: list[str], t
                               bottom=0.42 / H, wspace=0.1, hspace=0.07)
         ax = fig.add_subplot(gs[1, 0])
         axt = fig.add_subplot(gs[0, 0], sharex=ax)
-        axe = fig.add_subplot(gs[1, 1], sharey=ax)
+        axe = fig.add_subplot(gs[1, 1])  # the heatmap's rows; not shared, so no second set of row ticks
         cax = fig.add_subplot(gs[1, 2])
         f0, f1 = (frames[0], frames[-1]) if T else (0, 1)
         step = (f1 - f0) / max(T - 1, 1)
@@ -236,8 +237,9 @@ def fig_residual_heatmap(R: np.ndarray, frames: np.ndarray, labels: list[str], t
         axt.tick_params(labelbottom=False)
         axt.set_ylim(bottom=0)
         axe.barh(np.arange(E), np.nan_to_num(rms_e), color="0.45", height=0.75)
+        axe.set_ylim(E - 0.5, -0.5)
+        axe.yaxis.set_major_locator(NullLocator())
         axe.set_xlabel("RMS (deg)")
-        axe.tick_params(labelleft=False)
         axe.grid(axis="y", visible=False)
         cb = fig.colorbar(im, cax=cax, extend="both")
         cb.set_label("residual (deg)")
