@@ -43,6 +43,8 @@ def parse_effect_names(effects: str | Sequence[str] | None, source: str = "--eff
             return None
     else:
         names = [str(n).strip() for n in effects]
+        if not names:
+            return ()  # nothing to check: the effect classes (scipy.signal, ~1 s) stay unimported
     valid = effect_names()
     bad = [n for n in names if n not in valid]
     if bad:

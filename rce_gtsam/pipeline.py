@@ -229,7 +229,7 @@ class AnalysisResult:
 
 def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset: str | Preset = "default",
             seed: int | None = None, n_boot: int | None = None, effects: tuple[str, ...] | str = (),
-            progress=None, before_bootstrap=None) -> AnalysisResult:
+            progress=None, before_bootstrap=None, inputs: dict[str, str] | None = None) -> AnalysisResult:
     """Run the whole analysis on saved tracks.
 
     ``tracks`` and ``graph`` may be objects or file paths. ``seed`` and ``n_boot`` override the preset's
@@ -240,6 +240,8 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     ``progress``: optional callable ``progress(step)`` called as each of :data:`ANALYSIS_STEPS` starts
     (the CLI's progress bar). ``before_bootstrap``: optional callable given the result without CIs
     (``ci=None``) just before the bootstrap starts (the CLI draws the figures that need no CI meanwhile).
+    ``inputs``: the files ``tracks`` and ``graph`` were read from when they are passed as objects
+    (``{"graph": path, "tracks": path}``, recorded in report.json; paths passed directly are recorded).
     """
     step = progress or (lambda _name: None)
     from .diagnosis_io import parse_effect_names
@@ -247,7 +249,7 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     step("load")
-    inputs = {}
+    inputs = dict(inputs or {})
     if not isinstance(graph, BranchGraph):
         inputs["graph"] = str(graph)
         graph = load_graph(graph)

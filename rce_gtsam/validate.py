@@ -155,8 +155,9 @@ def check_folds(folds: int, n_frames: int, block_length: int) -> None:
                 f" (the {n_frames} frames make at most {top} test blocks of >= {block_length} frames)")
 
 
-def check_analysis_inputs(tracks_path: Path, graph_path: Path, preset) -> None:
-    """Read the graph and tracks (cheap) and check what the analysis needs of them, before it runs."""
+def check_analysis_inputs(tracks_path: Path, graph_path: Path, preset) -> tuple:
+    """Read the graph and tracks (cheap) and check what the analysis needs of them, before it runs;
+    returns (graph, validated tracks table) so the caller need not read them again."""
     from .graph import load_graph
     from .tracks import read_tracks_table, tracks_from_table
 

@@ -21,6 +21,13 @@ def test_cli_writes_all_outputs(chain, tmp_path, capsys, preset):
                  "--seed", "3", "--bootstrap", "40"]) == 0
     printed = capsys.readouterr().out
     assert "kappa" in printed and str(out) in printed
+    # the figures (drawn by the background worker) are part of every run without --no-figures
+    from rce_gtsam.viz.figures import FIGURE_FILES
+    from rce_gtsam.viz.overlays import OVERLAY_FILES
+    for name in (*FIGURE_FILES, *OVERLAY_FILES):
+        png = out / "figures" / name
+        assert png.is_file() and png.stat().st_size > 5_000 and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", png
+        assert f"figures/{name}" in printed
     summary = pd.read_csv(out / "compliance_summary.csv")
     for col in ["parent", "child", "zone", "kappa", "kappa_ci_low", "kappa_ci_high", "uncertainty", "n_frames"]:
         assert col in summary.columns

@@ -119,3 +119,39 @@ def test_precision_shrinkage_leaves_clean_edges_alone():
     Y = Y + np.random.default_rng(0).normal(0, 0.05, Y.shape)
     f = fit_rank1(Y, ComplianceConfig(response="signed", shrinkage="precision", n_iter=300, tol=1e-10))
     np.testing.assert_allclose(f.kappa, k, rtol=0.02)
+
+
+def test_nanmedian_axis1_equals_numpy():
+    """The bootstrap's starting excitation: the same numbers as np.nanmedian (NaN, inf, ties, empty columns)."""
+    import warnings
+
+    from rce_gtsam.compliance import nanmedian_axis1
+    rng = np.random.default_rng(0)
+    for trial in range(60):
+        X = rng.standard_normal((int(rng.integers(1, 5)), int(rng.integers(1, 8)), int(rng.integers(1, 30))))
+        X[rng.random(X.shape) < rng.random()] = np.nan
+        if trial % 3 == 0:
+            X[rng.random(X.shape) < 0.1] = np.inf
+        if trial % 5 == 0:
+            X = np.round(X)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            expected = np.nanmedian(X, axis=1)
+        assert np.array_equal(nanmedian_axis1(X), expected, equal_nan=True)
+
+
+def test_batch_with_a_shared_mask_fits_each_resample_as_alone():
+    """Resamples sharing the missing-data mask and weights (the phase bootstrap's batches) share the mask's
+    arrays; each one's fit is still exactly the fit of that resample alone."""
+    rng = np.random.default_rng(1)
+    E, T, B = 6, 120, 5
+    z = np.abs(np.sin(np.arange(T) / 9.0)) * 4 + 0.5
+    Y = rng.uniform(0.5, 2.0, E)[None, :, None] * z[None, None, :] + rng.normal(0, 0.4, (B, E, T))
+    Y[:, rng.random((E, T)) < 0.1] = np.nan
+    W = np.broadcast_to(rng.uniform(0.5, 1.5, (E, T)), (B, E, T))
+    cfg = ComplianceConfig(response="signed", shrinkage="precision")
+    batch = fit_rank1_batch(Y, cfg, W)
+    for b in range(B):
+        alone = fit_rank1_batch(Y[b:b + 1], cfg, W[b:b + 1])
+        for x, y in zip(batch, alone):
+            assert np.array_equal(x[b], y[0])

@@ -74,7 +74,7 @@ def run(args: argparse.Namespace) -> int:
     from .figure_worker import FigureWorker
     from .progress import Steps, process_seconds, progress_enabled
 
-    # the figure worker forks at its first job, just before the bootstrap (see figure_worker)
+    # the figure worker forks at its first job, once the inputs are checked (see figure_worker)
     worker = None if args.no_figures else FigureWorker()
     figures = None
     try:
@@ -86,13 +86,16 @@ def run(args: argparse.Namespace) -> int:
         check_command_options(args)
         effects = parse_effect_names(args.effects) or ()  # fail on a bad name before the (slow) analysis
         preset = preset_from_args(args)
-        check_analysis_inputs(args.tracks, args.graph, preset)
+        graph, table = check_analysis_inputs(args.tracks, args.graph, preset)
+        from ..tracks import tracks_from_table
+        tracks = tracks_from_table(table, graph, source=str(args.tracks))  # the CSV is read once
         t_start = process_seconds()
         steps = [*ANALYSIS_STEPS, "write"] + (["figures"] if worker else []) + (["recording"] if args.rerun else [])
         with Steps("analyze", steps, enabled=progress_enabled(args.quiet)) as bar:
             figures = FiguresInBackground(worker) if worker else None
-            result = analyze(args.tracks, args.graph, preset=preset, seed=args.seed, n_boot=args.bootstrap,
+            result = analyze(tracks, graph, preset=preset, seed=args.seed, n_boot=args.bootstrap,
                              effects=effects, progress=bar.callback,
+                             inputs={"graph": str(args.graph), "tracks": str(args.tracks)},
                              before_bootstrap=figures.before_bootstrap if figures else None)
             if figures:
                 figures.after_bootstrap(result)
@@ -141,14 +144,21 @@ def record_wall_time(result, t_start: float) -> None:
 
 
 class FiguresInBackground:
-    """The analysis figures drawn by a :class:`~.figure_worker.FigureWorker`: those that need no CI while
-    the bootstrap runs, the rest right after it, collected into the output's ``figures/``."""
+    """The analysis figures drawn by a :class:`~.figure_worker.FigureWorker`: matplotlib made ready as
+    soon as this is made (before the smoothing), the figures that need no CI while the bootstrap runs,
+    the rest right after it, collected into the output's ``figures/``."""
 
     def __init__(self, worker, first_frame=None):
+        import os
         import tempfile
+
+        from .figure_worker import prepare_figures
         self.worker = worker
         self.first_frame = first_frame
+        # the worker splits each batch of figures with a second process where there is a second core
+        self.processes = 2 if (os.cpu_count() or 1) >= 2 else 1
         self.dir = Path(tempfile.mkdtemp(prefix="rce_figures_"))  # scratch: files are moved out of it
+        worker.submit(prepare_figures)
 
     def discard(self) -> None:
         """Remove the scratch folder (after a failure; :meth:`writer` removes it on success)."""
@@ -161,14 +171,14 @@ class FiguresInBackground:
         from .figure_worker import draw_analysis_figures
         self.worker.submit(draw_analysis_figures, partial, self.dir,
                            [n for n in FIGURE_FILES if n not in CI_FIGURES],
-                           [n for n in OVERLAY_FILES if n not in CI_OVERLAYS], self.first_frame)
+                           [n for n in OVERLAY_FILES if n not in CI_OVERLAYS], self.first_frame, self.processes)
 
     def after_bootstrap(self, result) -> None:
         from ..viz.figures import CI_FIGURES
         from ..viz.overlays import CI_OVERLAYS
         from .figure_worker import draw_analysis_figures
         self.worker.submit(draw_analysis_figures, result, self.dir, list(CI_FIGURES), list(CI_OVERLAYS),
-                           self.first_frame)
+                           self.first_frame, self.processes)
 
     def diagnosis(self, view, result) -> None:
         """Also draw the diagnosis figures (``view``: :func:`~rce_gtsam.diagnosis_io.diagnosis_for_viz`)."""

@@ -39,7 +39,7 @@ def run(args: argparse.Namespace) -> int:
     from .figure_worker import FigureWorker
     from .progress import Steps, process_seconds, progress_enabled
 
-    worker = None if args.no_figures else FigureWorker()  # forks just before the bootstrap
+    worker = None if args.no_figures else FigureWorker()  # forks just before the analysis (FiguresInBackground)
     try:
         return _run(args, worker, Steps, process_seconds, progress_enabled(args.quiet))
     finally:

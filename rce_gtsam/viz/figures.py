@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from .style import mpl_style as _style
-from .style import save_png as _save
+from .style import fixed_margins, save_png as _save
 from .style import (EXCITATION_COLOR, FIG_WIDTH_IN, RAW_COLOR, RC, RESIDUAL_CMAP, SMOOTHED_COLOR,
                     ZONE_COLORS, robust_abs_max)
 
@@ -45,15 +45,21 @@ def _zone_legend(ax, zones, loc="upper left", ncol=1):
 
 
 def _errorbars(ax, x, v, lo, hi, zones, marker="o"):
-    """One errorbar per entity (so a figure has exactly one container per entity)."""
-    for xi, vi, l, h, z in zip(x, v, lo, hi, zones):
-        if not np.isfinite(vi):
-            continue
-        yerr = None
-        if np.isfinite(l) and np.isfinite(h):
-            yerr = np.array([[max(vi - l, 0.0)], [max(h - vi, 0.0)]])
-        ax.errorbar([xi], [vi], yerr=yerr, fmt=marker, color=ZONE_COLORS.get(str(z), "#777777"), ms=3.5,
-                    elinewidth=0.9, capsize=1.5, zorder=3)
+    """Points ``v`` at ``x`` with their intervals [lo, hi] (no bar where an end is not finite), in zone
+    colours: one ``errorbar`` container per zone and kind (with / without an interval), since every call
+    costs as much as drawing many points (the figures wait on it)."""
+    x, v, lo, hi = (np.asarray(a, dtype=float) for a in (x, v, lo, hi))
+    zones = np.array([str(z) for z in zones], dtype=object)
+    ok = np.isfinite(v)
+    has_ci = np.isfinite(lo) & np.isfinite(hi)
+    for zone in dict.fromkeys(zones[ok]):
+        for with_ci in (True, False):
+            sel = ok & (zones == zone) & (has_ci == with_ci)
+            if not sel.any():
+                continue
+            yerr = np.vstack([np.maximum(v[sel] - lo[sel], 0.0), np.maximum(hi[sel] - v[sel], 0.0)]) if with_ci else None
+            ax.errorbar(x[sel], v[sel], yerr=yerr, fmt=marker, color=ZONE_COLORS.get(zone, "#777777"), ms=3.5,
+                        elinewidth=0.9, capsize=1.5, zorder=3)
 
 
 # ------------------------------------------------------------------------------------------- analysis
@@ -66,12 +72,13 @@ def fig_smoothing(result):
     window = int(result.preset.smoother.presmooth_window)
     raw_label = f"raw (moving average of {window})" if window > 1 else "raw (tracker output)"
     with _style() as plt:
-        fig, axes = plt.subplots(1, 2, figsize=(FIG_WIDTH_IN, 2.6), constrained_layout=True)
+        fig, axes = plt.subplots(1, 2, figsize=(FIG_WIDTH_IN, 2.6))
+        fixed_margins(fig, left=0.5, top=0.52, bottom=0.4, wspace=0.62, ncols=2)
         for ax, rd, raw, smo, ylabel, title, red in (
                 (axes[0], rd_b, sm.bend_rms_raw_deg, sm.bend_rms_smoothed_deg, "filtered bending RMS (deg)",
                  "(a) Bending noise", d["bend_rms_reduction_pct"]),
                 (axes[1], rd_e, sm.edge_cv_raw, sm.edge_cv_smoothed, "edge-length CV (std / mean)",
-                 "(b) Segment-length variation", d["edge_length_cv_reduction_pct"])):
+                 "(b) Segment length", d["edge_length_cv_reduction_pct"])):
             o = np.argsort(rd)
             for y, lab, col, ls, mk in ((raw, raw_label, RAW_COLOR, "--", "o"),
                                         (smo, "smoothed (factor graph)", SMOOTHED_COLOR, "-", "s")):
@@ -82,7 +89,7 @@ def fig_smoothing(result):
             ax.set_title(f"{title}: mean {abs(red):.0f} % {'lower' if red >= 0 else 'higher'}")
             ax.set_ylim(bottom=0)
         h, lab = axes[0].get_legend_handles_labels()
-        fig.legend(h, lab, loc="outside upper center", ncol=2)
+        fig.legend(h, lab, loc="upper center", ncol=2, borderaxespad=0.2)
     return fig
 
 
@@ -91,7 +98,8 @@ def fig_motion(result, seed: int = 0):
     from .metrics import bend_rms, node_motion
     nm, br = node_motion(result, seed=seed), bend_rms(result, seed=seed)
     with _style() as plt:
-        fig, axes = plt.subplots(1, 2, figsize=(FIG_WIDTH_IN, 2.6), constrained_layout=True)
+        fig, axes = plt.subplots(1, 2, figsize=(FIG_WIDTH_IN, 2.6))
+        fixed_margins(fig, left=0.5, top=0.28, bottom=0.4, wspace=0.62, ncols=2)
         _errorbars(axes[0], nm.root_distance_px, nm.value, nm.low, nm.high, nm.zone)
         axes[0].set_ylabel("root-relative motion RMS (px)")
         axes[0].set_title("(a) Node motion")
@@ -115,8 +123,9 @@ def fig_compliance(result):
     U = result.uncertainty if result.uncertainty is not None else np.full(E, np.nan)
     labels = [f"{j}→{c}" for j, c in resp.edges]
     with _style() as plt:
-        fig, axes = plt.subplots(1, 2, figsize=(FIG_WIDTH_IN, 2.8), constrained_layout=True,
-                                 gridspec_kw={"width_ratios": [1.1, 1]})
+        fig, axes = plt.subplots(1, 2, figsize=(FIG_WIDTH_IN, 2.8), gridspec_kw={"width_ratios": [1.1, 1]})
+        fixed_margins(fig, left=0.5, top=0.28, bottom=0.4 + 0.055 * max(len(s) for s in labels), wspace=0.62,
+                      ncols=2)
         ax = axes[0]
         ax.axhline(1.0, color="0.4", ls="--", lw=0.8, zorder=1)
         _errorbars(ax, resp.root_distance_px, fit.kappa, lo, hi, zones)
@@ -172,14 +181,16 @@ def fig_excitation(result, fps: float | None = None):
     """The shared excitation z_t against frame (and seconds when ``fps`` is given)."""
     resp, fit = result.response, result.fit
     with _style() as plt:
-        fig, ax = plt.subplots(figsize=(FIG_WIDTH_IN, 2.0), constrained_layout=True)
+        fig, ax = plt.subplots(figsize=(FIG_WIDTH_IN, 2.0))
+        fixed_margins(fig, left=0.5, top=0.62 if fps else 0.28, bottom=0.4)
         ax.plot(resp.frames, fit.z, color=EXCITATION_COLOR, lw=0.8)
         ax.axhline(0, color="0.5", lw=0.5)
         ax.set_xlabel("frame")
         ax.set_ylabel("excitation z (deg)")
         rms = float(np.sqrt(np.mean(fit.z ** 2))) if fit.z.size else float("nan")
         kind = "signed" if result.preset.compliance.response == "signed" else "|Δβ|-based, ≥ 0"
-        ax.set_title(f"Shared excitation z_t ({kind}); RMS {rms:.2f} deg")
+        # above the seconds axis when there is one (titles are not moved automatically, style.RC)
+        ax.set_title(f"Shared excitation z_t ({kind}); RMS {rms:.2f} deg", pad=26 if fps else None)
         ax.set_xlim(resp.frames.min(), resp.frames.max())
         if fps:
             sec = ax.secondary_xaxis("top", functions=(lambda f: f / fps, lambda s: s * fps))
@@ -191,6 +202,7 @@ def fig_residual_heatmap(R: np.ndarray, frames: np.ndarray, labels: list[str], t
     """Heatmap of residuals R (E, T) in degrees, diverging colours centred at 0 with limits at the 99th
     percentile of |R| (so one outlier does not wash the map out), plus per-frame and per-edge RMS."""
     from matplotlib.colors import Normalize
+    from matplotlib.ticker import NullLocator
     E, T = R.shape
     lim = robust_abs_max(R)
     with np.errstate(invalid="ignore"):
@@ -200,11 +212,15 @@ def fig_residual_heatmap(R: np.ndarray, frames: np.ndarray, labels: list[str], t
             rms_t = np.sqrt(np.nanmean(R ** 2, axis=0))
             rms_e = np.sqrt(np.nanmean(R ** 2, axis=1))
     with _style() as plt:
-        fig = plt.figure(figsize=(FIG_WIDTH_IN, 1.2 + 0.16 * E + 0.9), constrained_layout=True)
-        gs = fig.add_gridspec(2, 3, width_ratios=[12, 1.6, 0.25], height_ratios=[1, max(2.0, 0.16 * E)])
+        H = 1.2 + 0.16 * E + 0.9
+        fig = plt.figure(figsize=(FIG_WIDTH_IN, H))
+        # fixed margins (see fixed_margins): y tick labels "parent→child" up to ~9 characters of 6-7 pt
+        gs = fig.add_gridspec(2, 3, width_ratios=[12, 1.6, 0.25], height_ratios=[1, max(2.0, 0.16 * E)],
+                              left=0.7 / FIG_WIDTH_IN, right=1 - 0.62 / FIG_WIDTH_IN, top=1 - 0.25 / H,
+                              bottom=0.42 / H, wspace=0.1, hspace=0.07)
         ax = fig.add_subplot(gs[1, 0])
         axt = fig.add_subplot(gs[0, 0], sharex=ax)
-        axe = fig.add_subplot(gs[1, 1], sharey=ax)
+        axe = fig.add_subplot(gs[1, 1])  # the heatmap's rows; not shared, so no second set of row ticks
         cax = fig.add_subplot(gs[1, 2])
         f0, f1 = (frames[0], frames[-1]) if T else (0, 1)
         step = (f1 - f0) / max(T - 1, 1)
@@ -221,8 +237,9 @@ def fig_residual_heatmap(R: np.ndarray, frames: np.ndarray, labels: list[str], t
         axt.tick_params(labelbottom=False)
         axt.set_ylim(bottom=0)
         axe.barh(np.arange(E), np.nan_to_num(rms_e), color="0.45", height=0.75)
+        axe.set_ylim(E - 0.5, -0.5)
+        axe.yaxis.set_major_locator(NullLocator())
         axe.set_xlabel("RMS (deg)")
-        axe.tick_params(labelleft=False)
         axe.grid(axis="y", visible=False)
         cb = fig.colorbar(im, cax=cax, extend="both")
         cb.set_label("residual (deg)")
@@ -245,7 +262,8 @@ def fig_bending_fit(result, n: int = 3):
     worst = worst_edges(view, n)
     with _style() as plt:
         fig, axes = plt.subplots(len(worst), 1, figsize=(FIG_WIDTH_IN, 1.5 * len(worst) + 0.4), sharex=True,
-                                 constrained_layout=True, squeeze=False)
+                                 squeeze=False)
+        fixed_margins(fig, left=0.55, top=0.45, bottom=0.4, hspace=0.32, nrows=len(worst))
         for ax, e in zip(axes[:, 0], worst):
             i = view.edges.index(e)
             y, p = view.Y[i], view.pred[i]
@@ -260,7 +278,7 @@ def fig_bending_fit(result, n: int = 3):
                          f"residual RMS {np.sqrt(np.mean(r ** 2)):.2f} deg", fontsize=8)
             ax.set_ylabel("bending (deg)")
         h, lab = axes[0, 0].get_legend_handles_labels()
-        fig.legend(h, lab, loc="outside upper right", ncol=3)
+        fig.legend(h, lab, loc="upper right", ncol=3, borderaxespad=0.6)
         axes[-1, 0].set_xlabel("frame")
         axes[-1, 0].set_xlim(view.frames.min(), view.frames.max())
     return fig

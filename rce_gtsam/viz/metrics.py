@@ -34,8 +34,11 @@ def rms_ci(values: np.ndarray, seed: int = 0, block: int = BLOCK, n_boot: int = 
     L = max(3, min(block, T))
     n_blocks = int(np.ceil(T / L))
     starts = rng.integers(0, T - L + 1, size=(n_boot, n_blocks))
-    idx = (starts[:, :, None] + np.arange(L)[None, None, :]).reshape(n_boot, -1)[:, :T]
-    boot = np.sqrt(np.mean(v[idx] ** 2, axis=1))
+    # sum of v^2 over each resample's blocks (the last one cut to reach T values) from prefix sums
+    S = np.concatenate([[0.0], np.cumsum(v ** 2)])
+    ends = np.full(n_blocks, L)
+    ends[-1] = T - (n_blocks - 1) * L
+    boot = np.sqrt((S[starts + ends] - S[starts]).sum(axis=1) / T)
     lo, hi = np.percentile(boot, [2.5, 97.5])
     return (rms, float(lo), float(hi))
 

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .style import KAPPA_CMAP, MISSING_COLOR, UNCERTAINTY_CMAP
+from .style import KAPPA_CMAP, MISSING_COLOR, UNCERTAINTY_CMAP, fixed_margins
 from .style import mpl_style as _style
 from .style import save_png as _save
 
@@ -61,7 +61,8 @@ def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.nda
     with _style() as plt:
         aspect = (x1 - x0) / max(y1 - y0, 1)
         h = 4.2
-        fig, ax = plt.subplots(figsize=(min(7.16, h * aspect + 1.4), h), constrained_layout=True)
+        fig, ax = plt.subplots(figsize=(min(7.16, h * aspect + 1.4), h))
+        fixed_margins(fig, left=0.5, right=0.6, top=0.28, bottom=0.4)
         # only the cropped part of the photo, faded toward white once here (two full-frame images, one of
         # them a float RGBA veil, were most of an overlay's drawing time)
         r0, r1 = int(max(0, np.floor(y0))), int(min(H, np.ceil(y1) + 1))
