@@ -22,8 +22,19 @@ import traceback
 from pathlib import Path
 
 
+#: How much lower the figure processes' CPU priority is than the command's (``nice`` increment).
+FIGURE_NICENESS = 10
+
+
 def _serve(conn, first) -> None:
-    """Worker loop: run the first job (inherited through the fork), then jobs from the pipe until None."""
+    """Worker loop: run the first job (inherited through the fork), then jobs from the pipe until None.
+
+    The worker runs at a lower CPU priority: on a machine with fewer free cores than processes, the
+    analysis the user waits for goes first and the figures fill the gaps."""
+    try:
+        os.nice(FIGURE_NICENESS)
+    except OSError:  # not permitted: keep the inherited priority
+        pass
     job = first
     while True:
         if job is None:
