@@ -24,6 +24,7 @@ from .base import Effect, Parameter, scalar
 
 
 GRID_CORE_STEPS = 4  # kappa and z steps per grid point before the errors are compared
+REFINE_ROUNDS = 2  # rounds of the finer local grid around the coarse grid's best (c, z0)
 
 
 class Nonlinear(Effect):
@@ -111,18 +112,35 @@ class Nonlinear(Effect):
             grid += [-g for g in grid[1:3]]
         model = getattr(view, "full_model", view.model)
         sub = model.with_effects(model.effects[: i + 1])
-        best, best_err, best_core = (0.0, 0.0), np.inf, None
-        for c in grid:
-            for z0 in ((0.0,) if c == 0.0 else (0.0, -0.5 * zq, 0.5 * zq, -zq, zq)):
+        scores: dict = {}
+
+        def score(c, z0):
+            """wsse after a few core steps at (c, z0), and the kappa and z they reached (cached)."""
+            key = (round(c * q * q, 9), round(z0 / zq, 9))
+            if key not in scores:
                 # a saturating g needs a larger linear deflection underneath than the linear fit found: a few
                 # kappa and z steps per grid point let kappa * z grow into it before the errors are compared
                 v = view.copy_with(sub, list(view.states)[:i] + [{"params": {"c": np.array(c), "z0": np.array(z0)},
                                                                    "latents": {}}])
                 for _ in range(GRID_CORE_STEPS):
                     core_step(v)
-                err = v.wsse()
-                if err < best_err:
-                    best, best_err, best_core = (c, z0), err, (v.kappa.copy(), v.z.copy())
+                scores[key] = (v.wsse(), (c, z0), (v.kappa.copy(), v.z.copy()))
+            return scores[key]
+
+        for c in grid:
+            for z0 in ((0.0,) if c == 0.0 else (0.0, -0.5 * zq, 0.5 * zq, -zq, zq)):
+                score(c, z0)
+        # the error surface in (c, z0) is a curved valley: refine around the coarse grid's best point (finer
+        # steps in both), which the alternating steps from a coarse point do not reach (noise-free simulated
+        # branch: fit RMSE 0.026 -> 0.007 deg, c 0.19 -> 0.36 against the true 0.38 deg^-2)
+        for _ in range(REFINE_ROUNDS):
+            c_best, z_best = min(scores.values(), key=lambda r: r[0])[1]
+            if c_best <= 0:
+                break
+            for f in (0.5, 0.7, 1.0, 1.4, 2.0):
+                for dz in (-0.25, 0.0, 0.25):
+                    score(c_best * f, z_best + dz * zq)
+        best_err, best, best_core = min(scores.values(), key=lambda r: r[0])
         # the fit goes on from the grid point's own kappa and z: the linear fit's kappa and z are compressed by
         # the saturation (compliant joints most), and from them the alternating steps settle at a shallower
         # curvature (noise-free branch: fit RMSE 0.024 deg from the linear start, 0.019 from the grid's)
