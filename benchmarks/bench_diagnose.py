@@ -122,10 +122,14 @@ def main() -> int:
     from scipy import stats
 
     from rce_gtsam.diagnose import choose_verdict, diagnose, maxt_verdict, oracle_test
+    from rce_gtsam.presets import get_preset
     mults = [float(m) for m in a.strength_mult.split(",")]
     print(f"input: {'matrices (simulator equations + noise)' if a.matrices else 'full pipeline (simulate -> analyze default preset)'}; "
           f"{a.seeds} seeds from {a.first_seed}, {a.frames} frames, effect strength {a.strength_mult} x default; "
           "oracle = the hidden effect's candidate with its true shared parameters, through the same folds", flush=True)
+    # the core model's config: the default preset's, as `rce diagnose` runs it (rce_gtsam.diagnosis_io);
+    # the matrices mode keeps diagnose's own default
+    config = None if a.matrices else get_preset("default").compliance
     rows, table = [], []
     for eff in a.effects.split(","):
         hidden = None if eff == "none" else eff
@@ -135,7 +139,8 @@ def main() -> int:
             for sd in range(a.first_seed, a.first_seed + a.seeds):
                 Y, W, s, k, y, tp, labels = case(hidden, sd, a.frames, a.matrices, mult, a.noise_free)
                 t = time.perf_counter()
-                d = diagnose(Y, weights=W, root_distance=s, seed=0, edge_labels=labels, n_folds=a.folds)
+                d = diagnose(Y, weights=W, root_distance=s, seed=0, edge_labels=labels, n_folds=a.folds,
+                             config=config)
                 ts.append(time.perf_counter() - t)
                 tps.append(tp)
                 ok += d.verdict == hidden
