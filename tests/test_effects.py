@@ -1,5 +1,5 @@
-import pytest
 import numpy as np
+import pytest
 
 from rce_gtsam import effects
 from rce_gtsam.model import FitView, ResponseModel
