@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -54,7 +54,7 @@ from .diagnosis.noise_floor import NoiseFloor
 from .diagnosis.statistics import ResidualContext, autocorrelation
 from .diagnosis.sysid import ResidualAnalysis, residual_analysis
 from .model import ModelFit, ResponseModel, render_fit_report, validate_inputs
-from .presets import ComplianceConfig
+from .presets import DEFAULT, ComplianceConfig
 
 BLOCK_LENGTH = 25  # frames: the moving-block bootstrap's block length (reference §2.9)
 FULL_ITER = 25  # block-coordinate sweeps of a candidate's fit on all frames (from the baseline fit)
@@ -376,7 +376,7 @@ def worst_edges_and_frames(fit: ModelFit, labels, block_length: int, frames=None
 # ----------------------------------------------------------------------------------------------------------
 
 def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8, seed: int = 0,
-             block_length: int = BLOCK_LENGTH, prior_strength: float = 12.0, response: str = "signed",
+             block_length: int = BLOCK_LENGTH, prior_strength: float | None = None, response: str | None = None,
              alpha: float = 0.05, edge_labels=None, frames=None, edge_nodes=None,
              config: ComplianceConfig | None = None, noise_floor: NoiseFloor | None = None,
              resolution: float = RESOLUTION) -> Diagnosis:
@@ -392,7 +392,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8
     the tracked node ids its bend angle is computed from (default: parsed from ``"joint->child"`` edge
     labels, else rows are taken as a chain in root-distance order) — held-out edge sets never share one.
     config: the whole compliance config of the core model (the analysis preset's: the baseline is then the
-    fit ``rce analyze`` reports); without it, ``prior_strength`` and ``response`` with count shrinkage.
+    fit ``rce analyze`` reports); without it, the default preset's (the fit ``ResponseModel()`` and
+    ``rce analyze`` make), with ``prior_strength`` / ``response`` replaced where given.
     resolution: the smallest share of the bending variance an effect must take off the held-out error to be
     named (default :data:`RESOLUTION`, 0.1 %), however significant: on noise-free data the pipeline's own
     small distortions (the smoother, the angle geometry) are "significant" at any size, and a second mode
@@ -403,7 +404,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int = 8
     labels = list(edge_labels) if edge_labels is not None else [str(i) for i in range(E)]
     cands = _resolve_effects(effects, E)
     if config is None:
-        config = ComplianceConfig(response=response, prior_strength=prior_strength, n_iter=300, tol=1e-5)
+        given = {k: v for k, v in (("prior_strength", prior_strength), ("response", response)) if v is not None}
+        config = replace(DEFAULT.compliance, **given)
     prior_strength, response = config.prior_strength, config.response
     base_model = ResponseModel(config=config)
     base = base_model.solve(Y, W, s)
