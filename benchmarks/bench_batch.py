@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -89,9 +90,12 @@ class SeparateCluster:
             if sfile.is_file() and sfile.stat().st_size:
                 break
             time.sleep(0.1)
+        # the workers as the README starts them: without Dask's statistical profiler (see
+        # rce_gtsam.batch.runner.LOCAL_WORKER_CONFIG, which the LocalCluster of `rce batch` uses)
+        env = {**os.environ, "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False"}
         self.procs.append(subprocess.Popen([dask, "worker", "--scheduler-file", str(sfile), "--host", "127.0.0.1",
                                             "--nworkers", str(self.workers), "--nthreads", "1", "--no-dashboard"],
-                                           stdout=log, stderr=subprocess.STDOUT))
+                                           stdout=log, stderr=subprocess.STDOUT, env=env))
         from distributed import Client
         with Client(scheduler_file=str(sfile), timeout="60s") as c:
             c.wait_for_workers(self.workers, timeout=180)
@@ -162,11 +166,11 @@ def main() -> int:
         rows = [(name, k, *best[i]) for i, (name, k, _) in enumerate(configs)]
         t_seq = rows[0][2]
         print("\n| run | workers | wall (s) | speed-up | efficiency | compute phase (s) | its speed-up | its efficiency "
-              "| cluster start + summary (s) |")
+              "| cluster start + stop + summary (s) |")
         print("|---|---|---|---|---|---|---|---|---|")
         for name, k, t, ph in rows:
             c = ph.get("compute", float("nan"))
-            rest = ph.get("cluster_start", 0.0) + ph.get("summary", 0.0)
+            rest = ph.get("cluster_start", 0.0) + ph.get("cluster_stop", 0.0) + ph.get("summary", 0.0)
             print(f"| {name} | {k} | {t:.1f} | {t_seq / t:.2f} | {t_seq / t / k:.2f} | {c:.1f} | {t_seq / c:.2f} | "
                   f"{t_seq / c / k:.2f} | {rest:.1f} |")
         print("speed-up = one-by-one wall / this wall; efficiency = speed-up / workers; the compute phase runs "

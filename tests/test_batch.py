@@ -103,6 +103,8 @@ def test_summary_matches_each_recording_and_reports_the_broken_one(inputs, first
     from rerun.chunk import RrdReader
     paths = Counter(str(ch.entity_path) for ch in RrdReader(str(out / "batch.rrd")).stream())
     assert "/overview/summary" in paths
+    # the figures are drawn in a forked process while the plants are logged, and logged last
+    assert {f"/overview/figures/{n}" for n in ("kappa_by_zone", "verdicts", "uncertainty")} <= set(paths)
     for r in rows:
         if r["id"] != "broken":
             assert f"/plants/{r['id']}/image/tracks/smoothed" in paths
