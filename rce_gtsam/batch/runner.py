@@ -66,6 +66,16 @@ def default_workers(n_tasks: int) -> int:
     return max(1, min(usable_cores(), n_tasks))
 
 
+def start_local_cluster(n_workers: int):
+    """The ``distributed.LocalCluster`` of :func:`run`: ``n_workers`` single-threaded worker processes
+    with :data:`LOCAL_WORKER_CONFIG`, the dashboard on any free port (so concurrent clusters do not fight
+    over 8787)."""
+    import dask
+    from distributed import LocalCluster
+    with dask.config.set(LOCAL_WORKER_CONFIG):  # the nannies hand this config to the worker processes
+        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0")
+
+
 def usable_cores() -> int:
     """The cores this process may run on."""
     try:
@@ -140,7 +150,7 @@ def _compute(todo, out: Path, options: BatchOptions, fps: dict, outcomes: dict, 
              bar, timings: dict, recording: bool) -> dict:
     """Submit ``todo`` to the cluster and fill ``outcomes`` as tasks finish. Returns the cluster info."""
     t0 = time.perf_counter()
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import Client, as_completed
 
     own_cluster = own_client = None
     if client is not None:
@@ -152,11 +162,8 @@ def _compute(todo, out: Path, options: BatchOptions, fps: dict, outcomes: dict, 
             raise InputError("--scheduler", f"cannot connect to {scheduler}: {exc}") from None
         info = {"kind": "scheduler", "scheduler": scheduler}
     else:
-        import dask
         n = workers or default_workers(len(todo))
-        # ":0": any free port for the scheduler's HTTP endpoint, so concurrent clusters do not fight over 8787
-        with dask.config.set(LOCAL_WORKER_CONFIG):  # the nannies hand this config to the worker processes
-            own_cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0")
+        own_cluster = start_local_cluster(n)
         client = own_client = Client(own_cluster)
         info = {"kind": "local", "workers": n, "threads_per_worker": 1}
     info["n_workers"] = len(client.scheduler_info().get("workers", {}))
