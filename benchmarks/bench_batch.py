@@ -17,7 +17,9 @@ this process and run:
 Configurations are interleaved and repeated (``--repeats``); the fastest run of each is reported. Every
 batch run writes into a fresh folder (nothing cached) and includes starting the cluster (LocalCluster
 only), the summary, the comparison figures and batch.rrd. Speed-up = one-by-one time / batch time;
-efficiency = speed-up / workers. Also checks that every run's kappa is bit-identical to the first run's.
+efficiency = speed-up / workers. Also the CPU seconds of all processes (this one and the LocalCluster's,
+not the --scheduler workers), which load from other programs inflates much less than wall time. Also
+checks that every run's kappa is bit-identical to the first run's.
 Timings on a shared machine are noisy: compare the ratios within one run.
 """
 
@@ -25,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -52,22 +55,32 @@ def one_by_one(manifest: Path, out: Path, options) -> float:
     from rce_gtsam.batch.options import fingerprint
     from rce_gtsam.batch.process import process_recording
     m = load_manifest(manifest)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), cpu_s()
     for rec in m.recordings:
         oc = process_recording(rec, out, options, fingerprint(rec, options)["hash"])
         if oc.status != "ok":
             raise SystemExit(f"{rec.id} failed: {oc.error}")
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, cpu_s() - c0
+
+
+def cpu_s() -> float:
+    """CPU seconds (user + system) of this process and of its children that ended (a LocalCluster's
+    nannies, which reaped their workers): load from other programs inflates wall times, much less this."""
+    import resource
+    return sum(r.ru_utime + r.ru_stime for r in (resource.getrusage(resource.RUSAGE_SELF),
+                                                  resource.getrusage(resource.RUSAGE_CHILDREN)))
 
 
 def batch_run(manifest: Path, out: Path, options, **where) -> float:
     from rce_gtsam import batch
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), cpu_s()
     res = batch.run(manifest, out, options=options, **where)
     wall = time.perf_counter() - t0
+    cpu = cpu_s() - c0
     if res.count("ok") != len(res.outcomes):
         raise SystemExit(f"batch failed: {[o.error for o in res.failed]}")
-    return wall, res.timings_s
+    # with --scheduler the workers are not this process's finished children: their CPU is not counted
+    return wall, {**res.timings_s, **({"cpu": cpu} if "scheduler" not in where else {})}
 
 
 class SeparateCluster:
@@ -89,9 +102,12 @@ class SeparateCluster:
             if sfile.is_file() and sfile.stat().st_size:
                 break
             time.sleep(0.1)
+        # the workers as the README starts them: without Dask's statistical profiler (see
+        # rce_gtsam.batch.runner.LOCAL_WORKER_CONFIG, which the LocalCluster of `rce batch` uses)
+        env = {**os.environ, "DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED": "False"}
         self.procs.append(subprocess.Popen([dask, "worker", "--scheduler-file", str(sfile), "--host", "127.0.0.1",
                                             "--nworkers", str(self.workers), "--nthreads", "1", "--no-dashboard"],
-                                           stdout=log, stderr=subprocess.STDOUT))
+                                           stdout=log, stderr=subprocess.STDOUT, env=env))
         from distributed import Client
         with Client(scheduler_file=str(sfile), timeout="60s") as c:
             c.wait_for_workers(self.workers, timeout=180)
@@ -144,8 +160,8 @@ def main() -> int:
             for i, (name, k, kind) in enumerate(configs):
                 out = tmp / f"run{rep}_{i}"
                 if kind is None:
-                    t = one_by_one(manifest, out, options)
-                    ph = {"compute": t}
+                    t, cpu = one_by_one(manifest, out, options)
+                    ph = {"compute": t, "cpu": cpu}
                 elif kind == "local":
                     t, ph = batch_run(manifest, out, options, workers=k)
                 else:
@@ -160,17 +176,19 @@ def main() -> int:
                 if i not in best or t < best[i][0]:
                     best[i] = (t, ph)
         rows = [(name, k, *best[i]) for i, (name, k, _) in enumerate(configs)]
-        t_seq = rows[0][2]
+        t_seq, cpu_seq = rows[0][2], rows[0][3]["cpu"]
         print("\n| run | workers | wall (s) | speed-up | efficiency | compute phase (s) | its speed-up | its efficiency "
-              "| cluster start + summary (s) |")
-        print("|---|---|---|---|---|---|---|---|---|")
+              "| cluster start + stop + summary (s) | CPU, all processes (s) | CPU / one by one |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
         for name, k, t, ph in rows:
             c = ph.get("compute", float("nan"))
-            rest = ph.get("cluster_start", 0.0) + ph.get("summary", 0.0)
+            rest = ph.get("cluster_start", 0.0) + ph.get("cluster_stop", 0.0) + ph.get("summary", 0.0)
             print(f"| {name} | {k} | {t:.1f} | {t_seq / t:.2f} | {t_seq / t / k:.2f} | {c:.1f} | {t_seq / c:.2f} | "
-                  f"{t_seq / c / k:.2f} | {rest:.1f} |")
+                  f"{t_seq / c / k:.2f} | {rest:.1f} | {ph.get('cpu', float('nan')):.1f} | "
+                  f"{ph.get('cpu', float('nan')) / cpu_seq:.2f} |")
         print("speed-up = one-by-one wall / this wall; efficiency = speed-up / workers; the compute phase runs "
-              "from the first task submitted to the last result")
+              "from the first task submitted to the last result; CPU: user + system seconds of this process and "
+              "its ended children (the LocalCluster's nannies and workers; not counted with --scheduler)")
         print(f"(fastest of {args.repeats} interleaved runs per configuration)")
         print("\nkappa of every run is bit-identical to the first one-by-one run (all recordings, all segments).")
         print(json.dumps({"rows": [{"run": n, "workers": k, "wall_s": round(t, 2),

@@ -103,6 +103,8 @@ def test_summary_matches_each_recording_and_reports_the_broken_one(inputs, first
     from rerun.chunk import RrdReader
     paths = Counter(str(ch.entity_path) for ch in RrdReader(str(out / "batch.rrd")).stream())
     assert "/overview/summary" in paths
+    # the figures are drawn in a forked process while the plants are logged, and logged last
+    assert {f"/overview/figures/{n}" for n in ("kappa_by_zone", "verdicts", "uncertainty")} <= set(paths)
     for r in rows:
         if r["id"] != "broken":
             assert f"/plants/{r['id']}/image/tracks/smoothed" in paths
@@ -191,3 +193,14 @@ def test_bad_option_is_exit_2(tmp_path, capsys):
     assert main(["batch", str(manifest), "--out", str(tmp_path / "o"), "--set", "smoother.nope=1", "--quiet"]) == 2
     assert "nope" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_local_cluster_workers_run_without_the_statistical_profiler():
+    """`rce batch`'s LocalCluster: Dask's profiler (a stack sample of the task every 10 ms) cost ~16 % of each
+    recording's CPU time in the worker, so its workers start without it."""
+    from distributed import Client
+
+    from rce_gtsam.batch.runner import start_local_cluster
+    with start_local_cluster(1) as cluster, Client(cluster) as c:
+        profiling = c.run(lambda dask_worker: "profile" in dask_worker.periodic_callbacks)
+    assert list(profiling.values()) == [False]

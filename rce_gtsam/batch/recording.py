@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import os
 import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -61,11 +62,11 @@ def overview_markdown(recordings: list[RecordingSummary]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _blueprint(recordings: list[RecordingSummary], figures: dict[str, Path]) -> rrb.Blueprint:
+def _blueprint(recordings: list[RecordingSummary], figure_names) -> rrb.Blueprint:
     overview = rrb.Vertical(
         rrb.TextDocumentView(origin="overview/summary", name="Recordings"),
         rrb.Horizontal(*[rrb.Spatial2DView(origin=f"overview/figures/{Path(n).stem}", name=Path(n).stem)
-                         for n in figures]),
+                         for n in figure_names]),
         name="Overview", row_shares=[1, 2])
     tabs = [overview]
     for r in recordings:
@@ -84,25 +85,29 @@ def _blueprint(recordings: list[RecordingSummary], figures: dict[str, Path]) -> 
 
 
 def save_batch_recording(recordings: list[RecordingSummary], path: str | Path,
-                         figures: dict[str, Path] | None = None) -> Path:
-    """Write the batch's ``.rrd`` (see the module docstring) atomically; returns its path."""
+                         figures: dict[str, Path] | Callable[[], dict[str, Path]] | None = None) -> Path:
+    """Write the batch's ``.rrd`` (see the module docstring) atomically; returns its path.
+
+    ``figures``: {file name: PNG path} of the comparison figures, or a function returning them that is
+    called only once every recording is logged (so the figures can be drawn meanwhile, in another process;
+    the blueprint then names :data:`~rce_gtsam.batch.figures.FIGURE_NAMES`)."""
     import json
 
     from ..viz.rerun_log import log_analysis, log_diagnosis
     from ..viz.scene import AnalysisView
+    from .figures import FIGURE_NAMES
 
     figures = figures or {}
+    figure_names = FIGURE_NAMES if callable(figures) else list(figures)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=".rrd", dir=path.parent)
     os.close(fd)
     try:
         rec = rr.RecordingStream(APP_ID)
-        rec.save(tmp, default_blueprint=_blueprint(recordings, figures))
+        rec.save(tmp, default_blueprint=_blueprint(recordings, figure_names))
         rec.log("overview/summary", rr.TextDocument(overview_markdown(recordings), media_type=rr.MediaType.MARKDOWN),
                 static=True)
-        for name, fig in figures.items():
-            rec.log(f"overview/figures/{Path(name).stem}", rr.EncodedImage(path=fig), static=True)
         for r in recordings:
             if r.status != "ok":
                 continue
@@ -111,6 +116,8 @@ def save_batch_recording(recordings: list[RecordingSummary], path: str | Path,
             stream = PrefixedStream(rec, f"plants/{r.id}")
             log_analysis(view, stream)
             log_diagnosis(json.loads((r.folder / "diagnosis.json").read_text()), stream, view=view)
+        for name, fig in (figures() if callable(figures) else figures).items():
+            rec.log(f"overview/figures/{Path(name).stem}", rr.EncodedImage(path=fig), static=True)
         rec.flush()
         rec.disconnect()
         del rec

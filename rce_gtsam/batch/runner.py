@@ -28,13 +28,21 @@ from .process import Outcome, process_recording, stored_outcome, write_record
 
 SUMMARY_CSV, SUMMARY_JSON, FIGURES_DIR, RECORDING_RRD = "summary.csv", "summary.json", "figures", "batch.rrd"
 
+#: Dask settings of the workers of the LocalCluster :func:`run` starts. The worker's statistical profiler
+#: (a stack sample of the task thread every 10 ms, taken under the GIL) cost ~16 % of a recording's CPU
+#: time (12.5 s vs 15.2 s of process CPU for 8 simulated recordings, benchmarks/bench_batch.py sizes);
+#: nobody looks at the profile of a batch. Workers started with ``dask worker`` take the same setting from
+#: the environment: ``DASK_DISTRIBUTED__WORKER__PROFILE__ENABLED=False dask worker ...``.
+LOCAL_WORKER_CONFIG = {"distributed.worker.profile.enabled": False}
+
 
 @dataclass(frozen=True)
 class BatchResult:
     """What :func:`run` did. outcomes: per recording id (manifest order). summary: the ``summary.csv``
     table. files: {name: path} of the batch-level outputs. wall_s: seconds for the whole call; timings_s:
     its phases ("prepare": manifest and fingerprints, "cluster_start", "compute": from the first task
-    submitted to the last result, "summary": summary, figures and recording).
+    submitted to the last result, "cluster_stop": closing the client and the cluster :func:`run` started,
+    "summary": summary, figures and recording).
     cluster: how the work was run ({"kind": "none" | "client" | "scheduler" | "local", ...})."""
 
     out: Path
@@ -55,11 +63,25 @@ class BatchResult:
 
 def default_workers(n_tasks: int) -> int:
     """Worker processes for a LocalCluster: the usable cores, at most one per task (>= 1)."""
+    return max(1, min(usable_cores(), n_tasks))
+
+
+def start_local_cluster(n_workers: int):
+    """The ``distributed.LocalCluster`` of :func:`run`: ``n_workers`` single-threaded worker processes
+    with :data:`LOCAL_WORKER_CONFIG`, the dashboard on any free port (so concurrent clusters do not fight
+    over 8787)."""
+    import dask
+    from distributed import LocalCluster
+    with dask.config.set(LOCAL_WORKER_CONFIG):  # the nannies hand this config to the worker processes
+        return LocalCluster(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address=":0")
+
+
+def usable_cores() -> int:
+    """The cores this process may run on."""
     try:
-        cores = len(os.sched_getaffinity(0))
+        return len(os.sched_getaffinity(0))
     except AttributeError:  # not Linux
-        cores = os.cpu_count() or 1
-    return max(1, min(cores, n_tasks))
+        return os.cpu_count() or 1
 
 
 def run(manifest: str | Path | Manifest, out: str | Path, client=None, *, scheduler: str | None = None,
@@ -105,7 +127,8 @@ def run(manifest: str | Path | Manifest, out: str | Path, client=None, *, schedu
     timings = {"prepare": time.perf_counter() - t0}
     try:
         if todo:
-            cluster_info = _compute(todo, out, options, fps, outcomes, client, scheduler, workers, bar, timings)
+            cluster_info = _compute(todo, out, options, fps, outcomes, client, scheduler, workers, bar, timings,
+                                    recording)
     finally:
         if bar is not None:
             bar.close()
@@ -124,10 +147,10 @@ def run(manifest: str | Path | Manifest, out: str | Path, client=None, *, schedu
 
 
 def _compute(todo, out: Path, options: BatchOptions, fps: dict, outcomes: dict, client, scheduler, workers,
-             bar, timings: dict) -> dict:
+             bar, timings: dict, recording: bool) -> dict:
     """Submit ``todo`` to the cluster and fill ``outcomes`` as tasks finish. Returns the cluster info."""
     t0 = time.perf_counter()
-    from distributed import Client, LocalCluster, as_completed
+    from distributed import Client, as_completed
 
     own_cluster = own_client = None
     if client is not None:
@@ -140,17 +163,21 @@ def _compute(todo, out: Path, options: BatchOptions, fps: dict, outcomes: dict, 
         info = {"kind": "scheduler", "scheduler": scheduler}
     else:
         n = workers or default_workers(len(todo))
-        # ":0": any free port for the scheduler's HTTP endpoint, so concurrent clusters do not fight over 8787
-        own_cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0")
+        own_cluster = start_local_cluster(n)
         client = own_client = Client(own_cluster)
         info = {"kind": "local", "workers": n, "threads_per_worker": 1}
     info["n_workers"] = len(client.scheduler_info().get("workers", {}))
     timings["cluster_start"] = time.perf_counter() - t0
     t0 = time.perf_counter()
+    warm = _SummaryWarmUp(recording)
     try:
         futures = {client.submit(process_recording, rec, str(out), options, fps[rec.id], pure=False,
                                  key=f"rce-batch-{rec.id}-{fps[rec.id][:12]}"): rec for rec in todo}
+        remaining, cores = len(futures), usable_cores()
+        warm.start_if(min(remaining, info["n_workers"] or 1) < cores)  # a core is idle: prepare the summary
         for fut in as_completed(futures):
+            remaining -= 1
+            warm.start_if(min(remaining, info["n_workers"] or 1) < cores)
             rec = futures[fut]
             try:
                 oc = fut.result()
@@ -165,11 +192,46 @@ def _compute(todo, out: Path, options: BatchOptions, fps: dict, outcomes: dict, 
                     bar.write(f"{rec.id}: failed: {oc.error}", file=sys.stderr)
         timings["compute"] = time.perf_counter() - t0
     finally:
+        warm.join()
+        t0 = time.perf_counter()
         if own_client is not None:
             own_client.close()
         if own_cluster is not None:
             own_cluster.close()
+        timings["cluster_stop"] = time.perf_counter() - t0
     return info
+
+
+class _SummaryWarmUp:
+    """Imports what the summary needs (matplotlib with its fonts; Rerun and the loggers when
+    ``recording``) in a thread of this process, started while a core is idle during the compute phase
+    (the cluster has fewer busy workers than cores), so the summary starts drawing at once. An error
+    here is left for the summary itself to raise."""
+
+    def __init__(self, recording: bool):
+        self.recording, self.thread = recording, None
+
+    def start_if(self, idle_core: bool) -> None:
+        """Start the imports (once) when ``idle_core``."""
+        if idle_core and self.thread is None:
+            import threading
+            self.thread = threading.Thread(target=self._run, name="rce-batch-warm-up", daemon=True)
+            self.thread.start()
+
+    def _run(self) -> None:
+        try:
+            from .figures import prepare_matplotlib
+            prepare_matplotlib()
+            if self.recording:
+                from . import recording  # noqa: F401 - rerun, the loggers, the analysis view
+                from ..viz import rerun_log, scene  # noqa: F401
+        except Exception:  # noqa: BLE001 - see the class docstring
+            pass
+
+    def join(self) -> None:
+        """Wait for the imports: the summary forks, which must not happen mid-import."""
+        if self.thread is not None:
+            self.thread.join()
 
 
 def _summary_key(m: Manifest, outcomes: dict, recording: bool) -> str:
@@ -208,11 +270,22 @@ def _write_summary(m: Manifest, out: Path, outcomes: dict, options: BatchOptions
     table = summary_table(m, recs)
     files = {SUMMARY_CSV: out / SUMMARY_CSV}
     write_table_atomic(table, out / SUMMARY_CSV)
-    figs = write_batch_figures(recs, out / FIGURES_DIR)
-    files.update({f"{FIGURES_DIR}/{k}": v for k, v in figs.items()})
-    if recording:
-        from .recording import save_batch_recording
-        files[RECORDING_RRD] = save_batch_recording(recs, out / RECORDING_RRD, figures=figs)
+    # the figures are drawn in a forked process while this one writes the recording's plants (both take
+    # about as long); the recording logs the figures last, once they are drawn
+    from ..commands.figure_worker import FigureWorker
+    with FigureWorker() as drawer:
+        drawer.submit(write_batch_figures, recs, out / FIGURES_DIR)
+        drawn: dict = {}
+
+        def figures() -> dict:
+            if not drawn:
+                drawn.update(drawer.results()[0])
+            return drawn
+
+        if recording:
+            from .recording import save_batch_recording
+            files[RECORDING_RRD] = save_batch_recording(recs, out / RECORDING_RRD, figures=figures)
+        files.update({f"{FIGURES_DIR}/{k}": v for k, v in figures().items()})
     counts = {s: sum(o.status == s for o in outcomes.values()) for s in ("ok", "skipped", "failed")}
     doc = summary_document(m, recs, {
         "manifest": str(m.path.resolve()), "out": str(out.resolve()), "n_recordings": len(m.recordings),

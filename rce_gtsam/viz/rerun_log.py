@@ -82,7 +82,8 @@ def _send_strips(rec, path: str, frames, seconds, strips: np.ndarray, colors: np
         cols["colors"] = c[keep][ok[keep]]
     if labels is not None:
         cols["labels"] = np.broadcast_to(np.array(labels, dtype=object), (F, S))[keep][ok[keep]].tolist()
-    columns = rr.LineStrips2D.columns(strips=list(flat.astype(np.float32)),
+    # one (n, P, 2) array: Rerun's numpy path converts it in one go (a list converts strip by strip, ~100x slower)
+    columns = rr.LineStrips2D.columns(strips=np.ascontiguousarray(flat, dtype=np.float32),
                                       radii=np.full(len(flat), radius, np.float32), **cols).partition(lengths)
     rec.send_columns(path, indexes=_indexes(frames[keep], seconds[keep]), columns=columns)
     return int(keep.sum())
