@@ -227,9 +227,14 @@ def weighted_ncc(img, tmpl, wts):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def _window_sums(img, a, m, m2, n):
-    """(4, rh, rw): sum(m I), sum(a I), sum(m2 I), sum(m2 I^2) over each window, from the n pixels with m != 0."""
+    """(4, rh, rw): sum(m I), sum(a I), sum(m2 I), sum(m2 I^2) over each window, from the n pixels with m != 0.
+
+    ``fastmath``: the compiler may reorder each window's float64 sum over the template pixels (and so
+    vectorise it): 1.9x faster, and the sums then differ from the in-order ones by ~1e-15 relative, far below
+    the float32 precision of the correlation map they feed.
+    """
     th, tw = a.shape
     H, W = img.shape
     rh, rw = H - th + 1, W - tw + 1
@@ -394,12 +399,6 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
             for s in range(S):
                 ox = cos_t[s] * dx + sin_t[s] * dy
                 oy = -sin_t[s] * dx + cos_t[s] * dy
-                g = _bilinear(gray0, px + ox, py + oy)  # image: replicated border
-                if round_out:
-                    g = math.floor(g + 0.5)
-                gf = np.float32(g)
-                if s == bg:
-                    back = gf
                 # band: zero outside
                 bx, by = cs + ox, cs + oy
                 fbx, fby = math.floor(bx), math.floor(by)
@@ -417,6 +416,14 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
                     if jx + 1 >= 0 and jx + 1 < bs:
                         w += ax * ay * bands[s, jy + 1, jx + 1]
                 wf = np.float32(w)
+                if wf == 0 and s != bg:
+                    continue  # adds exactly nothing: skip the image sample (most of a patch is off every band)
+                g = _bilinear(gray0, px + ox, py + oy)  # image: replicated border
+                if round_out:
+                    g = math.floor(g + 0.5)
+                gf = np.float32(g)
+                if s == bg:
+                    back = gf
                 acc += wf * gf
                 wacc += wf
             wacc_all[y, x] = wacc
