@@ -344,20 +344,28 @@ def segment_ncc(img, x0, y0, ex, ey, uu, vv, strip, round_out):
         for iv in range(V):
             reach = max(reach, math.sqrt(float(uu[iu]) ** 2 + float(vv[iv]) ** 2))
     inside = x0 - reach - 2 >= 0 and y0 - reach - 2 >= 0 and x0 + reach + 2 < W - 1 and y0 + reach + 2 < H - 1
+    flat = img.ravel()
+    cu = np.empty(U, np.float32)
+    su = np.empty(U, np.float32)
     for a in range(A):
         s1 = s2 = d = 0.0
         ca, sa = ex[a], ey[a]
+        for iu in range(U):  # the same float32 products as in the loop below, computed once per angle
+            cu[iu] = ca * uu[iu]
+            su[iu] = sa * uu[iu]
         for iv in range(V):
             v = vv[iv]
+            sv = sa * v
+            cv = ca * v
             for iu in range(U):
-                u = uu[iu]
-                mx = float((ca * u - sa * v) + fx0)
-                my = float((sa * u + ca * v) + fy0)
+                mx = float((cu[iu] - sv) + fx0)
+                my = float((su[iu] + cv) + fy0)
                 if inside:
                     ix, iy = int(mx), int(my)
                     fx, fy = mx - ix, my - iy
-                    p = ((1 - fx) * (1 - fy) * img[iy, ix] + fx * (1 - fy) * img[iy, ix + 1]
-                         + (1 - fx) * fy * img[iy + 1, ix] + fx * fy * img[iy + 1, ix + 1])
+                    o = iy * W + ix
+                    p = ((1 - fx) * (1 - fy) * flat[o] + fx * (1 - fy) * flat[o + 1]
+                         + (1 - fx) * fy * flat[o + W] + fx * fy * flat[o + W + 1])
                 else:
                     p = _bilinear(img, mx, my)
                 if round_out:
