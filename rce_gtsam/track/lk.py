@@ -125,7 +125,12 @@ search's sampling and correlation are now compiled kernels (:mod:`~rce_gtsam.tra
 each one call per node doing the same arithmetic as the OpenCV/numpy code it replaced (equal to float
 rounding; the kernels are tested against OpenCV). What is left in Python is the per-node decision logic;
 the two ``calcOpticalFlowPyrLK`` calls (all points at once, forward and backward) are ~1 ms of a frame, most
-of it building the pyramids. Frames are decoded in a thread (:func:`~rce_gtsam.track.sources.prefetched`).
+of it building the pyramids. Frames are decoded and converted to grey in a thread
+(:func:`~rce_gtsam.track.sources.prefetched`). The refinement pass runs in a second thread
+(``LKConfig.threads``), node by node right behind the first pass: node i is re-matched as soon as the first
+pass has finished i, its parent and its children, and it reads the parent's re-match -- the values a pass run
+after the whole first pass reads, so the tracks are bit-identical with one thread or two (tested). The first
+pass itself is a chain (each node's segment search hinges at its parent's new match), so it cannot be split.
 Measured on the shared 2-core machine (120-frame seed-0 render, 20 nodes, best of 3-5, baseline and current
 alternating): 3.9x / 3.7x wall, 3.3x / 3.6x CPU time, 3.3x tracking straight from the mp4 (two runs, the
 second with the machine's load average at 7-10, so absolute frame rates there mean little: 117 frames/s
@@ -533,40 +538,30 @@ class LKTracker:
         return float(last[i])
 
     # -- measurement against frame 0 ------------------------------------------------------------
-    def _template(self, gray0, i, p0, theta, r, seg_theta=None):
-        """Frame-0 appearance of node i posed for this frame: ``(crop, tmpl, wts, weight sum)``.
+    def _band_stack(self, i, seg_theta):
+        """Node i's articulated-template inputs for :func:`~rce_gtsam.track.match_kernels.articulated_template`:
+        ``(rotations (S,) rad, bands (S, n, n), background segment, smallest band weight sum)``.
 
-        ``crop`` is the (k, k) frame-0 neighbourhood (k = 2 (h + r) + 1, node at its centre), ``tmpl`` its
-        central (2h + 1) square and ``wts`` the template's per-pixel weights. ``seg_theta`` maps each segment
-        (p, c) incident to node i to its rotation (radians) since frame 0. With branch bands, the template is
-        *articulated*: each incident segment's band of the frame-0 image is rotated about the node by that
-        segment's own rotation (a node is a joint: the parent segment and the child segments turn by
+        ``seg_theta`` maps each segment (p, c) incident to node i to its rotation (radians) since frame 0. The
+        template is *articulated*: each incident segment's band of the frame-0 image is rotated about the node
+        by that segment's own rotation (a node is a joint: the parent segment and the child segments turn by
         different angles, and one rotation for the whole patch biases the match in proportion to the bend).
-        Otherwise the whole frame-0 patch is rotated by ``theta``.
         """
-        h = self.h
-        px, py = float(p0[0]), float(p0[1])
-        if self._band is not None and seg_theta:
-            keys = tuple(seg_theta)
-            stack = self._band_stacks.get((i, keys))
-            if stack is None:  # the incident segments' bands in ``seg_theta``'s order, and the background one
-                bg = max((n for n, (_, sc) in enumerate(keys) if sc == i), default=0)
-                # fewer pixels than a 2-px-wide strip: use the full patch -- except at a tip, whose band is short
-                # by construction (one segment, the thinnest stem), down to _TIP_MIN_BAND_PX
-                min_band = _TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * h + 1)
-                stack = self._band_stacks[(i, keys)] = (
-                    np.stack([self._seg_band[(sp, sc, i)] for sp, sc in keys]), bg, float(min_band))
-            return self._kernels.articulated_template(gray0, px, py, np.fromiter(seg_theta.values(), float), *stack,
-                                                      h, r, gray0.dtype == np.uint8)
-        c = float(h + r)
-        k = 2 * (h + r) + 1
-        prev = cv2.warpAffine(gray0, _rotation_about(px, py, theta, c - px, c - py), (k, k),
-                              flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
-        tmpl = np.ascontiguousarray(prev[r:r + 2 * h + 1, r:r + 2 * h + 1])
-        return prev, tmpl, np.ones_like(tmpl), float(tmpl.size)
+        keys = tuple(seg_theta)
+        stack = self._band_stacks.get((i, keys))
+        if stack is None:  # the incident segments' bands in ``seg_theta``'s order, and the background one
+            bg = max((n for n, (_, sc) in enumerate(keys) if sc == i), default=0)
+            # fewer pixels than a 2-px-wide strip: use the full patch -- except at a tip, whose band is short
+            # by construction (one segment, the thinnest stem), down to _TIP_MIN_BAND_PX
+            min_band = _TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * self.h + 1)
+            stack = self._band_stacks[(i, keys)] = (
+                np.stack([self._seg_band[(sp, sc, i)] for sp, sc in keys]), bg, float(min_band))
+        return (np.fromiter(seg_theta.values(), float), *stack)
 
     def _anchor(self, gray0, gray, i, p0, q, theta, r, seg_theta=None):
-        """Locate node i (frame-0 position p0) near q in ``gray`` within r px (see ``_template``).
+        """Locate node i (frame-0 position p0) near q in ``gray`` within r px, with its frame-0 appearance posed
+        for this frame: articulated (see ``_band_stack``) with branch bands, else the whole frame-0 patch
+        rotated by ``theta``.
 
         Returns (xy, ncc, fb, sigma, second-peak ncc, template weight sum, second-peak xy) or None.
         """
@@ -576,9 +571,19 @@ class LKTracker:
         # the frame-0 crop is only searched by the backward LK, which starts at its centre: a margin of
         # ``_rematch_radius`` px around the template suffices, whatever the search radius r in this frame
         margin = self._rematch_radius()
-        prev, tmpl, wts, wsum = self._template(gray0, i, p0, theta, margin, seg_theta)
+        px, py = float(p0[0]), float(p0[1])
         cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1]))).astype(np.float32)
-        m = self._kernels.match_node(cur, tmpl, wts, prev, r, h, float(h + margin))
+        if self._band is not None and seg_theta:
+            m, wsum = self._kernels.match_articulated(gray0, px, py, *self._band_stack(i, seg_theta), h, margin,
+                                                      gray0.dtype == np.uint8, cur, r)
+        else:
+            cp = float(h + margin)
+            kp = 2 * (h + margin) + 1
+            prev = cv2.warpAffine(gray0, _rotation_about(px, py, theta, cp - px, cp - py), (kp, kp),
+                                  flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
+            tmpl = np.ascontiguousarray(prev[margin:margin + 2 * h + 1, margin:margin + 2 * h + 1])
+            wsum = float(tmpl.size)
+            m = self._kernels.match_node(cur, tmpl, np.ones_like(tmpl), prev, r, h, cp)
         if not m[0]:
             return None
         xy = q + (m[1:3] - c)

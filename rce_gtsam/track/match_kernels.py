@@ -18,6 +18,7 @@ same arithmetic in one compiled call per node, on the crops the tracker cuts wit
 
 All positions are in pixels of the crop passed in (pixel centres at integers). Results equal the
 OpenCV/numpy implementation they replace to float rounding (float64 sums instead of OpenCV's float32).
+Every kernel releases the GIL (``nogil``): the tracker's refinement thread matches while the first pass does.
 """
 
 from __future__ import annotations
@@ -449,3 +450,11 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
         wts[:] = 1.0
         wsum = float(n * n)
     return crop, tmpl, wts, wsum
+
+
+@njit(cache=True, nogil=True)
+def match_articulated(gray0, px, py, thetas, bands, bg, min_band, h, margin, round_out, cur, r):
+    """:func:`articulated_template` of the node at (px, py) in ``gray0``, then :func:`match_node` of it in
+    ``cur`` within r px, in one call: ``(match_node's array, template weight sum)``."""
+    prev, tmpl, wts, wsum = articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, round_out)
+    return match_node(cur, tmpl, wts, prev, r, h, float(h + margin)), wsum
