@@ -10,8 +10,8 @@ process.
    and process CPU time, which counts less of what other processes take from a shared machine), next to plain
    frame-to-frame pyramidal LK; and what a user waits for: tracking straight from the mp4 (``open_video``, the
    tracker decoding ahead in its thread), also alternating, best of each. cv2 threads as found
-   (``--cv-threads N`` sets them). ``current1`` is the current tracker with ``LKConfig(threads=1)`` (the
-   refinement pass after the first, not in a second thread): same tracks, timed to show what the thread adds.
+   (``--cv-threads N`` sets them). ``current2`` is the current tracker with ``LKConfig(threads=2)`` (the
+   refinement pass in a second thread right behind the first): same tracks, timed to show what the thread adds.
 2. Accuracy, on rendered clips (``--clips SEED:FRAMES,...``; default seeds 0-4, 600 frames, seed 1 400, as in the
    README), each tracked by both: median, 99th percentile and largest error of points marked visible (px, against
    the true node positions), visible share of point-frames, and Spearman(kappa, kappa_true) from the full analysis
@@ -206,8 +206,8 @@ def main():
     with tempfile.TemporaryDirectory() as tmp:
         trackers = {"baseline": baseline_tracker(args.baseline, Path(tmp)), "current": LKTracker}
         print(f"baseline: rce_gtsam/track/lk.py at {args.baseline}; current: the working tree (default "
-              f"LKConfig, threads={LKConfig().threads}); current1: the same with LKConfig(threads=1)")
-        speed({**trackers, "current1": lambda: LKTracker(LKConfig(threads=1))}, args.cache, args.frames,
+              f"LKConfig, threads={LKConfig().threads}); current2: the same with LKConfig(threads=2)")
+        speed({**trackers, "current2": lambda: LKTracker(LKConfig(threads=2))}, args.cache, args.frames,
               args.repeat)
         if not args.no_accuracy:
             accuracy(trackers, args.cache, clips, args.jitter_px)

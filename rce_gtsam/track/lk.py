@@ -126,11 +126,11 @@ each one call per node doing the same arithmetic as the OpenCV/numpy code it rep
 rounding; the kernels are tested against OpenCV). What is left in Python is the per-node decision logic;
 the two ``calcOpticalFlowPyrLK`` calls (all points at once, forward and backward) are ~1 ms of a frame, most
 of it building the pyramids. Frames are decoded and converted to grey in a thread
-(:func:`~rce_gtsam.track.sources.prefetched`). The refinement pass runs in a second thread
-(``LKConfig.threads``), node by node right behind the first pass: node i is re-matched as soon as the first
-pass has finished i, its parent and its children, and it reads the parent's re-match -- the values a pass run
-after the whole first pass reads, so the tracks are bit-identical with one thread or two (tested). The first
-pass itself is a chain (each node's segment search hinges at its parent's new match), so it cannot be split.
+(:func:`~rce_gtsam.track.sources.prefetched`). With ``LKConfig.threads=2`` the refinement pass runs in a
+second thread, node by node right behind the first pass, and the tracks are bit-identical (tested); it is
+off by default because it was slower on the shared machine (the per-node Python holds the GIL, and a re-match
+is short). The first pass itself is a chain (each node's segment search hinges at its parent's new match),
+so it cannot be split across threads.
 Measured on the shared 2-core machine (120-frame seed-0 render, 20 nodes, best of 3-5, baseline and current
 alternating): 3.9x / 3.7x wall, 3.3x / 3.6x CPU time, 3.3x tracking straight from the mp4 (two runs, the
 second with the machine's load average at 7-10, so absolute frame rates there mean little: 117 frames/s
@@ -220,11 +220,13 @@ class LKConfig:
         0.85/0.81/0.96/0.91/0.95 -> 0.93/0.85/0.98/0.97/0.97) but so does the tail (share of visible
         errors > 2 px on seeds 2-4: 0.8/0.2/0.6 % -> 1.1/1.1/0.9 %), and under the soft 60-px shadow one
         visible point was 201 px off (seed 0), so it is not the default.
-    threads: 2 (default) = the refinement pass runs in a second thread, node by node right behind the first
-        pass (a node is re-matched as soon as the first pass has finished it, its parent and its children, and
-        after its parent's re-match: exactly the values a pass after the first reads, so the tracks are
-        bit-identical to ``threads=1``, which runs the two passes one after the other). The compiled kernels
-        and OpenCV release the GIL, so the two passes' matching overlaps on two cores.
+    threads: 2 = the refinement pass runs in a second thread, node by node right behind the first pass (a node
+        is re-matched as soon as the first pass has finished it, its parent and its children, and after its
+        parent's re-match: exactly the values a pass after the first reads, so the tracks are bit-identical to
+        ``threads=1``, the default, which runs the two passes one after the other). The compiled kernels and
+        OpenCV release the GIL, but the per-node Python between them does not, and a re-match is short (a
+        2-px search): on the shared 2-core machine (load 4-6) two threads were 0.75-0.98x as fast as one
+        (``benchmarks/bench_track.py``, ``current2`` row), so one thread is the default.
     """
 
     patch_radius_px: int | None = None
@@ -248,7 +250,7 @@ class LKConfig:
     distinct_follow: bool = True
     refine_consistency: bool = True
     anchor_highpass_px: float = 0.0
-    threads: int = 2
+    threads: int = 1
 
     def __post_init__(self):
         if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads not in (1, 2):
