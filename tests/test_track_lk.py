@@ -89,6 +89,10 @@ def test_bad_inputs(scene):
     g = BranchGraph.from_edges(0, [[0, 1], [1, 99]])
     with pytest.raises(InputError, match="node 99"):
         LKTracker().track(ArraySource(frames[:2]), bv.true_xy[:2, 0], g)
+    # a later frame that is not RGB (the grey conversion runs in the decode thread): one line, not a cv2 error
+    mixed = [frames[0], frames[1], frames[2][..., 0]]
+    with pytest.raises(InputError, match="frame 2 is not an RGB image"):
+        LKTracker().track(ArraySource(mixed), bv.true_xy[:, 0], BranchGraph.from_edges(0, bv.edges))
 
 
 def test_default_tracker_on_simulator_render(tmp_path):
