@@ -130,8 +130,12 @@ of it building the pyramids. Frames are decoded and converted to grey in a threa
 second thread, node by node right behind the first pass, and the tracks are bit-identical (tested); it is
 off by default because it was slower on the shared machine (the per-node Python holds the GIL, and a re-match
 is short). The first pass itself is a chain (each node's segment search hinges at its parent's new match),
-so it cannot be split across threads.
-Measured on the shared 2-core machine (120-frame seed-0 render, 20 nodes, best of 3-5, baseline and current
+so it cannot be split across threads. Against revision 028a0d1 (before the window sums with ``fastmath``,
+the one-call articulated match, the grey conversion in the decode thread and the template skipping off-band
+samples), on the 120-frame seed-0 render in alternating processes on the shared machine (load 4-7): best
+CPU time 1.18x, best wall 1.24x, median CPU 1.09x faster; the tracks of the accuracy clips (seeds 0-4,
+below) are bit-identical to that revision's. The compiled kernels against 7f3b223, measured on the shared
+2-core machine (120-frame seed-0 render, 20 nodes, best of 3-5, baseline and current
 alternating): 3.9x / 3.7x wall, 3.3x / 3.6x CPU time, 3.3x tracking straight from the mp4 (two runs, the
 second with the machine's load average at 7-10, so absolute frame rates there mean little: 117 frames/s
 tracking alone in the first). The kernels are compiled once per machine (cached next to the module, or in
