@@ -125,8 +125,17 @@ search's sampling and correlation are now compiled kernels (:mod:`~rce_gtsam.tra
 each one call per node doing the same arithmetic as the OpenCV/numpy code it replaced (equal to float
 rounding; the kernels are tested against OpenCV). What is left in Python is the per-node decision logic;
 the two ``calcOpticalFlowPyrLK`` calls (all points at once, forward and backward) are ~1 ms of a frame, most
-of it building the pyramids. Frames are decoded in a thread (:func:`~rce_gtsam.track.sources.prefetched`).
-Measured on the shared 2-core machine (120-frame seed-0 render, 20 nodes, best of 3-5, baseline and current
+of it building the pyramids. Frames are decoded and converted to grey in a thread
+(:func:`~rce_gtsam.track.sources.prefetched`). With ``LKConfig.threads=2`` the refinement pass runs in a
+second thread, node by node right behind the first pass, and the tracks are bit-identical (tested); it is
+off by default because it was slower on the shared machine (the per-node Python holds the GIL, and a re-match
+is short). The first pass itself is a chain (each node's segment search hinges at its parent's new match),
+so it cannot be split across threads. Against revision 028a0d1 (before the window sums with ``fastmath``,
+the one-call articulated match, the grey conversion in the decode thread and the template skipping off-band
+samples), on the 120-frame seed-0 render in alternating processes on the shared machine (load 4-7): best
+CPU time 1.18x, best wall 1.24x, median CPU 1.09x faster; the tracks of the accuracy clips (seeds 0-4,
+below) are bit-identical to that revision's. The compiled kernels against 7f3b223, measured on the shared
+2-core machine (120-frame seed-0 render, 20 nodes, best of 3-5, baseline and current
 alternating): 3.9x / 3.7x wall, 3.3x / 3.6x CPU time, 3.3x tracking straight from the mp4 (two runs, the
 second with the machine's load average at 7-10, so absolute frame rates there mean little: 117 frames/s
 tracking alone in the first). The kernels are compiled once per machine (cached next to the module, or in
@@ -154,8 +163,10 @@ from __future__ import annotations
 
 import contextlib
 import math
+import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -213,6 +224,13 @@ class LKConfig:
         0.85/0.81/0.96/0.91/0.95 -> 0.93/0.85/0.98/0.97/0.97) but so does the tail (share of visible
         errors > 2 px on seeds 2-4: 0.8/0.2/0.6 % -> 1.1/1.1/0.9 %), and under the soft 60-px shadow one
         visible point was 201 px off (seed 0), so it is not the default.
+    threads: 2 = the refinement pass runs in a second thread, node by node right behind the first pass (a node
+        is re-matched as soon as the first pass has finished it, its parent and its children, and after its
+        parent's re-match: exactly the values a pass after the first reads, so the tracks are bit-identical to
+        ``threads=1``, the default, which runs the two passes one after the other). The compiled kernels and
+        OpenCV release the GIL, but the per-node Python between them does not, and a re-match is short (a
+        2-px search): on the shared 2-core machine (load 4-6) two threads were 0.75-0.98x as fast as one
+        (``benchmarks/bench_track.py``, ``current2`` row), so one thread is the default.
     """
 
     patch_radius_px: int | None = None
@@ -236,6 +254,11 @@ class LKConfig:
     distinct_follow: bool = True
     refine_consistency: bool = True
     anchor_highpass_px: float = 0.0
+    threads: int = 1
+
+    def __post_init__(self):
+        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads not in (1, 2):
+            raise InputError("LKConfig", f"threads must be 1 or 2, got {self.threads!r}", "threads")
 
 
 # A tip's template uses its branch band whenever the band holds at least this many (weighted) pixels: a 4x4
@@ -244,6 +267,43 @@ class LKConfig:
 _TIP_MIN_BAND_PX = 16.0
 
 _LK_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01)
+
+
+def _with_grey(frames):
+    """(frame, its grey image, or None when it is not an RGB image) for each frame of ``frames``."""
+    for fr in frames:
+        img = fr.image
+        ok = img.ndim == 3 and img.shape[2] == 3
+        yield fr, (cv2.cvtColor(img, cv2.COLOR_RGB2GRAY) if ok else None)
+
+
+class _Progress:
+    """How many nodes (in ``LKTracker.order``) the first pass has finished in this frame; the refinement thread
+    waits on it."""
+
+    def __init__(self):
+        self._cond = threading.Condition()
+        self._n = 0
+        self._aborted = False
+
+    def advance(self) -> None:
+        with self._cond:
+            self._n += 1
+            self._cond.notify()
+
+    def abort(self) -> None:
+        with self._cond:
+            self._aborted = True
+            self._cond.notify_all()
+
+    def wait_for(self, k: int) -> None:
+        """Return once the first pass has finished k nodes (RuntimeError if it was abandoned)."""
+        if self._n >= k:
+            return
+        with self._cond:
+            self._cond.wait_for(lambda: self._n >= k or self._aborted)
+            if self._n < k:
+                raise RuntimeError("the first pass was abandoned")
 
 
 def _rotation_about(cx: float, cy: float, theta: float, dx: float, dy: float) -> np.ndarray:
@@ -295,6 +355,14 @@ class LKTracker:
         if h < 2:
             raise InputError(source, f"patch radius must be >= 2 px, got {h}")
         self.h = h
+        # refinement pass (see ``_refine``): at position k of the order, the nodes read that the pass has not
+        # re-matched yet, and how many first-pass nodes must be finished before node order[k] is re-matched
+        pos = {i: k for k, i in enumerate(self.order)}
+        self._refine_reads, self._refine_needs = [], []
+        for k, i in enumerate(self.order):
+            near = [j for j in (self.parent[i], i, *self.children[i]) if j >= 0]
+            self._refine_reads.append(np.array([j for j in near if pos[j] >= k], int))
+            self._refine_needs.append(1 + max(pos[j] for j in near))
         # terminal nodes (a parent, no children): their band is matched down to _TIP_MIN_BAND_PX pixels
         self._tips = {j for j in range(n) if self.parent[j] >= 0 and not self.children[j]}
         # Rotation baseline partner: walk toward the root until >= 2h away, else toward the tip.
@@ -476,40 +544,30 @@ class LKTracker:
         return float(last[i])
 
     # -- measurement against frame 0 ------------------------------------------------------------
-    def _template(self, gray0, i, p0, theta, r, seg_theta=None):
-        """Frame-0 appearance of node i posed for this frame: ``(crop, tmpl, wts, weight sum)``.
+    def _band_stack(self, i, seg_theta):
+        """Node i's articulated-template inputs for :func:`~rce_gtsam.track.match_kernels.articulated_template`:
+        ``(rotations (S,) rad, bands (S, n, n), background segment, smallest band weight sum)``.
 
-        ``crop`` is the (k, k) frame-0 neighbourhood (k = 2 (h + r) + 1, node at its centre), ``tmpl`` its
-        central (2h + 1) square and ``wts`` the template's per-pixel weights. ``seg_theta`` maps each segment
-        (p, c) incident to node i to its rotation (radians) since frame 0. With branch bands, the template is
-        *articulated*: each incident segment's band of the frame-0 image is rotated about the node by that
-        segment's own rotation (a node is a joint: the parent segment and the child segments turn by
+        ``seg_theta`` maps each segment (p, c) incident to node i to its rotation (radians) since frame 0. The
+        template is *articulated*: each incident segment's band of the frame-0 image is rotated about the node
+        by that segment's own rotation (a node is a joint: the parent segment and the child segments turn by
         different angles, and one rotation for the whole patch biases the match in proportion to the bend).
-        Otherwise the whole frame-0 patch is rotated by ``theta``.
         """
-        h = self.h
-        px, py = float(p0[0]), float(p0[1])
-        if self._band is not None and seg_theta:
-            keys = tuple(seg_theta)
-            stack = self._band_stacks.get((i, keys))
-            if stack is None:  # the incident segments' bands in ``seg_theta``'s order, and the background one
-                bg = max((n for n, (_, sc) in enumerate(keys) if sc == i), default=0)
-                # fewer pixels than a 2-px-wide strip: use the full patch -- except at a tip, whose band is short
-                # by construction (one segment, the thinnest stem), down to _TIP_MIN_BAND_PX
-                min_band = _TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * h + 1)
-                stack = self._band_stacks[(i, keys)] = (
-                    np.stack([self._seg_band[(sp, sc, i)] for sp, sc in keys]), bg, float(min_band))
-            return self._kernels.articulated_template(gray0, px, py, np.fromiter(seg_theta.values(), float), *stack,
-                                                      h, r, gray0.dtype == np.uint8)
-        c = float(h + r)
-        k = 2 * (h + r) + 1
-        prev = cv2.warpAffine(gray0, _rotation_about(px, py, theta, c - px, c - py), (k, k),
-                              flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
-        tmpl = np.ascontiguousarray(prev[r:r + 2 * h + 1, r:r + 2 * h + 1])
-        return prev, tmpl, np.ones_like(tmpl), float(tmpl.size)
+        keys = tuple(seg_theta)
+        stack = self._band_stacks.get((i, keys))
+        if stack is None:  # the incident segments' bands in ``seg_theta``'s order, and the background one
+            bg = max((n for n, (_, sc) in enumerate(keys) if sc == i), default=0)
+            # fewer pixels than a 2-px-wide strip: use the full patch -- except at a tip, whose band is short
+            # by construction (one segment, the thinnest stem), down to _TIP_MIN_BAND_PX
+            min_band = _TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * self.h + 1)
+            stack = self._band_stacks[(i, keys)] = (
+                np.stack([self._seg_band[(sp, sc, i)] for sp, sc in keys]), bg, float(min_band))
+        return (np.fromiter(seg_theta.values(), float), *stack)
 
     def _anchor(self, gray0, gray, i, p0, q, theta, r, seg_theta=None):
-        """Locate node i (frame-0 position p0) near q in ``gray`` within r px (see ``_template``).
+        """Locate node i (frame-0 position p0) near q in ``gray`` within r px, with its frame-0 appearance posed
+        for this frame: articulated (see ``_band_stack``) with branch bands, else the whole frame-0 patch
+        rotated by ``theta``.
 
         Returns (xy, ncc, fb, sigma, second-peak ncc, template weight sum, second-peak xy) or None.
         """
@@ -519,9 +577,19 @@ class LKTracker:
         # the frame-0 crop is only searched by the backward LK, which starts at its centre: a margin of
         # ``_rematch_radius`` px around the template suffices, whatever the search radius r in this frame
         margin = self._rematch_radius()
-        prev, tmpl, wts, wsum = self._template(gray0, i, p0, theta, margin, seg_theta)
+        px, py = float(p0[0]), float(p0[1])
         cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1]))).astype(np.float32)
-        m = self._kernels.match_node(cur, tmpl, wts, prev, r, h, float(h + margin))
+        if self._band is not None and seg_theta:
+            m, wsum = self._kernels.match_articulated(gray0, px, py, *self._band_stack(i, seg_theta), h, margin,
+                                                      gray0.dtype == np.uint8, cur, r)
+        else:
+            cp = float(h + margin)
+            kp = 2 * (h + margin) + 1
+            prev = cv2.warpAffine(gray0, _rotation_about(px, py, theta, cp - px, cp - py), (kp, kp),
+                                  flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
+            tmpl = np.ascontiguousarray(prev[margin:margin + 2 * h + 1, margin:margin + 2 * h + 1])
+            wsum = float(tmpl.size)
+            m = self._kernels.match_node(cur, tmpl, np.ones_like(tmpl), prev, r, h, cp)
         if not m[0]:
             return None
         xy = q + (m[1:3] - c)
@@ -531,45 +599,75 @@ class LKTracker:
         """Radius (px) of the refinement pass's re-match: max(2, h // 4) (the first pass is within a pixel)."""
         return max(2, self.h // 4)
 
-    def _refine(self, gray0, gray, q0, est, vis, sig, fb_max, pred=None, counts=None, borrowed=None):
+    def _refine_node(self, gray0, gray, q0, i, est, vis, fb_max):
+        """Re-match of visible node i with segment rotations from ``est`` (this frame's matches; the nodes before
+        i in ``self.order`` already re-matched): ``(xy, sigma px)``, or None when the re-match fails (no match,
+        correlation below ``min_ncc`` or forward-backward error above ``fb_max``)."""
+        cfg = self.config
+        p = self.parent[i]
+        seg_theta = {}
+        if p >= 0:
+            seg_theta[(p, i)] = _turn(est[p], est[i], q0[p], q0[i])
+        for ch in self.children[i]:
+            seg_theta[(i, ch)] = (_turn(est[i], est[ch], q0[i], q0[ch]) if vis[ch]
+                                  else seg_theta.get((p, i), 0.0))
+        m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, self._rematch_radius(), seg_theta)
+        if m is not None and m[1] >= cfg.min_ncc and m[2] <= fb_max:
+            xy, _, fb, s_lk = m[:4]
+            return xy, math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
+        return None
+
+    def _refine(self, gray0, gray, q0, est, vis, fb_max, first_done=None):
         """Second pass: re-match every visible node with segment rotations from this frame's matches.
 
         In the first pass a node's articulated template is rotated with angles measured partly from
         frame-to-frame predictions, which lag the true motion (the pyramidal LK window contains static
         background). Matches are far more accurate, so the rotations are recomputed from them and each node
         is matched again within a small radius (max(2, h // 4) px: the first pass is already within a pixel).
-        With ``LKConfig.refine_consistency``, a node found in the wide window in this frame (``borrowed``: no
-        frame-to-frame or segment prediction, so its first-pass template was posed with the rotation
-        borrowed from its parent, not measured) whose re-match fails (no match,
-        correlation below ``min_ncc`` or forward-backward error above the limit: the template posed as the
-        match itself implies does not fit there) is marked invisible at ``pred`` (its first-pass prediction).
+
+        ``est``/``vis``: the first pass's (P, 2) positions and (P,) visibility, only read. ``first_done(k)``
+        (threaded, the first pass still running) returns once the first pass has finished the first k nodes of
+        ``self.order``. Node i is re-matched once the first pass has finished it, its parent and its children;
+        it reads the re-matched position of the nodes before it in ``self.order`` and the first pass's of the
+        others: what a pass run after the whole first pass reads. Returns ``{node: (xy, sigma px) or None}``
+        for the visible nodes (None: the re-match failed; see ``_apply_refine``).
         """
-        cfg = self.config
-        rejected = []
-        for i in self.order:
+        cur = est.copy()
+        out = {}
+        for k, i in enumerate(self.order):
+            reads = self._refine_reads[k]  # nodes the re-match of i reads that this pass has not reached yet
+            if first_done is not None:
+                first_done(self._refine_needs[k])
+                cur[reads] = est[reads]
             if not vis[i]:
                 continue
-            p = self.parent[i]
-            seg_theta = {}
-            if p >= 0:
-                seg_theta[(p, i)] = _turn(est[p], est[i], q0[p], q0[i])
-            for ch in self.children[i]:
-                seg_theta[(i, ch)] = (_turn(est[i], est[ch], q0[i], q0[ch]) if vis[ch]
-                                      else seg_theta.get((p, i), 0.0))
-            m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, self._rematch_radius(), seg_theta)
-            if m is not None and m[1] >= cfg.min_ncc and m[2] <= fb_max:
-                xy, _, fb, s_lk = m[:4]
-                est[i] = xy
-                sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
-            elif cfg.refine_consistency and borrowed is not None and borrowed[i]:
+            r = out[i] = self._refine_node(gray0, gray, q0, i, cur, vis, fb_max)
+            if r is not None:
+                cur[i] = r[0]
+        return out
+
+    def _apply_refine(self, out, est, vis, sig, pred, counts, borrowed) -> None:
+        """Write the refinement pass's results ``out`` (see ``_refine``) into ``est``, ``vis`` and ``sig``.
+
+        With ``LKConfig.refine_consistency``, a node found in the wide window in this frame (``borrowed``: no
+        frame-to-frame or segment prediction, so its first-pass template was posed with the rotation borrowed
+        from its parent, not measured) whose re-match failed (the template posed as the match itself implies
+        does not fit there) is marked invisible at ``pred`` (its first-pass prediction).
+        """
+        rejected = []
+        for i in self.order:
+            r = out.get(i, False)
+            if r is False:
+                continue
+            if r is not None:
+                est[i], sig[i] = r
+            elif self.config.refine_consistency and borrowed[i]:
                 rejected.append(i)
         for i in rejected:  # after the pass: a child's re-match is posed from its parent's match, not moved
             vis[i] = False
-            if pred is not None:
-                est[i] = pred[i]
+            est[i] = pred[i]
             sig[i] = float(self.h)
-            if counts is not None:
-                counts["rejected_refine"] += 1
+            counts["rejected_refine"] += 1
 
     # -- main loop ------------------------------------------------------------------------------
     def track(self, source: FrameSource, query_points, graph: BranchGraph | None = None,
@@ -605,15 +703,20 @@ class LKTracker:
                   "rejected_refine": 0}
         t0 = time.perf_counter()
         n_done = 0
-        # the next frames decode in a thread (GIL released) while this one is tracked; closed on any exit
-        with contextlib.closing(prefetched(source)) as frames:
-            for frame in frames:
+        pool = ThreadPoolExecutor(1, thread_name_prefix="lk-refine") if cfg.threads == 2 else None
+        first = None
+        # the next frames decode (and are converted to grey) in a thread (GIL released) while this one is
+        # tracked; closed on any exit
+        with contextlib.closing(prefetched(_with_grey(source))) as frames, contextlib.ExitStack() as stack:
+            if pool is not None:  # on any exit: release a refinement thread still waiting, then join it
+                stack.callback(pool.shutdown)
+                stack.callback(lambda: first is not None and first.abort())
+            for frame, gray in frames:
                 if max_frames is not None and n_done >= max_frames:
                     break
                 img = frame.image
                 if img.ndim != 3 or img.shape[2] != 3:
                     raise InputError(src_name, f"frame {frame.index} is not an RGB image (shape {img.shape})")
-                gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
                 ga = self._anchor_image(gray)
                 if gray0 is None:
                     gray0 = ga
@@ -643,6 +746,12 @@ class LKTracker:
                     # latest estimates (this frame's where already done): new_est holds prev_est until a node
                     # is done, so only the visibility needs its own merged copy
                     cur_vis = prev_vis.copy()
+                    # the refinement pass follows the first one node by node in the second thread (``_refine``)
+                    first = _Progress()
+                    refine = None
+                    if self._band is not None and cfg.refine_pass:
+                        refine = True if pool is None else pool.submit(self._refine, gray0, ga, q0, new_est,
+                                                                       new_vis, fb_max, first.wait_for)
                     for i in self.order:
                         theta = self._rotation(i, new_est, cur_vis, q0, theta_last, theta_now, done)
                         theta_now[i] = theta
@@ -739,8 +848,11 @@ class LKTracker:
                             counts["invisible"] += 1
                         done[i] = True
                         cur_vis[i] = new_vis[i]
-                    if self._band is not None and cfg.refine_pass:
-                        self._refine(gray0, ga, q0, new_est, new_vis, sig, fb_max, preds, counts, wide)
+                        first.advance()
+                    if refine is not None:
+                        out = refine.result() if pool is not None else self._refine(gray0, ga, q0, new_est,
+                                                                                     new_vis, fb_max)
+                        self._apply_refine(out, new_est, new_vis, sig, preds, counts, wide)
                     hh, ww = gray.shape
                     new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
                     new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)

@@ -18,6 +18,7 @@ same arithmetic in one compiled call per node, on the crops the tracker cuts wit
 
 All positions are in pixels of the crop passed in (pixel centres at integers). Results equal the
 OpenCV/numpy implementation they replace to float rounding (float64 sums instead of OpenCV's float32).
+Every kernel releases the GIL (``nogil``): the tracker's refinement thread matches while the first pass does.
 """
 
 from __future__ import annotations
@@ -227,9 +228,14 @@ def weighted_ncc(img, tmpl, wts):
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=True)
 def _window_sums(img, a, m, m2, n):
-    """(4, rh, rw): sum(m I), sum(a I), sum(m2 I), sum(m2 I^2) over each window, from the n pixels with m != 0."""
+    """(4, rh, rw): sum(m I), sum(a I), sum(m2 I), sum(m2 I^2) over each window, from the n pixels with m != 0.
+
+    ``fastmath``: the compiler may reorder each window's float64 sum over the template pixels (and so
+    vectorise it): 1.9x faster, and the sums then differ from the in-order ones by ~1e-15 relative, far below
+    the float32 precision of the correlation map they feed.
+    """
     th, tw = a.shape
     H, W = img.shape
     rh, rw = H - th + 1, W - tw + 1
@@ -339,20 +345,28 @@ def segment_ncc(img, x0, y0, ex, ey, uu, vv, strip, round_out):
         for iv in range(V):
             reach = max(reach, math.sqrt(float(uu[iu]) ** 2 + float(vv[iv]) ** 2))
     inside = x0 - reach - 2 >= 0 and y0 - reach - 2 >= 0 and x0 + reach + 2 < W - 1 and y0 + reach + 2 < H - 1
+    flat = img.ravel()
+    cu = np.empty(U, np.float32)
+    su = np.empty(U, np.float32)
     for a in range(A):
         s1 = s2 = d = 0.0
         ca, sa = ex[a], ey[a]
+        for iu in range(U):  # the same float32 products as in the loop below, computed once per angle
+            cu[iu] = ca * uu[iu]
+            su[iu] = sa * uu[iu]
         for iv in range(V):
             v = vv[iv]
+            sv = sa * v
+            cv = ca * v
             for iu in range(U):
-                u = uu[iu]
-                mx = float((ca * u - sa * v) + fx0)
-                my = float((sa * u + ca * v) + fy0)
+                mx = float((cu[iu] - sv) + fx0)
+                my = float((su[iu] + cv) + fy0)
                 if inside:
                     ix, iy = int(mx), int(my)
                     fx, fy = mx - ix, my - iy
-                    p = ((1 - fx) * (1 - fy) * img[iy, ix] + fx * (1 - fy) * img[iy, ix + 1]
-                         + (1 - fx) * fy * img[iy + 1, ix] + fx * fy * img[iy + 1, ix + 1])
+                    o = iy * W + ix
+                    p = ((1 - fx) * (1 - fy) * flat[o] + fx * (1 - fy) * flat[o + 1]
+                         + (1 - fx) * fy * flat[o + W] + fx * fy * flat[o + W + 1])
                 else:
                     p = _bilinear(img, mx, my)
                 if round_out:
@@ -394,12 +408,6 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
             for s in range(S):
                 ox = cos_t[s] * dx + sin_t[s] * dy
                 oy = -sin_t[s] * dx + cos_t[s] * dy
-                g = _bilinear(gray0, px + ox, py + oy)  # image: replicated border
-                if round_out:
-                    g = math.floor(g + 0.5)
-                gf = np.float32(g)
-                if s == bg:
-                    back = gf
                 # band: zero outside
                 bx, by = cs + ox, cs + oy
                 fbx, fby = math.floor(bx), math.floor(by)
@@ -417,6 +425,14 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
                     if jx + 1 >= 0 and jx + 1 < bs:
                         w += ax * ay * bands[s, jy + 1, jx + 1]
                 wf = np.float32(w)
+                if wf == 0 and s != bg:
+                    continue  # adds exactly nothing: skip the image sample (most of a patch is off every band)
+                g = _bilinear(gray0, px + ox, py + oy)  # image: replicated border
+                if round_out:
+                    g = math.floor(g + 0.5)
+                gf = np.float32(g)
+                if s == bg:
+                    back = gf
                 acc += wf * gf
                 wacc += wf
             wacc_all[y, x] = wacc
@@ -434,3 +450,11 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
         wts[:] = 1.0
         wsum = float(n * n)
     return crop, tmpl, wts, wsum
+
+
+@njit(cache=True, nogil=True)
+def match_articulated(gray0, px, py, thetas, bands, bg, min_band, h, margin, round_out, cur, r):
+    """:func:`articulated_template` of the node at (px, py) in ``gray0``, then :func:`match_node` of it in
+    ``cur`` within r px, in one call: ``(match_node's array, template weight sum)``."""
+    prev, tmpl, wts, wsum = articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, round_out)
+    return match_node(cur, tmpl, wts, prev, r, h, float(h + margin)), wsum
