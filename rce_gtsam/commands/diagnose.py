@@ -25,7 +25,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="seed of every random step of this command: the split of the segments into the two "
                         "node-disjoint halves of the cross-validation (no bootstrap runs here; default 0)")
     p.add_argument("--folds", type=int, default=None,
-                   help="cross-validation blocks (default 8, fewer when the clip is too short for 8 blocks of "
+                   help="cross-validation blocks (default 16, fewer when the clip is too short for 16 blocks of "
                         "at least the bootstrap block length)")
     p.add_argument("--rerun", type=Path, default=None, metavar="FILE.rrd",
                    help="also save a Rerun recording of the analysis with the diagnosis report")
