@@ -117,7 +117,8 @@ def main() -> int:
                     help="comma-separated multipliers of rce_gtsam.simulate.EFFECT_DEFAULTS (default 1), "
                          "e.g. 0.5,1,1.5,2,3 for a detection-vs-strength table")
     ap.add_argument("--effects", default="none,delay,dynamics,second_mode,offset,nonlinear")
-    ap.add_argument("--folds", type=int, default=8, help="cross-validation blocks of diagnose (default 8)")
+    ap.add_argument("--folds", type=int, default=None,
+                    help="cross-validation blocks of diagnose (default: diagnose's own, N_FOLDS = 16)")
     a = ap.parse_args()
     from scipy import stats
 
