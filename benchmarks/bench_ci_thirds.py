@@ -59,49 +59,35 @@ def thirds(tracks_path, graph_path, preset: str, n_boot: int) -> dict:
             zs.append((np.log(k) - np.log(k_full[e])) / (np.sqrt(2) * s))
     u = (full.ci.high - full.ci.low) / full.fit.kappa
     return {"z": np.array(zs), "dropped": dropped, "median_U": float(np.median(u)),
-            "n_eff": full.ci.effective_samples}
+            "n_eff": full.ci.effective_samples, "full": full}
 
 
-def y_thirds_z(Y, weights, config, kappa, low, high) -> np.ndarray:
-    """z of kappa fitted on each third of Y (each re-referenced to its own median angle) against kappa [low, high]."""
-    from rce_gtsam.model import ResponseModel
-    s = (np.log(high) - np.log(low)) / (2 * 1.96)
-    cuts = np.linspace(0, Y.shape[1], 4).round().astype(int)
-    zs = []
-    for a, b in zip(cuts[:-1], cuts[1:]):
-        with np.errstate(all="ignore"):
-            Yb = Y[:, a:b] - np.nanmedian(Y[:, a:b], axis=1, keepdims=True)
-        k = ResponseModel(config=config).fit(Yb, weights=None if weights is None else weights[:, a:b]).kappa
-        with np.errstate(all="ignore"):
-            z = (np.log(np.abs(k)) - np.log(kappa)) / (np.sqrt(2) * s)
-        zs.append(z[np.isfinite(z)])
-    return np.concatenate(zs)
+def log_se(ci) -> np.ndarray:
+    """(E,) log-kappa standard error implied by a 95 % interval."""
+    from rce_gtsam.model.time_split import Z95
+    return (np.log(ci.high) - np.log(ci.low)) / (2 * Z95)
 
 
-def surrogate_null(tracks_path, graph_path, preset, n_boot: int, n: int, seed: int = 0) -> dict:
-    """The thirds check on ``n`` model-exact surrogates of a recording (see the module docstring)."""
+def surrogate_null(full, n_boot: int, n: int, seed: int = 0) -> dict:
+    """The thirds check on ``n`` model-exact surrogates of the analysed recording ``full`` (an AnalysisResult
+    with intervals; see the module docstring), and on its own data at the same (Y-level) computation."""
     from rce_gtsam.compliance import bootstrap_kappa, phase_randomised_residuals
-    from rce_gtsam.graph import load_graph
     from rce_gtsam.model import ResponseModel
-    from rce_gtsam.pipeline import analyze
-    from rce_gtsam.presets import get_preset
-    from rce_gtsam.tracks import load_tracks
+    from rce_gtsam.model.time_split import block_z
 
-    graph = load_graph(graph_path)
-    full = analyze(load_tracks(tracks_path, graph), graph, preset=preset, n_boot=n_boot, seed=0)
-    config = (get_preset(preset) if isinstance(preset, str) else preset).compliance
+    config = full.preset.compliance
     Y = full.response.Y
     W = full.response.weights if config.weighted else None
     pred = full.fit.predict()
     kappa = np.abs(full.fit.kappa)
-    z_data = y_thirds_z(Y, W, config, kappa, full.ci.low, full.ci.high)
+    z_data = block_z(Y, W, config, kappa, log_se(full.ci), 3)
     zs, cover = [], []
     for i, R in enumerate(phase_randomised_residuals(Y - pred, n, np.random.default_rng(seed))):
         Ys = np.where(np.isfinite(Y), pred + R, np.nan)
         fit = ResponseModel(config=config).fit(Ys, weights=W).core
-        ci = bootstrap_kappa(Ys, dataclasses.replace(config, seed=1000 + i), W, fit=fit)
+        ci = bootstrap_kappa(Ys, dataclasses.replace(config, seed=1000 + i, n_boot=n_boot), W, fit=fit)
         cover.append((ci.low <= kappa) & (kappa <= ci.high))
-        zs.append(y_thirds_z(Ys, W, config, np.abs(fit.kappa), ci.low, ci.high))
+        zs.append(block_z(Ys, W, config, np.abs(fit.kappa), log_se(ci), 3))
     z = np.concatenate(zs)
     return {"sd_z": float(np.std(z, ddof=1)), "share_out": float(np.mean(np.abs(z) > 1.96)),
             "coverage": float(np.mean(np.concatenate(cover))), "sd_z_data": float(np.std(z_data, ddof=1))}
@@ -135,7 +121,7 @@ def main() -> int:
               f"share |z| > 1.96: {100 * np.mean(np.abs(z) > 1.96):.0f} %, dropped {r['dropped']}; "
               f"median U_e {r['median_U']:.2f}; effective samples {r['n_eff']}", flush=True)
         if a.null:
-            n = surrogate_null(d / "tapir_tracks.csv", d / "branch_graph.json", a.preset, a.bootstrap, a.null)
+            n = surrogate_null(r["full"], a.bootstrap, a.null)
             print(f"  {plant} if the rank-1 model held exactly ({a.null} surrogates with its noise and excitation): "
                   f"SD(z) {n['sd_z']:.2f} (Y-level thirds; the data's at the same level {n['sd_z_data']:.2f}, "
                   f"ratio {n['sd_z_data'] / n['sd_z']:.2f}), share |z| > 1.96: {100 * n['share_out']:.0f} %; "

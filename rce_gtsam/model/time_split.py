@@ -46,9 +46,9 @@ class TimeSplitCheck:
                 "n_blocks": self.n_blocks, "block_frames": self.block_frames, "n_values": self.n_values}
 
 
-def block_rms_z(Y: np.ndarray, weights, config, kappa: np.ndarray, s: np.ndarray, n_blocks: int) -> tuple[float, int]:
-    """sqrt(mean z_ek^2) of kappa fitted on ``n_blocks`` disjoint frame blocks against ``kappa`` with log-SE
-    ``s`` (see the module docstring), and the number of finite z values."""
+def block_z(Y: np.ndarray, weights, config, kappa: np.ndarray, s: np.ndarray, n_blocks: int) -> np.ndarray:
+    """The finite z_ek of kappa fitted on ``n_blocks`` disjoint frame blocks (each re-referenced to its own
+    median angle) against ``kappa`` with log-SE ``s`` (see the module docstring), blocks in order."""
     from .response_model import ResponseModel  # the engine (this module is one of its leaves)
 
     E, T = Y.shape
@@ -68,7 +68,12 @@ def block_rms_z(Y: np.ndarray, weights, config, kappa: np.ndarray, s: np.ndarray
         with np.errstate(divide="ignore", invalid="ignore"):
             z = (np.log(np.abs(fit.kappa)) - np.log(np.abs(kappa))) / (math.sqrt(n_blocks - 1) * s)
         zs.append(z[np.isfinite(z)])
-    z = np.concatenate(zs) if zs else np.array([])
+    return np.concatenate(zs) if zs else np.array([])
+
+
+def block_rms_z(Y: np.ndarray, weights, config, kappa: np.ndarray, s: np.ndarray, n_blocks: int) -> tuple[float, int]:
+    """sqrt(mean z_ek^2) of :func:`block_z` and the number of finite z values."""
+    z = block_z(Y, weights, config, kappa, s, n_blocks)
     return (float(math.sqrt(np.mean(z ** 2))) if z.size else float("nan")), int(z.size)
 
 
