@@ -466,7 +466,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                  "full_data_t": dm["t"], "full_data_dof": dm["dof"], "full_data_batch_frames": dm["batch_frames"]}
         gain_share = (b_rmse ** 2 - rmse ** 2) / total_var if total_var > 0 else 0.0
         extra["heldout_gain_share"] = gain_share
-        supported = bool(np.isfinite(ev) and ev > t_crit and rmse < b_rmse and daic < 0 and gain_share >= resolution)
+        supported = bool(np.isfinite(ev) and ev > t_crit
+                         and _earns_its_place(rmse, b_rmse, daic, gain_share, resolution))
         results.append(CandidateResult(effect=eff.name, fit=full, heldout_rmse=rmse, fold_mse=mse, evidence=ev,
                                        improvement_pct=imp, delta_aic=daic, delta_bic=dbic, supported=supported,
                                        statistics=stats_all.get(eff.name, {}), extra=extra))
@@ -474,8 +475,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     mt = sign_flip_max_t(b_mse, [c.fold_mse for c in results], alpha=alpha, seed=seed)
     for c, p in zip(results, mt.p_adjusted):
         c.extra["maxt_p"] = float(p)
-        c.extra["supported_maxt"] = bool(p <= alpha and c.heldout_rmse < b_rmse and c.delta_aic < 0
-                                          and c.extra["heldout_gain_share"] >= resolution)
+        c.extra["supported_maxt"] = bool(p <= alpha and _earns_its_place(c.heldout_rmse, b_rmse, c.delta_aic,
+                                                                           c.extra["heldout_gain_share"], resolution))
     verdict, parsimony = choose_verdict(results, t_crit)
     worst_e, worst_f, summary = worst_edges_and_frames(base, labels, block_length, frames)
     settings = {"n_folds": len(blocks), "fold_blocks": blocks, "buffer_frames": gap, "block_length": block_length,
@@ -528,6 +529,13 @@ def integrated_time(d: np.ndarray) -> float:
             break
         tau += 2 * pair
     return float(min(max(tau, 1.0), n / 4))
+
+
+def _earns_its_place(rmse: float, b_rmse: float, delta_aic: float, gain_share: float, resolution: float) -> bool:
+    """What a significant candidate must also do to be supported (by either test): lower the held-out RMSE,
+    lower the effective-sample AIC, and take at least ``resolution`` of the bending variance off the
+    held-out error."""
+    return rmse < b_rmse and delta_aic < 0 and gain_share >= resolution
 
 
 def loss_difference_test(loss_ref: np.ndarray, loss: np.ndarray, min_batch: int = BLOCK_LENGTH) -> dict:
@@ -696,7 +704,6 @@ def maxt_verdict(diag: "Diagnosis") -> str | None:
     """The verdict the family-wise sign-flip max-T test (:mod:`rce_gtsam.diagnosis.maxt`) gives: the same rule
     as the diagnosis' (lowest held-out RMSE among the supported, parsimony against simpler ones), with
     "supported" from the max-T p-value and the max-T critical t in place of the Bonferroni t."""
-    from dataclasses import replace
     swapped = [replace(c, supported=bool(c.extra.get("supported_maxt", False))) for c in diag.candidates]
     return choose_verdict(swapped, diag.settings["maxt_critical_t"])[0]
 
