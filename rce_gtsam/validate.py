@@ -157,17 +157,18 @@ def check_folds(folds: int, n_frames: int, block_length: int) -> None:
 
 def check_analysis_inputs(tracks_path: Path, graph_path: Path, preset) -> tuple:
     """Read the graph and tracks (cheap) and check what the analysis needs of them, before it runs;
-    returns (graph, validated tracks table) so the caller need not read them again."""
+    returns (graph, validated tracks table, :class:`~rce_gtsam.tracks.Tracks`) so the caller need not read
+    them again."""
     from .graph import load_graph
     from .tracks import read_tracks_table, tracks_from_table
 
     graph = load_graph(graph_path)
     table = read_tracks_table(tracks_path)
-    tracks_from_table(table, graph, source=str(tracks_path))
+    tracks = tracks_from_table(table, graph, source=str(tracks_path))
     check_graph_has_bend(graph)
     check_tracks_span(table, tracks_path, preset.compliance.block_length)
     check_bends_observed(table, graph, tracks_path, preset.compliance.block_length)
-    return graph, table
+    return graph, table, tracks
 
 
 def check_command_options(args, out_dir_option: str | None = "--out") -> None:

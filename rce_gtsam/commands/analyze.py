@@ -86,9 +86,7 @@ def run(args: argparse.Namespace) -> int:
         check_command_options(args)
         effects = parse_effect_names(args.effects) or ()  # fail on a bad name before the (slow) analysis
         preset = preset_from_args(args)
-        graph, table = check_analysis_inputs(args.tracks, args.graph, preset)
-        from ..tracks import tracks_from_table
-        tracks = tracks_from_table(table, graph, source=str(args.tracks))  # the CSV is read once
+        graph, _, tracks = check_analysis_inputs(args.tracks, args.graph, preset)  # the CSV is read once
         t_start = process_seconds()
         steps = [*ANALYSIS_STEPS, "write"] + (["figures"] if worker else []) + (["recording"] if args.rerun else [])
         with Steps("analyze", steps, enabled=progress_enabled(args.quiet)) as bar:

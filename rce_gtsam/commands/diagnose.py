@@ -50,13 +50,14 @@ def run(args: argparse.Namespace) -> int:
     preset = preset_from_args(args)
     if args.folds is not None and args.folds < 2:
         raise InputError("--folds", f"need at least 2 cross-validation blocks, got {args.folds}")
-    _, table = check_analysis_inputs(args.tracks, args.graph, preset)
+    graph, table, tracks = check_analysis_inputs(args.tracks, args.graph, preset)  # the CSV is read once
     if args.folds is not None:  # an explicit value is checked; the default adapts to a short clip
         check_folds(args.folds, int(table["frame"].max()) + 1, preset.compliance.block_length)
     steps = ["load", "smooth", "bending", "fit", "diagnosis"] + (["figures"] if args.figures else []) \
         + (["recording"] if args.rerun else [])
     with Steps("diagnose", steps, enabled=progress_enabled(args.quiet)) as bar:
-        result = analyze(args.tracks, args.graph, preset=preset, n_boot=0,
+        result = analyze(tracks, graph, preset=preset, n_boot=0, inputs={"graph": str(args.graph),
+                                                                         "tracks": str(args.tracks)},
                          progress=lambda s: s != "bootstrap" and bar.start(s))
         bar.start("diagnosis")
         diag = diagnose_result(result, effects=names, seed=args.seed, n_folds=args.folds)
