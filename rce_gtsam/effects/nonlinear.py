@@ -140,7 +140,7 @@ class Nonlinear(Effect):
             for f in (0.5, 0.7, 1.0, 1.4, 2.0):
                 for dz in (-0.25, 0.0, 0.25):
                     score(c_best * f, z_best + dz * zq)
-        best_err, best, best_core = min(scores.values(), key=lambda r: r[0])
+        _, best, best_core = min(scores.values(), key=lambda r: r[0])
         # the fit goes on from the grid point's own kappa and z: the linear fit's kappa and z are compressed by
         # the saturation (compliant joints most), and from them the alternating steps settle at a shallower
         # curvature (noise-free branch: fit RMSE 0.024 deg from the linear start, 0.019 from the grid's)
