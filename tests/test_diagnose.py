@@ -97,6 +97,27 @@ def test_parsimony_prefers_the_simpler_effect_unless_the_complex_one_is_signific
     assert choose_verdict([], t_crit=3.0) == (None, {})
 
 
+def test_parsimony_counts_a_free_time_course_as_more_than_any_static_parameters():
+    """A second mode (a free per-frame series) with the lowest held-out RMSE but not significantly better than a
+    creep (per-edge offset and trend) is not the verdict, even though on smooth noise-free residuals its
+    effective parameter count is the lower one (measured: 52.8 vs 61.9, and the second mode was named on a
+    noise-free simulated creep). When the creep is significantly worse the second mode stays."""
+    from types import SimpleNamespace as C
+    from rce_gtsam.diagnose import choose_verdict, complexity
+    rng = np.random.default_rng(2)
+    base = 1 + 0.05 * rng.standard_normal(16)
+    sm = C(effect="second_mode", supported=True, heldout_rmse=0.59, fold_mse=base * 0.35,
+           extra={"k_eff": 52.8, "free_series": 1})
+    off = C(effect="offset", supported=True, heldout_rmse=0.60, fold_mse=base * 0.35 * (1 + 0.05 * rng.standard_normal(16)),
+            extra={"k_eff": 61.9, "free_series": 0})
+    assert complexity(off) < complexity(sm)
+    v, info = choose_verdict([sm, off], t_crit=2.6)
+    assert v == "offset" and info["preferred_simpler"] == "offset" and info["lowest_heldout"] == "second_mode"
+    off_worse = C(effect="offset", supported=True, heldout_rmse=0.8, fold_mse=base * 0.6 * (1 + 0.001 * rng.standard_normal(16)),
+                  extra={"k_eff": 61.9, "free_series": 0})
+    assert choose_verdict([sm, off_worse], t_crit=2.6)[0] == "second_mode"
+
+
 def test_same_kind_parsimony_weighs_an_unsupported_simpler_operator():
     """Dynamics supported, delay not (but lowering the held-out error, and not significantly worse): by default
     the verdict is dynamics; with same_kind=True, delay. An unsupported simpler effect of another kind is

@@ -24,7 +24,31 @@ from .base import Effect, Parameter, scalar
 
 
 GRID_CORE_STEPS = 4  # kappa and z steps per grid point before the errors are compared
+# per-edge gain multipliers tried in each update (log-spaced, 1/64 to 64, then refined around each edge's best):
+# an edge deep in saturation at the reference pose has a second, shallow minimum of its error at a small
+# linear gain, far from (and much wider than) the true one (noise-free simulated branch: the true gain 31x the
+# fitted one), which the Gauss-Newton kappa step cannot leave
+KAPPA_SCAN = 2.0 ** np.arange(-6.0, 6.25, 0.25)
+KAPPA_REFINE = 2.0 ** np.linspace(-0.25, 0.25, 9)
 REFINE_ROUNDS = 2  # rounds of the finer local grid around the coarse grid's best (c, z0)
+
+
+def best_edge_gains(view) -> np.ndarray:
+    """kappa with each edge's gain replaced by the best of :data:`KAPPA_SCAN` x its gain, refined by
+    :data:`KAPPA_REFINE` (everything else fixed; the current gain is one of the candidates).
+
+    Given z and the shared (c, z0), each edge's error depends on its own kappa_e only, so the scan is exact per
+    edge: a global 1-D search where the Gauss-Newton step only finds the nearest minimum."""
+    def best(mults):  # mults: (M, E) multipliers per edge -> (E,) the best
+        sse = np.empty(mults.shape)
+        for j, m in enumerate(mults):
+            r = view.Y0 - view.predict(kappa=view.kappa * m)
+            sse[j] = np.sum(view.W * r * r, axis=1)
+        return mults[np.argmin(sse, axis=0), np.arange(mults.shape[1])]
+
+    E = view.kappa.size
+    coarse = best(np.repeat(KAPPA_SCAN[:, None], E, axis=1))
+    return view.kappa * best(np.concatenate([coarse[None] * KAPPA_REFINE[:, None], np.ones((1, E))]))
 
 
 class Nonlinear(Effect):
@@ -162,7 +186,12 @@ class Nonlinear(Effect):
 
         res = least_squares(lambda p: view.residual_vector(i, st_of(p)), x0, bounds=([lo, -np.inf], [np.inf, np.inf]),
                             diff_step=1e-3, max_nfev=12, x_scale=[1.0, 1.0])
-        return {**st_of(res.x), "scale": q, "z_scale": zq}
+        new = {**st_of(res.x), "scale": q, "z_scale": zq}
+        if scalar(new["params"]["c"]) != 0.0:
+            gains = best_edge_gains(view.copy_with(view.model, view.with_state(i, new)))
+            if not np.array_equal(gains, view.kappa):
+                new["core_start"] = (gains, view.z.copy())
+        return new
 
     def describe(self, state):
         c = scalar(state["params"]["c"])

@@ -198,6 +198,13 @@ class ResponseModel:
                 if not refit_shared and not eff.latent_names() and not any(p.per_edge for p in eff.parameters(E)):
                     continue
                 view.states[i] = eff.update(view.states[i], view, frozen)
+                # an update may also hand the core a better (kappa, z) it found (a per-edge global search that
+                # the Gauss-Newton steps cannot make); taken only when it lowers the error
+                core_start = view.states[i].pop("core_start", None) if isinstance(view.states[i], dict) else None
+                if core_start is not None and not frozen:
+                    k_new, z_new = np.array(core_start[0], dtype=float), np.array(core_start[1], dtype=float)
+                    if view.wsse(kappa=k_new, z=z_new) < view.wsse():
+                        view.kappa, view.z = k_new, z_new
             new_err = view.wsse()
             dk = float(np.max(np.abs(np.log(np.maximum(np.abs(view.kappa), EPS))
                                      - np.log(np.maximum(np.abs(k_prev), EPS))))) if E else 0.0
