@@ -122,7 +122,7 @@ def main() -> int:
     a = ap.parse_args()
     from scipy import stats
 
-    from rce_gtsam.diagnose import choose_verdict, diagnose, maxt_verdict, oracle_test
+    from rce_gtsam.diagnose import choose_verdict, diagnose, maxt_verdict, oracle_test, paired_t
     from rce_gtsam.presets import get_preset
     mults = [float(m) for m in a.strength_mult.split(",")]
     print(f"input: {'matrices (simulator equations + noise)' if a.matrices else 'full pipeline (simulate -> analyze default preset)'}; "
@@ -135,7 +135,7 @@ def main() -> int:
     for eff in a.effects.split(","):
         hidden = None if eff == "none" else eff
         for mult in (mults if hidden is not None else [1.0]):
-            okz, ok2, conf2, ok3, orc3, conf3 = 0, 0, 0, 0, 0, 0
+            okz, ok2, conf2, ok3, orc3, conf3, n_sep, conf_sep = 0, 0, 0, 0, 0, 0, 0, 0
             okf, orcf, ok, orc, conf, imp_v, imp_h, ceil, kb, ka, ts, tps, tru, nsr = 0, 0, 0, 0, 0, [], [], [], [], [], [], [], [], []
             for sd in range(a.first_seed, a.first_seed + a.seeds):
                 Y, W, s, k, y, tp, labels = case(hidden, sd, a.frames, a.matrices, mult, a.noise_free)
@@ -160,6 +160,15 @@ def main() -> int:
                           and (hidden is not None))
                 orc3 += o3
                 okz += bool(o["knows_z"]["supported"])
+                # does even the true form (the oracle) beat the rival lag candidate by the verdict's own test?
+                # Where it does not, no method can tell delay from dynamics on this recording
+                rival = {"delay": "dynamics", "dynamics": "delay"}.get(hidden)
+                sep = False
+                if rival is not None and "fold_mse" in o:
+                    t_sep = paired_t(d.candidate(rival).fold_mse, o["fold_mse"][: len(d.candidate(rival).fold_mse)])
+                    sep = bool(np.isfinite(t_sep) and t_sep > d.settings["evidence_threshold_t"])
+                n_sep += sep
+                conf_sep += sep and {d.verdict, hidden} == {"delay", "dynamics"}
                 dm_crit = stats.t.ppf(1 - 0.05 / max(len(d.candidates), 1), max(o.get("full_data_dof", 1), 1))
                 orcf += bool(o["full_data_t"] > dm_crit and o["improvement_pct"] > 0)
                 kb.append(klog(d.baseline.kappa, k))
@@ -180,17 +189,19 @@ def main() -> int:
             med = lambda v: float(np.median(v)) if v else float("nan")  # noqa: E731
             n = a.seeds
             rows.append(f"{eff:<12} {mult:>5g} {ok:>5}/{n} {orc:>5}/{n} {okz:>5}/{n} {okf:>5}/{n} "
-                        f"{orcf:>5}/{n} {conf:>5} {ok2:>5}/{n} {conf2:>5} {ok3:>5}/{n} {orc3:>5}/{n} {conf3:>5} {med(imp_v):14.1f} "
+                        f"{orcf:>5}/{n} {conf:>5} {conf_sep:>4}/{n_sep:<4} {ok2:>5}/{n} {conf2:>5} {ok3:>5}/{n} {orc3:>5}/{n} {conf3:>5} {med(imp_v):14.1f} "
                         f"{med(imp_h):13.1f} {med(ceil):9.1f} {med(tru):7.1f} {med(nsr):9.2f} {med(kb):8.3f} -> "
                         f"{med(ka):.3f} {med(ts):7.1f} {med(tps):6.1f}")
             table.append({"effect": eff, "mult": mult, "right": ok, "oracle": orc, "knows_z": okz, "n": n, "right_full": okf, "right2": ok2,
-                          "oracle_full": orcf})
+                          "oracle_full": orcf, "separated": n_sep, "confused_where_separated": conf_sep})
             print(rows[-1], flush=True)
-    print(f"\n{'effect':<12} {'x':>5} {'right':>8} {'oracle':>8} {'knows z':>8} {'right*':>8} {'oracle*':>8} {'d<->d':>5} {'right2':>8} {'d<->d2':>6} {'right3':>8} {'oracle3':>8} {'d<->d3':>6} {'dRMSE% verdict':>14} {'dRMSE% hidden':>13} "
+    print(f"\n{'effect':<12} {'x':>5} {'right':>8} {'oracle':>8} {'knows z':>8} {'right*':>8} {'oracle*':>8} {'d<->d':>5} {'d<->d|sep':>9} {'right2':>8} {'d<->d2':>6} {'right3':>8} {'oracle3':>8} {'d<->d3':>6} {'dRMSE% verdict':>14} {'dRMSE% hidden':>13} "
           f"{'ceiling%':>9} {'truth%':>7} {'noise/sig':>9} {'klog before -> after':>20} {'s':>7} {'pipe s':>6}")
     print("\n".join(rows))
     print("(right/oracle/knows z: the verdict's fold-paired t rule; right*/oracle*: the full-data Diebold-Mariano rule;"
           " for effect-free rows 'right' counts no verdict and 'oracle'/'knows z' count false firings;"
+          " d<->d|sep: delay<->dynamics confusions / cases where the oracle (true form and shared parameters) beats"
+          " the rival lag candidate by the verdict's fold t (where it does not, the recording cannot tell them apart);"
           " right2 / d<->d2: the verdict with same-kind parsimony, choose_verdict(same_kind=True);"
           " right3 / oracle3 / d<->d3: the family-wise sign-flip max-T test, maxt_verdict)")
     # the strength at which each is right >= 90 %: project vs oracle

@@ -581,7 +581,8 @@ def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str
 
     Returns {t: the fold-paired t the verdict uses, threshold_t, supported (t above the verdict's threshold and a
     lower held-out error), full_data_t (:func:`loss_difference_test`), full_data_dof, improvement_pct (held-out
-    RMSE, baseline -> oracle), params (the true shared parameters used), knows_z: {t, supported,
+    RMSE, baseline -> oracle), fold_mse (per fold, pooled as the candidates' are: pair it with a rival
+    candidate's to ask whether even the true form beats that rival), params (the true shared parameters used), knows_z: {t, supported,
     improvement_pct}}."""
     st = diag.settings
     base = diag.baseline
@@ -639,8 +640,10 @@ def _scored_test(diag: "Diagnosis", Y: np.ndarray, prediction: np.ndarray) -> di
     tv = st.get("heldout_total_variance", 0.0)
     share = float(np.mean(base[both]) - np.mean(loss[both])) / tv if both.any() and tv > 0 else 0.0
     ok = bool(np.isfinite(t) and t > crit and imp > 0 and share >= st.get("resolution", 0.0))
+    # per fold, pooled over the fold's scored entries as the candidates' fold_mse are (to pair with theirs)
+    pooled = np.array([sse_t[a:b].sum() / max(cnt_t[a:b].sum(), 1) for a, b in st["fold_blocks"]])
     return {"t": t, "threshold_t": crit, "supported": ok, "full_data_t": dm["t"], "full_data_dof": dm["dof"],
-            "improvement_pct": imp}
+            "improvement_pct": imp, "fold_mse": pooled[: len(diag.baseline_fold_mse)]}
 
 
 def paired_t(mse_ref: np.ndarray, mse: np.ndarray) -> float:
