@@ -5,7 +5,13 @@ half the segments' noisy data; a pure delay only shifts it. Test: the same diagn
 the held-out z of every model (baseline included) low-passed (zero-phase 2nd-order Butterworth at 2 Hz, 30 fps)
 before it predicts. Measured (seeds 0-3, delay x1, full pipeline): the baseline's held-out RMSE falls 0.7-2 %,
 dynamics' gain over delay shrinks from +1.5/+1.1/+0.1/+0.7 points to +0.4/+0.4/-0.7/-0.2. A smoothness prior
-on the held-out excitation for every model is the principled version (not built).
+on the held-out excitation for every model is the principled version: built and measured on the branch
+``exp/heldout-ar-prior`` (an AR(p) prior fitted to each fold's training z, order by AIC, used as the exact
+posterior mean of the held-out z for every model, operators included), and not adopted. On delay x1 seeds 0-3
+the baseline's held-out RMSE fell 1.3-3.7 % and dynamics' edge over delay shrank, but the oracle's fold t fell
+too (1.5/2.8/3.6/2.5 -> 1.8/2.5/2.1/0.7): the prior takes away part of every candidate's gain, the true
+effect's included, so detection loses power; verdicts moved both ways (delay seed 3: dynamics -> none;
+dynamics seed 0: delay -> dynamics).
 
 Usage: python benchmarks/exp_heldout_z_smoothing.py [--seeds 4]
 """
