@@ -170,3 +170,38 @@ def test_nonlinear_fit_recovers_the_saturation_of_a_simulated_branch(seed):
     assert abs(c / c_true - 1) < 0.05, (c, c_true)
     assert rmse < 0.004, rmse
     assert np.abs(ratio / np.exp(np.mean(np.log(ratio))) - 1).max() < 0.02, ratio
+
+
+def test_an_update_may_hand_the_core_a_better_start_but_never_a_worse_one():
+    """The solver takes an update's ``core_start`` (kappa, z) only when it lowers the error: a proposal that
+    multiplies one edge's gain by 5 in every sweep is refused, and the fit ends where the plain rank-1 fit does.
+    (That a better proposal is taken is shown by the saturation's per-edge gain search,
+    ``test_nonlinear_fit_recovers_the_saturation_of_a_simulated_branch``.)"""
+    from rce_gtsam.effects.base import Effect
+
+    rng = np.random.default_rng(3)
+    E, T = 6, 300
+    k_true = np.exp(rng.normal(0, 0.3, E))
+    k_true /= np.exp(np.mean(np.log(k_true)))
+    z = np.sin(np.arange(T) / 7.0) * 3
+    Y = np.outer(k_true, z) + 0.01 * rng.standard_normal((E, T))
+    W, s = np.ones((E, T)), np.linspace(0, 1, E)
+
+    class Proposer(Effect):
+        name = "proposer"
+        kind = "additive"
+
+        def __init__(self, factor):
+            self.factor = factor
+
+        def init(self, view):
+            return {"params": {}, "latents": {}}
+
+        def update(self, state, view, frozen):
+            k = view.kappa.copy()
+            k[0] = k_true[0] * view.kappa[1] / k_true[1] * self.factor  # edge 0 at factor x its consistent gain
+            return {"params": {}, "latents": {}, "core_start": (k, view.z.copy())}
+
+    plain = ResponseModel().solve(Y, W, s, start=(np.ones(E), z.copy(), {}), max_iter=30)
+    worse = (ResponseModel() + Proposer(5.0)).solve(Y, W, s, start=(np.ones(E), z.copy(), {}), max_iter=30)
+    assert np.allclose(worse.kappa, plain.kappa, rtol=1e-6)

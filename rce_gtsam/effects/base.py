@@ -95,7 +95,9 @@ class Effect:
         """One block update of this term's state with everything else held fixed.
 
         ``frozen=True``: only the latents may change (prediction of new frames with static params fixed),
-        and only on ``view.free`` frames.
+        and only on ``view.free`` frames. Like :meth:`init`'s, the returned state may carry
+        ``"core_start": (kappa, z)``: a better core the effect found (e.g. a global search over each edge's gain
+        that the Gauss-Newton steps cannot make); the solver takes it only when it lowers the error.
         """
         return state
 
