@@ -42,9 +42,15 @@ def test_extended_intervals_contain_the_estimate_and_cover_kappa_true():
 
 
 def test_absorption_spectrum_sees_the_offset_take_the_lowest_frequencies():
-    """An offset and creep per edge absorb most of the lowest non-zero frequency's noise and little above."""
-    Y, s, _, _, _ = synth(None, seed=2, T=300)
-    mf = fit_extended(Y, ("offset",), CFG, None, s).model_fit
-    _, W, sv = validate_inputs(mf.Y, mf.weights, mf.root_distance)
-    g = absorption_spectrum(mf, W, sv, np.random.default_rng(0), n_probe=6)
-    assert g[0] == 1.0 and g[1] < 0.7 and np.median(g[20:]) > 0.9, g[:6]
+    """A fitted offset and creep per edge absorb part of the lowest non-zero frequencies' noise and nothing above.
+    Their coefficients are shrunk by empirical Bayes, so on creep-free data they shrink toward 0 and absorb
+    little (measured g[1:6] >= 0.89, 2 effective parameters); on data with a creep they stay and absorb more
+    (measured min 0.72, 24 effective parameters). The bootstrap restores exactly what the spectrum shows."""
+    g_of = {}
+    for eff in (None, "offset"):
+        Y, s, _, _, _ = synth(eff, seed=2, T=300)
+        mf = fit_extended(Y, ("offset",), CFG, None, s).model_fit
+        _, W, sv = validate_inputs(mf.Y, mf.weights, mf.root_distance)
+        g_of[eff] = g = absorption_spectrum(mf, W, sv, np.random.default_rng(0), n_probe=6)
+        assert g[0] == 1.0 and np.median(g[20:]) > 0.9, g[:6]
+    assert g_of["offset"][1:6].min() < 0.8 < 0.85 < g_of[None][1:6].min(), (g_of["offset"][:6], g_of[None][:6])

@@ -80,7 +80,8 @@ class Effect:
         return ()
 
     def n_free(self, state: dict, n_edges: int, n_frames_observed: int) -> int:
-        """Number of fitted degrees of freedom (for AIC/BIC): static parameters + latent frames."""
+        """Number of fitted degrees of freedom (for AIC/BIC): static parameters + latent frames (fractional
+        for shrunk estimates: the sum of their shrinkage factors)."""
         n = sum(n_edges if p.per_edge else 1 for p in self.parameters(n_edges))
         return n + len(self.latent_names()) * n_frames_observed
 
