@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..model.steps import lag1_autocorrelation
 from .base import Effect, Parameter
 
 
@@ -18,11 +19,8 @@ def residual_variance_inflated(resid: np.ndarray, W: np.ndarray) -> np.ndarray:
     weighted mean or trend of serially correlated residuals. ``resid`` (E, T) with NaN where missing."""
     ok = np.isfinite(resid)
     r = np.where(ok, resid, 0.0)
-    n = ok.sum(axis=1)
-    var = np.sum(W * r * r, axis=1) / np.maximum(n - 2, 1)
-    both = ok[:, 1:] & ok[:, :-1]
-    lag = np.sum(np.where(both, r[:, 1:] * r[:, :-1], 0.0), axis=1)
-    rho = np.clip(lag / np.maximum(np.sum(r * r, axis=1), 1e-300), 0.0, 0.99)
+    var = np.sum(W * r * r, axis=1) / np.maximum(ok.sum(axis=1) - 2, 1)
+    rho = lag1_autocorrelation(r, ok)
     return var * (1 + rho) / (1 - rho)
 
 

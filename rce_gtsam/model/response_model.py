@@ -179,9 +179,7 @@ class ResponseModel:
             states.append(prev_states[eff.name] if eff.name in prev_states else eff.init(PartialView(view, states)))
         for st in states:  # an effect's init may hand the core a better start than the linear fit (its state's
             # "core_start": (kappa, z) it found while choosing its own starting parameters)
-            core_start = st.pop("core_start", None) if isinstance(st, dict) else None
-            if core_start is not None and not frozen:
-                view.kappa, view.z = np.array(core_start[0], dtype=float), np.array(core_start[1], dtype=float)
+            _take_core_start(view, st, frozen, only_if_lower=False)
         view.states = states
         has_latent = any(e.latent_names() for e in self.effects)
         converged = False
@@ -200,11 +198,7 @@ class ResponseModel:
                 view.states[i] = eff.update(view.states[i], view, frozen)
                 # an update may also hand the core a better (kappa, z) it found (a per-edge global search that
                 # the Gauss-Newton steps cannot make); taken only when it lowers the error
-                core_start = view.states[i].pop("core_start", None) if isinstance(view.states[i], dict) else None
-                if core_start is not None and not frozen:
-                    k_new, z_new = np.array(core_start[0], dtype=float), np.array(core_start[1], dtype=float)
-                    if view.wsse(kappa=k_new, z=z_new) < view.wsse():
-                        view.kappa, view.z = k_new, z_new
+                _take_core_start(view, view.states[i], frozen, only_if_lower=True)
             new_err = view.wsse()
             dk = float(np.max(np.abs(np.log(np.maximum(np.abs(view.kappa), EPS))
                                      - np.log(np.maximum(np.abs(k_prev), EPS))))) if E else 0.0
@@ -219,3 +213,14 @@ class ResponseModel:
         return ModelFit(model=self, kappa=view.kappa, z=view.z, states=tuple(view.states), Y=np.where(obs, Y, np.nan),
                         weights=W, root_distance=s, iterations=it, converged=converged, n_obs=int(obs.sum()),
                         shrinkage=view.shrinkage)
+
+
+def _take_core_start(view, state, frozen: bool, only_if_lower: bool) -> None:
+    """Pop an effect state's ``"core_start": (kappa, z)`` and, unless ``frozen``, move the core there (with
+    ``only_if_lower``, only when that lowers the weighted SSE)."""
+    core_start = state.pop("core_start", None) if isinstance(state, dict) else None
+    if core_start is None or frozen:
+        return
+    k_new, z_new = np.array(core_start[0], dtype=float), np.array(core_start[1], dtype=float)
+    if not only_if_lower or view.wsse(kappa=k_new, z=z_new) < view.wsse():
+        view.kappa, view.z = k_new, z_new

@@ -63,10 +63,17 @@ def precision_shrinkage(r_hat, used, Wm, den, n, k_hat, tau: float) -> np.ndarra
     n of them) divided by the information ``den``, inflated by the lag-1 autocorrelation of the residuals
     (:func:`rce_gtsam.compliance.log_normal_shrinkage`; the same estimate the rank-1 solver makes)."""
     sigma2 = np.sum(Wm * r_hat * r_hat, axis=1) / np.maximum(n - 1, 1)
-    both = used[:, 1:] & used[:, :-1]
-    lag = np.sum(np.where(both, r_hat[:, 1:] * r_hat[:, :-1], 0.0), axis=1)
-    rho = np.clip(lag / np.maximum(np.sum(r_hat * r_hat, axis=1), 1e-300), 0.0, 0.99)
+    rho = lag1_autocorrelation(r_hat, used)
     return log_normal_shrinkage(sigma2 / np.maximum(den, EPS), rho, k_hat, tau)
+
+
+def lag1_autocorrelation(r: np.ndarray, used: np.ndarray) -> np.ndarray:
+    """(E,) each row's lag-1 autocorrelation of the residuals ``r`` (E, T) over pairs of ``used`` frames (r
+    taken as 0 elsewhere), clipped to [0, 0.99]: the rho of the AR(1) variance inflation (1 + rho) / (1 - rho)."""
+    r = np.where(used, r, 0.0)
+    both = used[:, 1:] & used[:, :-1]
+    lag = np.sum(np.where(both, r[:, 1:] * r[:, :-1], 0.0), axis=1)
+    return np.clip(lag / np.maximum(np.sum(r * r, axis=1), 1e-300), 0.0, 0.99)
 
 
 def z_step(view: FitView) -> None:
