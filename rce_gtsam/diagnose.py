@@ -92,7 +92,7 @@ class CandidateResult:
         return {**_jsonable(self.extra), "effect": self.effect, "heldout_rmse": _num(self.heldout_rmse), "evidence": _num(self.evidence),
                 "improvement_pct": _num(self.improvement_pct), "delta_aic": _num(self.delta_aic),
                 "delta_bic": _num(self.delta_bic), "supported": bool(self.supported),
-                "fit_rmse": _num(self.fit.rmse), "n_params": int(self.fit.n_params),
+                "fit_rmse": _num(self.fit.rmse), "n_params": _count(self.fit.n_params),
                 "fold_mse": [_num(v) for v in self.fold_mse], "statistics": _jsonable(self.statistics),
                 "params": _jsonable(self.fit.effect_summary().get(self.effect, {})),
                 "kappa": [_num(v) for v in self.fit.kappa], "converged": bool(self.fit.converged)}
@@ -166,6 +166,13 @@ class Diagnosis:
 
     def report(self) -> str:
         return render_diagnosis_report(self)
+
+
+def _count(k):
+    """A parameter count for the JSON: an int, or the float effective count of shrunk estimates (the offset's)
+    rather than that count truncated."""
+    k = float(k)
+    return int(k) if k.is_integer() else round(k, 2)
 
 
 def _num(x):

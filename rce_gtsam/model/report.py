@@ -15,7 +15,7 @@ def render_fit_report(fit: "ModelFit", edge_labels=None, max_rows: int = 40) -> 
     out += ["[[Fit Statistics]]",
             f"    # iterations       = {fit.iterations} ({'converged' if fit.converged else 'NOT converged'})",
             f"    # data points      = {fit.n_obs}",
-            f"    # variables        = {fit.n_params}",
+            f"    # variables        = {_count(fit.n_params)}",
             f"    weighted SSE       = {fit.wsse:.6g}",
             f"    RMSE               = {fit.rmse:.4f} deg",
             f"    R-squared          = {fit.r_squared:.4f}",
@@ -44,3 +44,10 @@ def render_fit_report(fit: "ModelFit", edge_labels=None, max_rows: int = 40) -> 
         for k_, v in eff.describe(st).items():
             out.append(f"    {eff.name}.{k_:<20} = {v:.4g}")
     return "\n".join(out)
+
+
+def _count(k) -> str:
+    """A parameter count as read: an integer as such, a fractional effective count (shrunk estimates, e.g. the
+    offset's) to one decimal, marked effective."""
+    k = float(k)
+    return f"{k:.0f}" if k.is_integer() else f"{k:.1f} (effective: shrunk estimates count by their shrinkage)"
