@@ -56,6 +56,7 @@ from . import effects as effects_mod
 from .diagnosis.budget import VarianceBudget, variance_budget
 from .diagnosis.maxt import sign_flip_max_t
 from .diagnosis.noise_floor import NoiseFloor
+from .diagnosis.score_test import cross_fitted_score_test, effect_directions, half_fits
 from .diagnosis.statistics import ResidualContext, autocorrelation
 from .diagnosis.sysid import ResidualAnalysis, residual_analysis
 from .model import ModelFit, ResponseModel, render_fit_report, validate_inputs
@@ -451,6 +452,11 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     stats_all = residual_statistics(base, cands)
     n_c = max(len(cands), 1)
     t_crit = float(stats.t.ppf(1 - alpha / n_c, max(int(used.sum()) - 1, 1)))
+    # an effect with a full-data score test has two tests, each at half its share of alpha (Bonferroni)
+    t_crit_split = float(stats.t.ppf(1 - alpha / (2 * n_c), max(int(used.sum()) - 1, 1)))
+    p_crit_score = alpha / (2 * n_c)
+    # the score test needs two row sets that share no tracked node (their noise is then independent)
+    hfits = half_fits(base_model, Y, W, s, halves) if node_disjoint else None
     ess = effective_sample(base)
     base_ic = effective_ic(base, ess)
     results = []
@@ -473,8 +479,17 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                  "full_data_t": dm["t"], "full_data_dof": dm["dof"], "full_data_batch_frames": dm["batch_frames"]}
         gain_share = (b_rmse ** 2 - rmse ** 2) / total_var if total_var > 0 else 0.0
         extra["heldout_gain_share"] = gain_share
-        supported = bool(np.isfinite(ev) and ev > t_crit
-                         and _earns_its_place(rmse, b_rmse, daic, gain_share, resolution))
+        score = (cross_fitted_score_test(halves, hfits, effect_directions(eff), seed=seed)
+                 if hfits is not None else None)
+        if score is None:
+            significant = bool(np.isfinite(ev) and ev > t_crit)
+        else:
+            extra.update({"score_p": score.p, "score_q": score.q, "score_directions": score.n_directions,
+                          "score_threshold_p": p_crit_score, "threshold_t": t_crit_split,
+                          "score_z": score.z_equivalent})
+            significant = bool((np.isfinite(ev) and ev > t_crit_split) or score.p <= p_crit_score)
+        extra["significant"] = significant
+        supported = bool(significant and _earns_its_place(rmse, b_rmse, daic, gain_share, resolution))
         results.append(CandidateResult(effect=eff.name, fit=full, heldout_rmse=rmse, fold_mse=mse, evidence=ev,
                                        improvement_pct=imp, delta_aic=daic, delta_bic=dbic, supported=supported,
                                        statistics=stats_all.get(eff.name, {}), extra=extra))
@@ -488,6 +503,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     worst_e, worst_f, summary = worst_edges_and_frames(base, labels, block_length, frames)
     settings = {"n_folds": len(blocks), "fold_blocks": blocks, "buffer_frames": gap, "block_length": block_length,
                 "seed": seed, "alpha": alpha, "evidence_threshold_t": t_crit, "resolution": resolution,
+                "evidence_threshold_t_split": t_crit_split, "score_threshold_p": p_crit_score,
                 "heldout_total_variance": total_var, "maxt_critical_t": mt.critical_t, "maxt_flips": mt.n_flips, "prior_strength": prior_strength,
                 "response": response, "edge_halves": [halves[0].tolist(), halves[1].tolist()],
                 "node_disjoint_halves": node_disjoint, "weighted": weights is not None,
@@ -586,8 +602,12 @@ def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str
     error even on effect-free data (6/6 effect-free pipeline seeds, t 3.2-7.5): it measures what estimating z
     from half the rows costs, not what the effect costs, and is no ceiling for a diagnosis.
 
-    Returns {t: the fold-paired t the verdict uses, threshold_t, supported (t above the verdict's threshold and a
-    lower held-out error), full_data_t (:func:`loss_difference_test`), full_data_dof, improvement_pct (held-out
+    For an effect with a full-data score test (:mod:`rce_gtsam.diagnosis.score_test`) the oracle's score test
+    runs along the true signature itself (the noise-free truth of each row set, its rank-1 part projected out),
+    and it is significant like the verdict's candidates: fold t above the split threshold or score p below its.
+
+    Returns {t: the fold-paired t the verdict uses, threshold_t, supported (significant and a
+    lower held-out error), score_p (None without a score test), full_data_t (:func:`loss_difference_test`), full_data_dof, improvement_pct (held-out
     RMSE, baseline -> oracle), fold_mse (per fold, pooled as the candidates' are: pair it with a rival
     candidate's to ask whether even the true form beats that rival), params (the true shared parameters used), knows_z: {t, supported,
     improvement_pct}}."""
@@ -620,13 +640,27 @@ def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str
               int(math.ceil(max([0.0] + [e.memory_frames(x) for e, x in zip(full.model.effects, full.states)]))))
     pred = np.full(Y.shape, np.nan)
     heldout_errors(model, full, base.Y, W, s, blocks, halves, gap, cv_iter=CV_ITER, prediction=pred)
-    out = _scored_test(diag, Y, pred)
+    score = None
+    if eff.score_directions(base.kappa, base.z, s) is not None and st.get("node_disjoint_halves"):
+        # the full-data score test along the true signature: the noise-free truth of each row set (its rank-1
+        # part is projected out by the test), i.e. the direction a test that knew the effect would use
+        score = cross_fitted_score_test(halves, half_fits(base.model, base.Y, W, s, halves),
+                                        lambda i, kappa, z, s_: y[halves[i]][None], seed=st["seed"])
+    if score is None:
+        out = _scored_test(diag, Y, pred)
+    else:
+        out = _scored_test(diag, Y, pred, threshold_t=st["evidence_threshold_t_split"],
+                           score_p=score.p, score_threshold_p=st["score_threshold_p"])
     return {**out, "params": clean.effect_summary().get(effect, {}), "knows_z": knows_z}
 
 
-def _scored_test(diag: "Diagnosis", Y: np.ndarray, prediction: np.ndarray) -> dict:
+def _scored_test(diag: "Diagnosis", Y: np.ndarray, prediction: np.ndarray, threshold_t: float | None = None,
+                 score_p: float | None = None, score_threshold_p: float = 0.0) -> dict:
     """The verdict's fold-paired t (and the Diebold-Mariano t) of a held-out ``prediction`` (E, T, degrees;
-    NaN = not scored) against the baseline's held-out error, over the frames of the folds."""
+    NaN = not scored) against the baseline's held-out error, over the frames of the folds. ``threshold_t``:
+    the fold t threshold (default: the verdict's single-test one); ``score_p``: a full-data score test's p
+    that also makes it significant when <= ``score_threshold_p`` (an effect with both tests, each at half the
+    level)."""
     st = diag.settings
     sq = (Y - prediction) ** 2
     T = Y.shape[1]
@@ -641,15 +675,17 @@ def _scored_test(diag: "Diagnosis", Y: np.ndarray, prediction: np.ndarray) -> di
     dm = loss_difference_test(base, loss, st["block_length"])
     fold_mse = np.array([np.nanmean(loss[a:b]) for a, b in st["fold_blocks"]])
     t = paired_t(diag.baseline_fold_mse, fold_mse[: len(diag.baseline_fold_mse)])
-    crit = st["evidence_threshold_t"]
+    crit = st["evidence_threshold_t"] if threshold_t is None else threshold_t
     both = np.isfinite(base) & np.isfinite(loss)
     imp = 100.0 * (1 - math.sqrt(np.mean(loss[both]) / np.mean(base[both]))) if both.any() else float("nan")
     tv = st.get("heldout_total_variance", 0.0)
     share = float(np.mean(base[both]) - np.mean(loss[both])) / tv if both.any() and tv > 0 else 0.0
-    ok = bool(np.isfinite(t) and t > crit and imp > 0 and share >= st.get("resolution", 0.0))
+    significant = bool((np.isfinite(t) and t > crit) or (score_p is not None and score_p <= score_threshold_p))
+    ok = bool(significant and imp > 0 and share >= st.get("resolution", 0.0))
     # per fold, pooled over the fold's scored entries as the candidates' fold_mse are (to pair with theirs)
     pooled = np.array([sse_t[a:b].sum() / max(cnt_t[a:b].sum(), 1) for a, b in st["fold_blocks"]])
-    return {"t": t, "threshold_t": crit, "supported": ok, "full_data_t": dm["t"], "full_data_dof": dm["dof"],
+    return {"t": t, "threshold_t": crit, "supported": ok, "score_p": score_p, "full_data_t": dm["t"],
+            "full_data_dof": dm["dof"],
             "improvement_pct": imp, "fold_mse": pooled[: len(diag.baseline_fold_mse)]}
 
 

@@ -147,6 +147,17 @@ class Effect:
         Plain floats and arrays; the diagnosis reports it as the candidate's ``statistics``."""
         return {}
 
+    def score_directions(self, kappa: np.ndarray, z: np.ndarray, s: np.ndarray) -> np.ndarray | None:
+        """(J, E, T) the directions in which a *small* amount of this effect moves the rank-1 prediction
+        kappa_e z_t (degrees per unit of each direction's parameter): its derivative at the effect's null value,
+        for the diagnosis' full-data score test (:mod:`rce_gtsam.diagnosis.score_test`). ``z`` is an excitation
+        estimated on other segments (the test's cross-fitting), ``s`` the segments' root distances. None (the
+        default): the effect has no fixed signature (per-segment or per-frame parameters) or its test is not
+        calibrated, and the held-out test alone judges it. Directions the rank-1 model can absorb (a lag common
+        to all segments) are projected out by the test; the conformance test checks that the directions span
+        the change of the effect's own prediction near its null value."""
+        return None
+
     def explain(self, summary: dict, statistics: dict) -> str:
         """One or two sentences with the fitted numbers behind a verdict for this effect. ``summary``: the
         extended fit's ``effect_summary()[name]`` (parameters with standard errors plus :meth:`describe`);

@@ -130,6 +130,10 @@ class Delay(Effect):
     def memory_frames(self, state):
         return abs(scalar(state["params"]["tau"]))
 
+    def score_directions(self, kappa, z, s):
+        """d/dtau of kappa_e z(t - tau s_e) at tau = 0: -kappa_e s_e dz/dt (one direction, degrees per frame)."""
+        return (-kappa[:, None] * s[:, None] * np.gradient(np.asarray(z, float))[None, :])[None]
+
     def describe(self, state):
         return {"tip_lag_frames": scalar(state["params"]["tau"])}
 

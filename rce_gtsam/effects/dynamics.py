@@ -165,6 +165,15 @@ class Dynamics(Effect):
                             diff_step=1e-4, max_nfev=3)
         return self._state(res.x)
 
+    def score_directions(self, kappa, z, s):
+        """Far below resonance the oscillator is 1 - (2 zeta / w_e) d/dt + ((4 zeta^2 - 1) / w_e^2) d2/dt2 + ...;
+        with 1 / w_e and 1 / w_e^2 varying along the branch, to first order in root distance the effect moves
+        kappa_e z_t along kappa_e s_e dz/dt and kappa_e s_e d2z/dt2 (the parts common to all segments are
+        absorbed by z). Two directions (degrees per frame, per frame^2)."""
+        dz = np.gradient(np.asarray(z, float))
+        ks = kappa[:, None] * s[:, None]
+        return np.stack([ks * dz[None, :], ks * np.gradient(dz)[None, :]])
+
     def describe(self, state):
         p = state["params"]
         return {"period_root_frames": float(2 * np.pi / scalar(p["omega_root"])),
