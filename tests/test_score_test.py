@@ -88,3 +88,29 @@ def test_score_test_is_calibrated_on_coloured_noise_and_finds_the_effect(name):
     for sd in (4, 5):
         Y, s, *_ = synth(name, seed=sd, E=12, T=600, noise=0.15)
         assert _p(Y, s, name) <= 0.01
+
+
+def test_diagnose_runs_the_score_test_where_an_effect_has_one_and_splits_alpha():
+    """The diagnosis: delay and dynamics carry score_p; the others do not. Their fold t threshold is the
+    Bonferroni quantile at alpha / (2 C) and their score threshold alpha / (2 C) (C candidates); significant =
+    either test, supported = significant and the held-out error falls. The delay in these matrices is found."""
+    from scipy import stats
+
+    from rce_gtsam.diagnose import diagnose
+    Y, s, *_ = synth("delay", seed=4, E=12, T=600, noise=0.15)
+    d = diagnose(Y, root_distance=s, n_folds=8)
+    C = len(d.candidates)
+    assert d.settings["score_threshold_p"] == pytest.approx(0.05 / (2 * C))
+    assert d.settings["evidence_threshold_t_split"] == pytest.approx(stats.t.ppf(1 - 0.05 / (2 * C), 7))
+    for c in d.candidates:
+        if c.effect in NEAR_NULL:
+            assert 0 < c.extra["score_p"] <= 1 and c.extra["threshold_t"] == d.settings["evidence_threshold_t_split"]
+            assert c.extra["significant"] == bool(c.evidence > c.extra["threshold_t"]
+                                                  or c.extra["score_p"] <= c.extra["score_threshold_p"])
+        else:
+            assert "score_p" not in c.extra
+            assert c.extra["significant"] == bool(c.evidence > d.settings["evidence_threshold_t"])
+        if c.supported:
+            assert c.extra["significant"] and c.heldout_rmse < d.baseline_heldout_rmse
+    assert d.candidate("delay").extra["score_p"] <= 0.005
+    assert d.verdict == "delay"
