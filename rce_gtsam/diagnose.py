@@ -63,7 +63,7 @@ from . import effects as effects_mod
 from .diagnosis.budget import VarianceBudget, variance_budget
 from .diagnosis.maxt import sign_flip_max_t
 from .diagnosis.noise_floor import NoiseFloor
-from .diagnosis.score_test import cross_fitted_score_test, effect_directions, half_fits
+from .diagnosis.score_test import cross_fitted_score_test, effect_directions, half_fits, is_significant
 from .diagnosis.statistics import ResidualContext, autocorrelation
 from .diagnosis.sysid import ResidualAnalysis, residual_analysis
 from .model import ModelFit, ResponseModel, render_fit_report, validate_inputs
@@ -489,12 +489,12 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         score = (cross_fitted_score_test(halves, hfits, effect_directions(eff), seed=seed)
                  if hfits is not None else None)
         if score is None:
-            significant = bool(np.isfinite(ev) and ev > t_crit)
+            significant = is_significant(ev, t_crit, None, p_crit_score)
         else:
             extra.update({"score_p": score.p, "score_q": score.q, "score_directions": score.n_directions,
                           "score_threshold_p": p_crit_score, "threshold_t": t_crit_split,
                           "score_z": score.z_equivalent})
-            significant = bool((np.isfinite(ev) and ev > t_crit_split) or score.p <= p_crit_score)
+            significant = is_significant(ev, t_crit_split, score.p, p_crit_score)
         extra["significant"] = significant
         supported = bool(significant and _earns_its_place(rmse, b_rmse, daic, gain_share, resolution))
         results.append(CandidateResult(effect=eff.name, fit=full, heldout_rmse=rmse, fold_mse=mse, evidence=ev,
@@ -687,8 +687,7 @@ def _scored_test(diag: "Diagnosis", Y: np.ndarray, prediction: np.ndarray, thres
     imp = 100.0 * (1 - math.sqrt(np.mean(loss[both]) / np.mean(base[both]))) if both.any() else float("nan")
     tv = st.get("heldout_total_variance", 0.0)
     share = float(np.mean(base[both]) - np.mean(loss[both])) / tv if both.any() and tv > 0 else 0.0
-    significant = bool((np.isfinite(t) and t > crit) or (score_p is not None and score_p <= score_threshold_p))
-    ok = bool(significant and imp > 0 and share >= st.get("resolution", 0.0))
+    ok = bool(is_significant(t, crit, score_p, score_threshold_p) and imp > 0 and share >= st.get("resolution", 0.0))
     # per fold, pooled over the fold's scored entries as the candidates' fold_mse are (to pair with theirs)
     pooled = np.array([sse_t[a:b].sum() / max(cnt_t[a:b].sum(), 1) for a, b in st["fold_blocks"]])
     return {"t": t, "threshold_t": crit, "supported": ok, "score_p": score_p, "full_data_t": dm["t"],

@@ -33,6 +33,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import stats
 
 from ..compliance import draw_phases, residual_spectrum, surrogate_residuals
 
@@ -53,10 +54,6 @@ class ScoreTest:
     n_surrogates: int
     z_equivalent: float
 
-    def as_dict(self) -> dict:
-        return {"p": self.p, "q": self.q, "n_directions": self.n_directions, "n_surrogates": self.n_surrogates,
-                "z_equivalent": self.z_equivalent}
-
 
 def remove_rank1_tangent(G: np.ndarray, kappa: np.ndarray, z: np.ndarray, W: np.ndarray) -> np.ndarray:
     """G (J, E, T) minus its weighted least-squares fit by a_e z_t + kappa_e b_t (per direction): the part of
@@ -73,6 +70,12 @@ def remove_rank1_tangent(G: np.ndarray, kappa: np.ndarray, z: np.ndarray, W: np.
     a = np.linalg.lstsq(M, r.T, rcond=1e-10)[0].T  # (J, E)
     b = Gk - np.einsum("et,je->jt", wk * z[None], a) / D
     return G - a[:, :, None] * z[None, None] - kappa[None, :, None] * b[:, None, :]
+
+
+def is_significant(t: float, threshold_t: float, score_p: float | None, score_threshold_p: float) -> bool:
+    """The diagnosis' significance rule: the held-out fold t above its threshold, or (for an effect with a score
+    test, ``score_p`` not None) the score test's p at or below its threshold."""
+    return bool((np.isfinite(t) and t > threshold_t) or (score_p is not None and score_p <= score_threshold_p))
 
 
 def effect_directions(effect):
@@ -127,5 +130,4 @@ def cross_fitted_score_test(halves, fits, directions, n_surrogates: int = N_SURR
     q = float(_quadratic(S, Vi))
     qs = _quadratic(Ss, Vi)
     p = float((1 + np.sum(qs >= q)) / (n_surrogates + 1))
-    from scipy import stats
     return ScoreTest(p=p, q=q, n_directions=J, n_surrogates=n_surrogates, z_equivalent=float(stats.norm.isf(p)))
