@@ -124,7 +124,8 @@ class ResponseModel:
         return self.solve(Y, W, s, start=None if init is None else init.warm_start(), precision=precision)
 
     def solve(self, Y, W, s, *, start=None, frozen: bool = False, free=None, max_iter: int | None = None,
-              refit_shared: bool = True, z_ridge: float = 0.0, frame_counts=None, precision=None) -> ModelFit:
+              refit_shared: bool = True, z_ridge: float | None = None, frame_counts=None,
+              precision=None) -> ModelFit:
         """The solver behind :meth:`fit`, with the options that refits and cross-validation need.
 
         ``Y`` (E, T) degrees with NaN = missing, ``W`` (E, T) weights (0 where missing), ``s`` (E,) root
@@ -134,7 +135,12 @@ class ResponseModel:
         ``max_iter``: loop cap (default ``config.n_iter``); ``refit_shared=False`` keeps each effect's shared
         (not per-edge) parameters at their starting values; ``z_ridge``: precision of a zero-mean Gaussian
         prior on each z_t in weighted-SSE units (noise variance / z variance: the posterior mean of z), for z
-        estimated from few edges; ``frame_counts`` (T,): how many times each frame counts in the kappa
+        estimated from few edges; None (default): 0 for models without an operator effect, and for models
+        with one (z seen through a lag or a filter) the rank-1 core's own ratio at the start
+        (:func:`z_prior_precision`) — without it, frames and frequencies of z that the operators barely pass
+        (the last frames behind a lag, high frequencies behind a resonance) are fitted to noise and grow
+        without bound (a 30-frame tip lag: z RMS 0.7 -> 41 deg from 3 end frames, its held-out RMSE +8 %);
+        ``frame_counts`` (T,): how many times each frame counts in the kappa
         step's sample size (a bootstrap resample applied as multiplicities; W already multiplied by them);
         ``precision``: see :meth:`fit`.
 
@@ -169,11 +175,13 @@ class ResponseModel:
             kappa, z, prev_states = start
             kappa, z = np.array(kappa, dtype=float), np.array(z, dtype=float)
         view = FitView(self, Y0, W, s, free, kappa, z, [])
-        view.z_ridge = float(z_ridge)
         view.frame_counts = None if frame_counts is None else np.asarray(frame_counts, dtype=float)
         if start is None and not frozen:
             for _ in range(5):  # a few baseline iterations so that the effects start from a sensible core
                 core_step(view)
+        if z_ridge is None:
+            z_ridge = z_prior_precision(view) if any(e.kind == "operator" for e in self.effects) else 0.0
+        view.z_ridge = float(z_ridge)
         states = []
         for eff in self.effects:
             states.append(prev_states[eff.name] if eff.name in prev_states else eff.init(PartialView(view, states)))
@@ -213,6 +221,20 @@ class ResponseModel:
         return ModelFit(model=self, kappa=view.kappa, z=view.z, states=tuple(view.states), Y=np.where(obs, Y, np.nan),
                         weights=W, root_distance=s, iterations=it, converged=converged, n_obs=int(obs.sum()),
                         shrinkage=view.shrinkage)
+
+
+def z_prior_precision(view) -> float:
+    """The precision of the zero-mean Gaussian prior on each z_t that makes the z step a posterior mean, in
+    weighted-SSE units: (the rank-1 core's mean weighted squared residual) / (mean z^2), both from the
+    view's current kappa and z with no effect applied (0 when z is all zero). Relative to a typical frame's
+    information (sum_e W kappa_e^2) it is ~1 / (E x signal-to-noise): it shrinks well-observed frames by
+    about that fraction and keeps frames the data barely determine near zero."""
+    obs = view.W > 0
+    z2 = float(np.mean(view.z ** 2))
+    if z2 <= 0 or not obs.any():
+        return 0.0
+    r = np.where(obs, view.Y0 - view.kappa[:, None] * view.z[None, :], 0.0)
+    return float(np.sum(view.W * r * r) / obs.sum()) / z2
 
 
 def _take_core_start(view, state, frozen: bool, only_if_lower: bool) -> None:
