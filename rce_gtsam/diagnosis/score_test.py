@@ -88,6 +88,25 @@ def half_fits(model, Y, W, s, halves) -> list:
     return [model.solve(Y[h], W[h], s[h]) for h in halves]
 
 
+def scores_with_null(R: np.ndarray, H: np.ndarray, n_surrogates: int = N_SURROGATES, seed: int = 0):
+    """The scores S_j = sum H_j R of residuals R (E, T; NaN = missing, degrees) along weighted directions
+    H (J, E, T), and the same scores of ``n_surrogates`` multivariate phase surrogates of R (every segment's
+    spectrum and cross-spectrum kept; missing entries stay missing), directions held fixed: (S (J,),
+    S_null (n_surrogates, J))."""
+    mask = np.isfinite(R)
+    J, T = H.shape[0], R.shape[1]
+    Hf = H.reshape(J, -1)
+    S = Hf @ np.where(mask, R, 0.0).ravel()
+    spectrum = residual_spectrum(R)
+    rng = np.random.default_rng(seed)
+    phase, dc = draw_phases(rng, n_surrogates, T)
+    Ss = np.vstack([(surrogate_residuals(spectrum, T, phase[i:i + SURROGATE_BATCH],
+                                         None if dc is None else dc[i:i + SURROGATE_BATCH]) * mask
+                     ).reshape(-1, Hf.shape[1]) @ Hf.T
+                    for i in range(0, n_surrogates, SURROGATE_BATCH)])
+    return S, Ss
+
+
 def _quadratic(S: np.ndarray, Vi: np.ndarray) -> np.ndarray:
     return np.einsum("...i,ij,...j->...", S, Vi, S)
 
@@ -114,17 +133,8 @@ def cross_fitted_score_test(halves, fits, directions, n_surrogates: int = N_SURR
         Rs.append(f.residuals)
     H = np.concatenate(parts, axis=1)            # (J, E_A + E_B, T)
     R = np.vstack(Rs)
-    mask = np.isfinite(R)
-    J, T = H.shape[0], R.shape[1]
-    Hf = H.reshape(J, -1)
-    S = Hf @ np.where(mask, R, 0.0).ravel()
-    spectrum = residual_spectrum(R)
-    rng = np.random.default_rng(seed)
-    phase, dc = draw_phases(rng, n_surrogates, T)
-    Ss = np.vstack([(surrogate_residuals(spectrum, T, phase[i:i + SURROGATE_BATCH],
-                                         None if dc is None else dc[i:i + SURROGATE_BATCH]) * mask
-                     ).reshape(-1, Hf.shape[1]) @ Hf.T
-                    for i in range(0, n_surrogates, SURROGATE_BATCH)])
+    J = H.shape[0]
+    S, Ss = scores_with_null(R, H, n_surrogates, seed)
     V = np.atleast_2d(np.cov(Ss.T))
     Vi = np.linalg.pinv(V, rcond=1e-10)
     q = float(_quadratic(S, Vi))

@@ -158,6 +158,14 @@ class Effect:
         the change of the effect's own prediction near its null value."""
         return None
 
+    def align(self, X: np.ndarray, state: dict, s: np.ndarray) -> np.ndarray | None:
+        """(E, T) the rows of X (degrees; NaN = missing) moved onto the excitation's clock by undoing this effect's
+        operator at ``state`` (``s``: the rows' root distances), NaN where that is undefined; None (the default):
+        the operator cannot be undone exactly. On its clock a model with this effect is the rank-1 model again,
+        whose tangent the tests know how to remove: the diagnosis then asks with
+        :mod:`rce_gtsam.diagnosis.encompassing` whether a richer candidate explains what this one leaves."""
+        return None
+
     def explain(self, summary: dict, statistics: dict) -> str:
         """One or two sentences with the fitted numbers behind a verdict for this effect. ``summary``: the
         extended fit's ``effect_summary()[name]`` (parameters with standard errors plus :meth:`describe`);

@@ -134,6 +134,19 @@ class Delay(Effect):
         """d/dtau of kappa_e z(t - tau s_e) at tau = 0: -kappa_e s_e dz/dt (one direction, degrees per frame)."""
         return (-kappa[:, None] * s[:, None] * np.gradient(np.asarray(z, float))[None, :])[None]
 
+    def align(self, X, state, s):
+        """x_e(t + tau s_e): each row moved back by its lag (the same Catmull-Rom taps as the operator, with the
+        opposite lag). NaN where the source frame lies outside the recording or a tap of it is missing."""
+        tau = scalar(state["params"]["tau"])
+        E, T = X.shape
+        idx, w = self._compute_taps(-tau, T, np.asarray(s, float))
+        ok_in = np.isfinite(X)
+        rows = np.arange(E)[:, None, None]
+        out = np.sum(np.where(ok_in, X, 0.0)[rows, idx] * w, axis=-1)
+        src = np.arange(T)[None, :] + tau * np.asarray(s, float)[:, None]
+        ok = ok_in[rows, idx].all(axis=-1) & (src >= 0) & (src <= T - 1)
+        return np.where(ok, out, np.nan)
+
     def describe(self, state):
         return {"tip_lag_frames": scalar(state["params"]["tau"])}
 

@@ -1,0 +1,108 @@
+"""The encompassing test between two supported candidates (rce_gtsam.diagnosis.encompassing): the delay's
+alignment, the projection, the test's calibration and power on simulator matrices, and how the verdict uses it."""
+
+import types
+
+import numpy as np
+import pytest
+from _effect_data import synth
+
+from rce_gtsam import effects
+from rce_gtsam.diagnose import choose_verdict, diagnose, node_disjoint_split, shared_node_matrix
+from rce_gtsam.diagnosis.encompassing import can_test, encompassing_test, project_out
+from rce_gtsam.model import ResponseModel
+
+
+def test_delay_align_undoes_the_delay():
+    E, T = 5, 300
+    s = np.linspace(0.1, 1.0, E)
+    t = np.arange(T)
+    z = np.sin(2 * np.pi * t / 53) + 0.5 * np.sin(2 * np.pi * t / 97 + 1.0)
+    eff = effects.make("delay")
+    state = {"params": {"tau": np.array(12.3)}, "latents": {}}
+    X = eff.apply(np.repeat(z[None], E, axis=0), state, types.SimpleNamespace(s=s, T=T, E=E))
+    A = eff.align(X, state, s)
+    ok = np.isfinite(A)
+    assert ok[:, 5:T - 15].all()
+    assert not ok[-1, -1]  # the tip's last frame would come from beyond the recording
+    assert np.abs(A - z[None])[ok].max() < 0.03  # two cubic interpolations of a 1.5-amplitude signal
+    X[2, 150] = np.nan  # a missing sample: only the frames whose taps touch it become undefined
+    A = eff.align(X, state, s)
+    assert 1 <= int(np.isnan(A[2, 130:170]).sum()) <= 4 and np.isfinite(A[[0, 1, 3, 4], 130:170]).all()
+
+
+def test_project_out_leaves_nothing_along_the_nuisance():
+    rng = np.random.default_rng(0)
+    G, N = rng.standard_normal((2, 4, 50)), rng.standard_normal((3, 4, 50))
+    W = rng.uniform(0.5, 2.0, (4, 50))
+    P = project_out(G, N, W)
+    assert np.abs(np.einsum("et,jet,ket->jk", W, P, N)).max() < 1e-9
+    assert project_out(G, None, W) is G
+
+
+def _fits(effect, seed, noise):
+    Y, s, *_ = synth(effect, seed=seed, E=12, T=600, noise=noise)
+    W = np.where(np.isfinite(Y), 1.0, 0.0)
+    base = ResponseModel().solve(Y, W, s)
+    fits = [(ResponseModel() + effects.make(n)).solve(Y, W, s, start=(base.kappa.copy(), base.z.copy(), {}),
+                                                      max_iter=40) for n in ("delay", "dynamics")]
+    return Y, W, s, fits
+
+
+def _p(effect, seed, noise):
+    Y, W, s, (delay, dynamics) = _fits(effect, seed, noise)
+    halves = node_disjoint_split(s, shared_node_matrix(s), seed)
+    return encompassing_test(delay, dynamics, Y, W, s, halves, n_surrogates=400, seed=seed, max_iter=40).p
+
+
+def test_the_test_applies_to_a_richer_operator_against_the_delay_only():
+    Y, W, s, (delay, dynamics) = _fits("delay", 0, 0.3)
+    assert can_test(delay, dynamics)
+    assert not can_test(dynamics, delay)  # a resonance cannot be undone exactly
+    offset = (ResponseModel() + effects.make("offset")).solve(Y, W, s)
+    assert not can_test(delay, offset)    # per-segment offsets cannot be carried to the other row set
+
+
+def test_encompassing_test_is_calibrated_on_delay_and_finds_dynamics():
+    """Delay matrices with white + low-pass noise (the dynamics candidate fits them too): p <= 0.05 in at most 3
+    of 12 seeds (measured 2 of 20: 0.040, 0.0075; P(>= 4 of 12) = 0.2 % for a calibrated test). Dynamics matrices
+    at the simulator's default strength, half that noise: p <= 0.005 (measured 0.0025, the smallest 400
+    surrogates give, on seeds 0-2)."""
+    null = [_p("delay", sd, 0.3) for sd in range(12)]
+    assert sum(p <= 0.05 for p in null) <= 3, null
+    for sd in (0, 1, 2):
+        assert _p("dynamics", sd, 0.15) <= 0.005
+
+
+def _cand(name, rmse, k_eff, fold, enc=None):
+    extra = {"free_series": 0, "k_eff": k_eff}
+    if enc is not None:
+        extra["encompassing_p"] = enc
+    return types.SimpleNamespace(effect=name, supported=True, heldout_rmse=rmse, fold_mse=np.asarray(fold),
+                                 extra=extra, improvement_pct=1.0)
+
+
+def test_choose_verdict_lets_the_encompassing_test_decide_between_a_richer_and_a_simpler_candidate():
+    fold = np.array([1.0, 1.1, 0.9, 1.2, 1.0, 0.95, 1.05, 1.1])
+    simple = _cand("delay", 1.01, 20, fold * np.array([1.03, 0.99, 1.02, 1.0, 0.98, 1.04, 1.01, 1.0]))
+    # the richer one predicts what the simpler one leaves: it is the verdict although the fold t is small
+    rich = _cand("dynamics", 1.0, 30, fold, enc={"delay": 0.001})
+    verdict, par = choose_verdict([rich, simple], t_crit=3.0, p_pair=0.005)
+    assert verdict == "dynamics" and par["encompassing_p"] == {"delay": 0.001}
+    # it predicts nothing there: parsimony names the simpler one
+    rich = _cand("dynamics", 1.0, 30, fold, enc={"delay": 0.2})
+    verdict, par = choose_verdict([rich, simple], t_crit=3.0, p_pair=0.005)
+    assert verdict == "delay" and par["preferred_simpler"] == "delay"
+    # without a threshold (the max-T variant) the fold t decides, as for pairs the test does not cover
+    assert choose_verdict([rich, simple], t_crit=3.0)[0] == "delay"
+
+
+def test_diagnose_runs_it_when_dynamics_is_lowest_and_delay_also_supported():
+    Y, s, *_ = synth("dynamics", seed=1, E=12, T=600, noise=0.15)
+    d = diagnose(Y, root_distance=s, n_folds=8)
+    assert d.candidate("delay").supported and d.candidate("dynamics").supported
+    assert d.settings["encompassing_threshold_p"] == d.settings["score_threshold_p"]
+    assert d.settings["parsimony"]["encompassing_p"]["delay"] <= 0.005
+    assert d.candidate("dynamics").extra["encompassing_z"]["delay"] > 0
+    assert d.verdict == "dynamics"
+    assert "encompassing test p" in d.explanation
