@@ -55,6 +55,24 @@ def test_effect_fits_owns_evidence_and_explains(name):
     assert residual_statistics(base, [name])[name].keys() == stats.keys()
 
 
+@pytest.mark.parametrize("name", BUILTIN)
+def test_an_effect_that_can_be_undone_undoes_its_own_operator(name):
+    """Effect.align (optional; the encompassing test needs it of the simpler candidate): where it is not None,
+    it moves the effect's own fitted operator's output back onto the excitation's clock."""
+    from rce_gtsam.simulate import EFFECT_DEFAULTS
+    Y, s, k, z, y = synth(name, seed=3, E=10, T=400, noise=0.05, strength=3 * EFFECT_DEFAULTS[name])
+    ext = (ResponseModel() + effects.make(name)).fit(Y, root_distance=s)
+    eff, state = ext.model.effects[0], ext.states[0]
+    if eff.align(np.zeros((1, 4)), state, np.zeros(1)) is None:
+        return
+    assert eff.kind == "operator"
+    X = eff.apply(np.repeat(ext.z[None], len(s), axis=0), state, ext.view())
+    A = eff.align(X, state, s)
+    ok = np.isfinite(A)
+    assert ok.mean() > 0.8
+    assert np.abs(A - ext.z[None])[ok].max() < 0.05 * np.abs(ext.z).max()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", BUILTIN)
 def test_diagnosis_names_each_effect_on_clean_data(name):
