@@ -65,7 +65,7 @@ def can_test(simple_fit, richer_fit) -> bool:
     eff = simple_fit.model.effects[-1] if simple_fit.model.effects else None
     if eff is None or len(simple_fit.model.effects) != 1:
         return False
-    E, T = simple_fit.Y.shape
+    E = simple_fit.Y.shape[0]
     if eff.align(np.zeros((1, 2)), simple_fit.states[-1], np.zeros(1)) is None:
         return False
     return all(e.kind == "operator" and not any(p.per_edge for p in e.parameters(E))
