@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..model.view import FitView
-from .score_test import N_SURROGATES, remove_rank1_tangent, scores_with_null
+from .score_test import N_SURROGATES, on_scale_of, remove_rank1_tangent, scores_with_null
 
 
 @dataclass(frozen=True)
@@ -121,9 +121,7 @@ def encompassing_test(simple_fit, richer_fit, Y, W, s, halves, n_surrogates: int
                                                   state, sh)), 0.0)
         Wa = np.maximum(Wa, 0.0)
         Ga = np.nan_to_num(eff.align(G, state, sh))[None]
-        zo = fits["simple"][o].z
-        z_other = zo * (float(np.dot(zo, f.z)) / max(float(np.dot(zo, zo)), 1e-300))  # on f's scale
-        own = eff.score_directions(f.kappa, z_other, sh)
+        own = eff.score_directions(f.kappa, on_scale_of(fits["simple"][o].z, f.z), sh)
         N = None if own is None else remove_rank1_tangent(np.asarray(own, float), f.kappa, f.z, Wa)
         parts.append(Wa[None] * project_out(remove_rank1_tangent(Ga, f.kappa, f.z, Wa), N, Wa))
         Rs.append(R)

@@ -83,6 +83,12 @@ def effect_directions(effect):
     return lambda i, kappa, z, s: effect.score_directions(kappa, z, s)
 
 
+def on_scale_of(z_other: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """``z_other`` (T,) rescaled by its least-squares gain onto ``z`` (T,): another row set's excitation on this
+    set's scale (each set's fit fixes the kappa-z gauge its own way)."""
+    return z_other * (float(np.dot(z_other, z)) / max(float(np.dot(z_other, z_other)), 1e-300))
+
+
 def half_fits(model, Y, W, s, halves) -> list:
     """The baseline ``model`` fitted on each row set of ``halves`` alone (the test's cross-fitting)."""
     return [model.solve(Y[h], W[h], s[h]) for h in halves]
@@ -123,7 +129,7 @@ def cross_fitted_score_test(halves, fits, directions, n_surrogates: int = N_SURR
     parts, Rs = [], []
     for i in (0, 1):
         f, o = fits[i], fits[1 - i]
-        z_other = o.z * (float(np.dot(o.z, f.z)) / max(float(np.dot(o.z, o.z)), 1e-300))  # on f's scale
+        z_other = on_scale_of(o.z, f.z)
         G = directions(i, f.kappa, z_other, f.root_distance)
         if G is None:
             return None
