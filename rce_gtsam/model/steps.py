@@ -137,10 +137,19 @@ def profiled_sse(view: FitView, index: int, state: dict) -> float:
 Z_RIDGE = 1e-3
 
 
+def _unseen_to_prior_mean(view: FitView, dz: np.ndarray, unseen: np.ndarray) -> None:
+    """dz that moves the ``unseen`` frames' z to the prior mean 0 when the z prior is on (in place)."""
+    if view.z_ridge > 0:
+        dz[unseen] = -view.z[unseen]
+
+
 def operator_z_solve(view: FitView, C: np.ndarray, r: np.ndarray, free: np.ndarray) -> np.ndarray:
     """Gauss-Newton step dz of  min sum_e,t W (r - C L_e dz)^2  over the free frames, operators present.
 
-    Frames whose z no observation touches (through the operators) are not free: nothing determines them.
+    Frames whose z no observation touches (through the operators: past a lag's reach at the recording's end)
+    are not solved for: nothing in the data determines them. With the z prior on (``view.z_ridge`` > 0) they
+    are set to its mean, 0 (their posterior mean); left alone they would only be rescaled by every kappa step's
+    normalisation, which compounded to z = -146 deg on a 4-row delay fit whose data lie within +-3 deg.
     Direct path: a single operator that exposes ``sparse_operator`` (delay) gives a sparse, banded normal
     matrix, solved exactly with a sparse LU. Otherwise preconditioned conjugate gradients, with the
     circulant approximation of the normal matrix (sum_e mean(D_e) |H_e(f)|^2, from the operators'
@@ -161,7 +170,9 @@ def operator_z_solve(view: FitView, C: np.ndarray, r: np.ndarray, free: np.ndarr
         A = (L.T @ sparse.diags(D.ravel()) @ L).tocsc()
         diag = A.diagonal()
         med = max(float(np.median(diag[diag > 0])) if (diag > 0).any() else 1.0, EPS)
-        idx = np.flatnonzero(free & (diag > 1e-9 * med))
+        seen = diag > 1e-9 * med
+        idx = np.flatnonzero(free & seen)
+        _unseen_to_prior_mean(view, dz, free & ~seen)
         if idx.size == 0:
             return dz
         Aff = A[idx][:, idx] + sparse.identity(idx.size, format="csc") * (1e-9 * med + lam)
@@ -169,7 +180,9 @@ def operator_z_solve(view: FitView, C: np.ndarray, r: np.ndarray, free: np.ndarr
         return dz
     support = np.abs(view.transform_T(D))
     med = max(float(np.median(support[support > 0])) if (support > 0).any() else 1.0, EPS)
-    idx = np.flatnonzero(free & (support > 1e-9 * med))
+    seen = support > 1e-9 * med
+    idx = np.flatnonzero(free & seen)
+    _unseen_to_prior_mean(view, dz, free & ~seen)
     if idx.size == 0:
         return dz
     ridge = Z_RIDGE * med + lam
