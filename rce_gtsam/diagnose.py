@@ -494,7 +494,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         else:
             extra.update({"score_p": score.p, "score_q": score.q, "score_directions": score.n_directions,
                           "score_threshold_p": p_crit_score, "threshold_t": t_crit_split,
-                          "score_z": score.z_equivalent})
+                          "score_z": score.z_equivalent, "score_statistic": score.statistic})
             significant = is_significant(ev, t_crit_split, score.p, p_crit_score)
         extra["significant"] = significant
         supported = bool(significant and _earns_its_place(rmse, b_rmse, daic, gain_share, resolution))
@@ -652,7 +652,7 @@ def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str
     pred = np.full(Y.shape, np.nan)
     heldout_errors(model, full, base.Y, W, s, blocks, halves, gap, cv_iter=CV_ITER, prediction=pred)
     score = None
-    if eff.score_directions(base.kappa, base.z, s) is not None and st.get("node_disjoint_halves"):
+    if eff.test_directions(base.kappa, base.z, s) is not None and st.get("node_disjoint_halves"):
         # the full-data score test along the true signature: the noise-free truth of each row set (its rank-1
         # part is projected out by the test), i.e. the direction a test that knew the effect would use
         score = cross_fitted_score_test(halves, half_fits(base.model, base.Y, W, s, halves),

@@ -3,11 +3,16 @@
 The held-out fold test (:func:`rce_gtsam.diagnose.diagnose`) compares 16 fold-level error ratios; its power is
 set by their number, whatever the length of the recording. This test uses every frame at once.
 
-* **Statistic.** An effect that is small moves the rank-1 prediction kappa_e z_t in a few known directions
-  G_j (E, T): its derivative at the effect's null value (:meth:`~rce_gtsam.effects.Effect.score_directions`;
-  a delay tau s_e moves it by -tau kappa_e s_e dz/dt). The score S_j = sum_{e,t} W_et R_et G_j,et of the
+* **Statistic.** An effect moves the rank-1 prediction kappa_e z_t in known directions G_j (E, T)
+  (:meth:`~rce_gtsam.effects.Effect.test_directions`). The score S_j = sum_{e,t} W_et R_et G_j,et of the
   baseline's residuals R along each direction (the part of G_j the baseline could absorb by changing kappa
-  or z is projected out first) is large when the effect is there; Q = S' V^-1 S over the J directions.
+  or z is projected out first) is large when the effect is there. Two ways to combine them:
+  ``"quadratic"``, Q = S' V^-1 S over J directions that are the derivatives of J parameters at the effect's
+  null value (dynamics: kappa_e s_e dz/dt and kappa_e s_e d2z/dt2); ``"max"``, the largest standardised score
+  S_j / sd_j over J values of one parameter (the delay scans its tip lag, kappa_e z(t - tau s_e): the
+  derivative at tau = 0 points elsewhere once the lag is a sizeable part of the sway's period).
+* **Clock.** A rank-1 excitation is a blend of the segments' responses, in phase near their weighted
+  centroid of root distance (:func:`excitation_clock`); directions get the root distances measured from there.
 * **Cross-fitting.** G is built from an excitation z estimated on *other* segments than the R it is paired
   with: the rows are split into two sets that share no tracked node (:func:`rce_gtsam.diagnose.node_disjoint_split`),
   each set's baseline is fitted on its own, and set A's residuals are paired with directions from set B's
@@ -43,16 +48,20 @@ SURROGATE_BATCH = 250  # surrogates drawn and scored at a time (memory: batch x 
 
 @dataclass(frozen=True)
 class ScoreTest:
-    """One effect's full-data score test. p: share of surrogates whose Q reaches the observed (with the
-    observed itself counted, so p >= 1 / (n_surrogates + 1)); q: the observed quadratic form S' V^-1 S;
-    n_directions: J; n_surrogates: surrogates drawn; z_equivalent: the standard-normal quantile of 1 - p
-    (a size the report can compare across effects)."""
+    """One effect's full-data score test. p: share of surrogates whose statistic reaches the observed (with
+    the observed itself counted, so p >= 1 / (n_surrogates + 1)); q: the observed statistic (``"quadratic"``:
+    S' V^-1 S; ``"max"``: the largest standardised score); n_directions: J; n_surrogates: surrogates drawn;
+    z_equivalent: the standard-normal quantile of 1 - p (a size the report can compare across effects);
+    statistic: how the J scores were combined; peak: for ``"max"``, the index of the direction with the
+    largest score (for the delay, which lag of :meth:`~rce_gtsam.effects.Delay.scan_lags`), else None."""
 
     p: float
     q: float
     n_directions: int
     n_surrogates: int
     z_equivalent: float
+    statistic: str = "quadratic"
+    peak: int | None = None
 
 
 def remove_rank1_tangent(G: np.ndarray, kappa: np.ndarray, z: np.ndarray, W: np.ndarray) -> np.ndarray:
@@ -79,8 +88,18 @@ def is_significant(t: float, threshold_t: float, score_p: float | None, score_th
 
 
 def effect_directions(effect):
-    """The ``directions`` argument of :func:`cross_fitted_score_test` for an effect."""
-    return lambda i, kappa, z, s: effect.score_directions(kappa, z, s)
+    """The ``directions`` argument of :func:`cross_fitted_score_test` for an effect (its
+    :meth:`~rce_gtsam.effects.Effect.test_directions`)."""
+    return lambda i, kappa, z, s: effect.test_directions(kappa, z, s)
+
+
+def excitation_clock(fit) -> float:
+    """The root distance at which a rank-1 fit's excitation z is in phase with its segments: their root
+    distances' mean weighted by each segment's share of z's information (sum_t W kappa_e^2). Under a lag that
+    grows along the branch, z is a blend of the segments' lagged responses weighted so."""
+    info = np.sum(np.where(np.isfinite(fit.residuals), fit.weights, 0.0), axis=1) * fit.kappa ** 2
+    total = float(np.sum(info))
+    return float(np.sum(info * fit.root_distance) / total) if total > 0 else 0.0
 
 
 def on_scale_of(z_other: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -123,16 +142,20 @@ def cross_fitted_score_test(halves, fits, directions, n_surrogates: int = N_SURR
 
     halves: (rows_A, rows_B) index arrays; fits: the baseline fitted on each set alone (``ModelFit`` with
     kappa, z, residuals, weights, root_distance); directions: a function (set index 0/1, kappa, z_other, s) ->
-    (J, E_set, T) array or None — for an effect its :meth:`~rce_gtsam.effects.Effect.score_directions` (see
-    :func:`effect_directions`); for the benchmark's oracle the noise-free truth of the set's rows. Returns
-    None when there are no directions."""
+    (G (J, E_set, T), statistic) or a bare G (quadratic) or None, with s the set's root distances measured from
+    z_other's clock (:func:`excitation_clock`) — for an effect its
+    :meth:`~rce_gtsam.effects.Effect.test_directions` (see :func:`effect_directions`); for the benchmark's
+    oracle the noise-free truth of the set's rows. Returns None when there are no directions."""
     parts, Rs = [], []
+    statistic = "quadratic"
     for i in (0, 1):
         f, o = fits[i], fits[1 - i]
         z_other = on_scale_of(o.z, f.z)
-        G = directions(i, f.kappa, z_other, f.root_distance)
+        G = directions(i, f.kappa, z_other, f.root_distance - excitation_clock(o))
         if G is None:
             return None
+        if isinstance(G, tuple):
+            G, statistic = G
         ok = np.isfinite(f.residuals)
         W = np.where(ok, f.weights, 0.0)
         parts.append(W[None] * remove_rank1_tangent(np.asarray(G, float), f.kappa, f.z, W))
@@ -141,9 +164,16 @@ def cross_fitted_score_test(halves, fits, directions, n_surrogates: int = N_SURR
     R = np.vstack(Rs)
     J = H.shape[0]
     S, Ss = scores_with_null(R, H, n_surrogates, seed)
-    V = np.atleast_2d(np.cov(Ss.T))
-    Vi = np.linalg.pinv(V, rcond=1e-10)
-    q = float(_quadratic(S, Vi))
-    qs = _quadratic(Ss, Vi)
+    peak = None
+    if statistic == "max":
+        sd = np.maximum(Ss.std(axis=0), 1e-300)
+        peak = int(np.argmax(S / sd))
+        q, qs = float(S[peak] / sd[peak]), np.max(Ss / sd, axis=1)
+    elif statistic == "quadratic":
+        Vi = np.linalg.pinv(np.atleast_2d(np.cov(Ss.T)), rcond=1e-10)
+        q, qs = float(_quadratic(S, Vi)), _quadratic(Ss, Vi)
+    else:
+        raise ValueError(f"score test statistic {statistic!r}: expected 'quadratic' or 'max'")
     p = float((1 + np.sum(qs >= q)) / (n_surrogates + 1))
-    return ScoreTest(p=p, q=q, n_directions=J, n_surrogates=n_surrogates, z_equivalent=float(stats.norm.isf(p)))
+    return ScoreTest(p=p, q=q, n_directions=J, n_surrogates=n_surrogates, z_equivalent=float(stats.norm.isf(p)),
+                     statistic=statistic, peak=peak)

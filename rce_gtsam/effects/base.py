@@ -158,6 +158,15 @@ class Effect:
         the change of the effect's own prediction near its null value."""
         return None
 
+    def test_directions(self, kappa: np.ndarray, z: np.ndarray, s: np.ndarray):
+        """``(G, statistic)`` for the diagnosis' full-data score test, or None (no test): directions G (J, E, T)
+        and how their scores combine. ``"quadratic"``: S' V^-1 S, the J directions of J parameters tested at
+        once. ``"max"``: the largest standardised score, for J values of one parameter (a scan; the same
+        surrogates calibrate the maximum). ``s``: the segments' root distances measured from the excitation's
+        clock (where ``z`` is in phase with the segments). Default: :meth:`score_directions`, quadratic."""
+        G = self.score_directions(kappa, z, s)
+        return None if G is None else (G, "quadratic")
+
     def align(self, X: np.ndarray, state: dict, s: np.ndarray) -> np.ndarray | None:
         """(E, T) the rows of X (degrees; NaN = missing) moved onto the excitation's clock by undoing this effect's
         operator at ``state`` (``s``: the rows' root distances), NaN where that is undefined; None (the default):
