@@ -63,14 +63,20 @@ def sample_patch(img, cx, cy, out):
     w01 = a * (1 - b)
     w10 = (1 - a) * b
     w11 = a * b
-    inside = ix >= 0 and iy >= 0 and ix + tw < W and iy + th < H
+    if ix >= 0 and iy >= 0 and ix + tw < W and iy + th < H:
+        # inside: unsigned flat indices, so no negative-index wraparound per tap (same taps, same arithmetic)
+        flat = img.ravel()
+        one, uw = np.uint64(1), np.uint64(W)
+        for i in range(th):
+            o = np.uint64((iy + i) * W + ix)
+            for j in range(tw):
+                out[i, j] = (w00 * flat[o] + w01 * flat[o + one] + w10 * flat[o + uw] + w11 * flat[o + uw + one])
+                o += one
+        return
     for i in range(th):
         for j in range(tw):
-            if inside:
-                r0, r1, c0, c1 = iy + i, iy + i + 1, ix + j, ix + j + 1
-            else:
-                r0, r1 = _clamp(iy + i, H), _clamp(iy + i + 1, H)
-                c0, c1 = _clamp(ix + j, W), _clamp(ix + j + 1, W)
+            r0, r1 = _clamp(iy + i, H), _clamp(iy + i + 1, H)
+            c0, c1 = _clamp(ix + j, W), _clamp(ix + j + 1, W)
             out[i, j] = (w00 * img[r0, c0] + w01 * img[r0, c1] + w10 * img[r1, c0] + w11 * img[r1, c1])
 
 
@@ -239,7 +245,7 @@ def _window_sums(img, a, m, m2, n):
     th, tw = a.shape
     H, W = img.shape
     rh, rw = H - th + 1, W - tw + 1
-    off = np.empty(n, np.int64)  # flat offset of each weighted pixel in a window
+    off = np.empty(n, np.uint64)  # flat offset of each weighted pixel in a window (unsigned: no wraparound code)
     fa = np.empty(n)
     fm = np.empty(n)
     fm2 = np.empty(n)
@@ -253,7 +259,7 @@ def _window_sums(img, a, m, m2, n):
     out = np.empty((4, rh, rw))
     for v in range(rh):
         for u in range(rw):
-            base = v * W + u
+            base = np.uint64(v * W + u)
             s_a = s_m = s_m2 = s_i2 = 0.0
             for k in range(n):
                 p = float(flat[base + off[k]])
@@ -334,6 +340,7 @@ def _segment_sums(src, W, ox0, oy0, x0, y0, ex, ey, uu, vv, strip, round_out, ou
     A, V, U = ex.shape[0], vv.shape[0], uu.shape[0]
     n = V * U
     fx0, fy0 = np.float32(x0), np.float32(y0)
+    one, uw = np.uint64(1), np.uint64(W)  # unsigned flat indices: no negative-index wraparound code per tap
     cu = np.empty(U, np.float32)
     su = np.empty(U, np.float32)
     for a in range(A):
@@ -351,9 +358,9 @@ def _segment_sums(src, W, ox0, oy0, x0, y0, ex, ey, uu, vv, strip, round_out, ou
                 my = float((su[iu] + cv) + fy0)
                 ix, iy = int(mx), int(my)
                 fx, fy = mx - ix, my - iy
-                o = (iy - oy0) * W + (ix - ox0)
-                p = ((1 - fx) * (1 - fy) * src[o] + fx * (1 - fy) * src[o + 1]
-                     + (1 - fx) * fy * src[o + W] + fx * fy * src[o + W + 1])
+                o = np.uint64((iy - oy0) * W + (ix - ox0))
+                p = ((1 - fx) * (1 - fy) * src[o] + fx * (1 - fy) * src[o + one]
+                     + (1 - fx) * fy * src[o + uw] + fx * fy * src[o + uw + one])
                 if round_out:
                     p = math.floor(p + 0.5)
                 p -= 128.0
@@ -475,6 +482,16 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
     wacc_all = np.empty((k, k), np.float32)
     cos_t = np.cos(thetas)
     sin_t = np.sin(thetas)
+    # every sample lies within ``reach`` of the node (the crop's corner, rotated, plus the bilinear tap): when the
+    # band crops and the image hold that disc, the taps need no bounds checks (unsigned flat indices, no clamping;
+    # the same taps and arithmetic)
+    H, W = gray0.shape
+    reach = c * math.sqrt(2.0) + 2.0
+    band_in = reach < cs - 1.0
+    img_in = px - reach >= 0 and py - reach >= 0 and px + reach < W - 1 and py + reach < H - 1
+    fb = bands.ravel()
+    fg = gray0.ravel()
+    one, ubs, uw = np.uint64(1), np.uint64(bs), np.uint64(W)
     for y in range(k):
         for x in range(k):
             dx, dy = x - c, y - c
@@ -490,20 +507,36 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
                 jx, jy = int(fbx), int(fby)
                 ax, ay = bx - fbx, by - fby
                 w = 0.0
-                if jy >= 0 and jy < bs:
-                    if jx >= 0 and jx < bs:
-                        w += (1 - ax) * (1 - ay) * bands[s, jy, jx]
-                    if jx + 1 >= 0 and jx + 1 < bs:
-                        w += ax * (1 - ay) * bands[s, jy, jx + 1]
-                if jy + 1 >= 0 and jy + 1 < bs:
-                    if jx >= 0 and jx < bs:
-                        w += (1 - ax) * ay * bands[s, jy + 1, jx]
-                    if jx + 1 >= 0 and jx + 1 < bs:
-                        w += ax * ay * bands[s, jy + 1, jx + 1]
+                if band_in:
+                    o = np.uint64((s * bs + jy) * bs + jx)
+                    w += (1 - ax) * (1 - ay) * fb[o]
+                    w += ax * (1 - ay) * fb[o + one]
+                    w += (1 - ax) * ay * fb[o + ubs]
+                    w += ax * ay * fb[o + ubs + one]
+                else:
+                    if jy >= 0 and jy < bs:
+                        if jx >= 0 and jx < bs:
+                            w += (1 - ax) * (1 - ay) * bands[s, jy, jx]
+                        if jx + 1 >= 0 and jx + 1 < bs:
+                            w += ax * (1 - ay) * bands[s, jy, jx + 1]
+                    if jy + 1 >= 0 and jy + 1 < bs:
+                        if jx >= 0 and jx < bs:
+                            w += (1 - ax) * ay * bands[s, jy + 1, jx]
+                        if jx + 1 >= 0 and jx + 1 < bs:
+                            w += ax * ay * bands[s, jy + 1, jx + 1]
                 wf = np.float32(w)
                 if wf == 0 and s != bg:
                     continue  # adds exactly nothing: skip the image sample (most of a patch is off every band)
-                g = _bilinear(gray0, px + ox, py + oy)  # image: replicated border
+                gx, gy = px + ox, py + oy
+                if img_in:
+                    fgx, fgy = math.floor(gx), math.floor(gy)
+                    ix, iy = int(fgx), int(fgy)
+                    fx, fy = gx - fgx, gy - fgy
+                    o = np.uint64(iy * W + ix)
+                    g = ((1 - fx) * (1 - fy) * fg[o] + fx * (1 - fy) * fg[o + one]
+                         + (1 - fx) * fy * fg[o + uw] + fx * fy * fg[o + uw + one])
+                else:
+                    g = _bilinear(gray0, gx, gy)  # image: replicated border
                 if round_out:
                     g = math.floor(g + 0.5)
                 gf = np.float32(g)
