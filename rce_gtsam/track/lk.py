@@ -478,9 +478,9 @@ class LKTracker:
         branch. A pixel is kept when its normalised distance is below 3.41 = sqrt(chi2_2(0.997)), the
         two-dimensional 3-sigma bound: 99.7 % of branch pixels are kept if the spread is Gaussian.
         """
-        img = rgb.astype(np.float32)
-        s = img.sum(axis=2) + 1e-3
-        chroma = np.stack([img[..., 0] / s, img[..., 1] / s], axis=2)
+        from . import match_kernels  # the per-pixel float32 arithmetic of numpy, compiled (10x faster, same values)
+
+        chroma = match_kernels.chromaticity(rgb)
         samples = []
         for p, c in graph.edges:
             d = q[c] - q[p]
@@ -492,8 +492,7 @@ class LKTracker:
         smp = np.concatenate(samples, axis=0)
         med = np.median(smp, axis=0)
         spread = np.maximum(1.4826 * np.median(np.abs(smp - med), axis=0), 0.01)
-        dist = np.sqrt((((chroma - med) / spread) ** 2).sum(axis=2))
-        return (dist < 3.41).astype(np.float32)
+        return match_kernels.chroma_mask(chroma, med, spread, 3.41)
 
     def _anchor_image(self, gray: np.ndarray) -> np.ndarray:
         """The image every measurement against frame 0 is made in (see ``LKConfig.anchor_highpass_px``)."""
