@@ -124,8 +124,10 @@ map, peak and second peak, forward LK, forward-backward LK), the articulated tem
 search's sampling and correlation are now compiled kernels (:mod:`~rce_gtsam.track.match_kernels`, numba),
 each one call per node doing the same arithmetic as the OpenCV/numpy code it replaced (equal to float
 rounding; the kernels are tested against OpenCV). What is left in Python is the per-node decision logic;
-the two ``calcOpticalFlowPyrLK`` calls (all points at once, forward and backward) are ~1 ms of a frame, most
-of it building the pyramids. Frames are decoded and converted to grey in a thread
+the two ``calcOpticalFlowPyrLK`` calls (all points at once, forward and backward) are ~1.5 ms of a frame, most
+of it building the pyramids (each call builds both images' pyramids again; OpenCV's Python binding cannot take
+the pyramids of ``cv2.buildOpticalFlowPyramid``, opencv issue 4777, so they cannot be built once per frame).
+Frames are decoded and converted to grey in a thread
 (:func:`~rce_gtsam.track.sources.prefetched`). With ``LKConfig.threads=2`` the refinement pass runs in a
 second thread, node by node right behind the first pass, and the tracks are bit-identical (tested); it is
 off by default because it was slower on the shared machine (the per-node Python holds the GIL, and a re-match
@@ -154,6 +156,29 @@ compiled kernels the refinement pass is a sixth of the time, and on seed 0 a 0.0
 a third of the re-matches). Cutting the search crop at an integer position or as float (no uint8 rounding), or
 the frame-0 template without rounding, changed the 99th percentile on 400 frames of seeds 1 / 3 by -0.24 to
 +0.06 px, i.e. within the figures' resolution, and was not kept.
+Against revision 7cf087e (profiled on the 120-frame seed-0 render: 8.8 ms a frame, of which ~2.3 ms Python and
+numpy glue around the kernels, 3 ms the node measurement, 1.8 ms the segment search, 1.5 ms the two pyramidal LK
+calls, and 0.3 ms the frame-0 set-up spread over the clip): the segment search is one compiled call (angles,
+correlations, the peak and its parabola, the child's position), its taps read a float64 copy of the disc the
+strip sweeps with the border branch hoisted out of the loop; the match returns frame-pixel scalars instead of
+an array the caller shifts; the per-node constants (incident segments, band stacks, frame-0 directions) are
+built once; the in-image taps of the window sums, the segment sums, the articulated template and the LK patch
+sampler use unsigned flat indices, so no negative-index wraparound code runs per tap (the window sums' vectorised
+reduction is unchanged: the correlation maps were bit-identical on 12,000 captured calls); and the frame-0
+chromaticity and colour mask are compiled (numpy's float32 arithmetic, 27 ms of every ``track`` at 640x480).
+Every output is bit-identical: the tracks, visibility, sigmas and counters on the accuracy clips (seeds 0-4) and,
+on 120 frames of seed 0, with ``threads=2``, without a graph, with ``anchor_highpass_px=4``,
+``segment_fallback`` and without rotated or masked templates. Measured in one ``bench_track.py --baseline
+7cf087e`` run (best of 5, the machine's load average 2.3-2.5 from another process): tracking alone 144.5 ->
+190.1 frames/s wall (6.92 -> 5.26 ms/frame), 117 -> 146 frames/s CPU time; straight from the mp4 136 -> 177
+frames/s; with ``threads=2`` 205 frames/s alone and 189 from the mp4 (it now wins on an idle second core, but
+costs CPU time, 131 frames/s, and lost under load before; still off by default). In alternating processes under
+heavier load (another process taking 1.3 of the 2 cores, load average 3-5; 9 runs each): best 125 -> 170 frames/s
+alone (median 118 -> 166), from the mp4 best 111 -> 146 (median 104 -> 129): the decode thread then competes for
+the cores. Where a frame goes now (profiled, 6.3 ms): the node measurement 2.2 ms (articulated template 0.7,
+correlation map 1.0, forward and backward LK 0.5), the segment search 1.4 ms, the pyramidal LK 1.45 ms, Python
+and ``getRectSubPix`` 0.8 ms, the set-up 0.1 ms (13 ms a clip). The first ``track`` of a process loads the
+compiled kernels from numba's cache (0.5 s); they are compiled once per machine and change (16 s, measured).
 
 Limits: the template is rotated, not scaled (a branch that moves a lot toward the camera changes scale);
 a node hidden from frame 0 onwards cannot be tracked.
@@ -230,7 +255,9 @@ class LKConfig:
         ``threads=1``, the default, which runs the two passes one after the other). The compiled kernels and
         OpenCV release the GIL, but the per-node Python between them does not, and a re-match is short (a
         2-px search): on the shared 2-core machine (load 4-6) two threads were 0.75-0.98x as fast as one
-        (``benchmarks/bench_track.py``, ``current2`` row), so one thread is the default.
+        (``benchmarks/bench_track.py``, ``current2`` row), so one thread is the default. With less Python per node
+        (see the module docstring's Speed paragraph) two threads were 1.08x as fast alone and 1.06x from the mp4 at
+        load 2.3-2.5, for 1.1x the CPU time.
     """
 
     patch_radius_px: int | None = None

@@ -15,9 +15,15 @@ same arithmetic in one compiled call per node, on the crops the tracker cuts wit
 * :func:`match_node` -- one node's measurement: correlation peak and the best peak outside h/2 of it,
   parabolic sub-pixel peak, forward LK from it and the forward-backward error (the matched patch searched
   for in the frame-0 crop).
+* :func:`segment_search` -- the segment search: :func:`segment_ncc` of the frame-0 strip over the rotations
+  around the last one, the best by a parabola, and the child's position there.
+* :func:`chromaticity`, :func:`chroma_mask` -- the frame-0 colour mask's per-pixel float32 arithmetic, as numpy
+  does it (equal arrays).
 
 All positions are in pixels of the crop passed in (pixel centres at integers). Results equal the
 OpenCV/numpy implementation they replace to float rounding (float64 sums instead of OpenCV's float32).
+Taps known to lie inside an array (checked once per call) index it through unsigned flat offsets: numba then
+emits no negative-index wraparound code per tap (the same taps and arithmetic; 1.1-1.2x).
 Every kernel releases the GIL (``nogil``): the tracker's refinement thread matches while the first pass does.
 """
 
