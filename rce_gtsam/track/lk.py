@@ -173,8 +173,8 @@ on 120 frames of seed 0, with ``threads=2``, without a graph, with ``anchor_high
 190.1 frames/s wall (6.92 -> 5.26 ms/frame), 117 -> 146 frames/s CPU time; straight from the mp4 136 -> 177
 frames/s; with ``threads=2`` 205 frames/s alone and 189 from the mp4 (it now wins on an idle second core, but
 costs CPU time, 131 frames/s, and lost under load before; still off by default). In alternating processes under
-heavier load (another process taking 1.3 of the 2 cores, load average 3-5; 9 runs each): best 125 -> 170 frames/s
-alone (median 118 -> 166), from the mp4 best 111 -> 146 (median 104 -> 129): the decode thread then competes for
+heavier load (another process taking 1.3 of the 2 cores, load average 3-4; 9 runs each): best 128 -> 176 frames/s
+alone (median 123 -> 171), from the mp4 best 113 -> 152 (median 110 -> 143): the decode thread then competes for
 the cores. Where a frame goes now (profiled, 6.3 ms): the node measurement 2.2 ms (articulated template 0.7,
 correlation map 1.0, forward and backward LK 0.5), the segment search 1.4 ms, the pyramidal LK 1.45 ms, Python
 and ``getRectSubPix`` 0.8 ms, the set-up 0.1 ms (13 ms a clip). The first ``track`` of a process loads the
