@@ -179,6 +179,11 @@ the cores. Where a frame goes now (profiled, 6.3 ms): the node measurement 2.2 m
 correlation map 1.0, forward and backward LK 0.5), the segment search 1.4 ms, the pyramidal LK 1.45 ms, Python
 and ``getRectSubPix`` 0.8 ms, the set-up 0.1 ms (13 ms a clip). The first ``track`` of a process loads the
 compiled kernels from numba's cache (0.5 s); they are compiled once per machine and change (16 s, measured).
+Tried for this and dropped: the segment sums with the angles innermost (numba emitted no gathers: no faster), a
+two-pass articulated template (band weights first, then image samples) and taking the background sample only where
+no band reaches (no faster), cutting the search crop in a kernel (no formula reproduced OpenCV 5's uint8
+``getRectSubPix`` exactly), and the pyramidal LK on a crop around the nodes (not exact near the crop's edge, and
+the nodes of a frame span ~200x300 px, so the crop with the level-3 margins is most of the frame).
 
 Limits: the template is rotated, not scaled (a branch that moves a lot toward the camera changes scale);
 a node hidden from frame 0 onwards cannot be tracked.
