@@ -1,8 +1,8 @@
 """Default tracker: speed and accuracy against a baseline revision of it, in the same run (prints figures; not a test).
 
 The baseline is ``rce_gtsam/track/lk.py`` as it was at ``--baseline`` (git revision, default 7f3b223: before the
-speed-up), loaded from ``git show`` into a module of its own, so both trackers run on the same frames in the same
-process.
+speed-up), loaded from ``git show`` into a module of its own (with that revision's ``match_kernels.py``, when it has
+one), so both trackers run on the same frames in the same process.
 
 1. Speed, on the simulator's 640x480 render (seed 0, 20 nodes, ``--frames`` frames, H.264 as ``rce simulate
    --video`` writes it): decode time (``open_video``, frames to RGB) on its own; then tracking time alone on the
@@ -50,17 +50,34 @@ from rce_gtsam.simulate import SimulationConfig, simulate  # noqa: E402
 from rce_gtsam.track import ArraySource, LKConfig, LKTracker, open_video  # noqa: E402
 
 
-def baseline_tracker(rev: str, tmp: Path):
-    """``LKTracker`` class of ``rce_gtsam/track/lk.py`` at git revision ``rev`` (its own module, same package)."""
-    src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:rce_gtsam/track/lk.py"], check=True,
-                         capture_output=True, text=True).stdout
-    path = tmp / f"lk_{rev}.py"
-    path.write_text(src)
-    spec = importlib.util.spec_from_file_location("rce_gtsam.track.lk_baseline", path)
+def _git_show(rev: str, path: str) -> str | None:
+    out = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:{path}"], capture_output=True, text=True)
+    return out.stdout if out.returncode == 0 else None
+
+
+def _load(name: str, path: Path):
+    spec = importlib.util.spec_from_file_location(name, path)
     mod = importlib.util.module_from_spec(spec)
     sys.modules[spec.name] = mod  # dataclasses look their module up here
     spec.loader.exec_module(mod)
-    return mod.LKTracker
+    return mod
+
+
+def baseline_tracker(rev: str, tmp: Path):
+    """``LKTracker`` class of ``rce_gtsam/track/lk.py`` at git revision ``rev`` (its own module, same package), with
+    the compiled kernels of that revision (``match_kernels.py``, when it has them: their signatures change between
+    revisions; compiled afresh in ``tmp``, which takes a while)."""
+    src = _git_show(rev, "rce_gtsam/track/lk.py")
+    if src is None:
+        raise SystemExit(f"no rce_gtsam/track/lk.py at revision {rev}")
+    kernels = _git_show(rev, "rce_gtsam/track/match_kernels.py")
+    if kernels is not None:
+        (tmp / "match_kernels_baseline.py").write_text(kernels)
+        _load("rce_gtsam.track.match_kernels_baseline", tmp / "match_kernels_baseline.py")
+        src = src.replace("from . import match_kernels", "from . import match_kernels_baseline as match_kernels")
+    path = tmp / f"lk_{rev}.py"
+    path.write_text(src)
+    return _load("rce_gtsam.track.lk_baseline", path).LKTracker
 
 
 def clip(seed: int, n_frames: int, cache: Path):

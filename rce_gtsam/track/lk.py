@@ -124,8 +124,10 @@ map, peak and second peak, forward LK, forward-backward LK), the articulated tem
 search's sampling and correlation are now compiled kernels (:mod:`~rce_gtsam.track.match_kernels`, numba),
 each one call per node doing the same arithmetic as the OpenCV/numpy code it replaced (equal to float
 rounding; the kernels are tested against OpenCV). What is left in Python is the per-node decision logic;
-the two ``calcOpticalFlowPyrLK`` calls (all points at once, forward and backward) are ~1 ms of a frame, most
-of it building the pyramids. Frames are decoded and converted to grey in a thread
+the two ``calcOpticalFlowPyrLK`` calls (all points at once, forward and backward) are ~1.5 ms of a frame, most
+of it building the pyramids (each call builds both images' pyramids again; OpenCV's Python binding cannot take
+the pyramids of ``cv2.buildOpticalFlowPyramid``, opencv issue 4777, so they cannot be built once per frame).
+Frames are decoded and converted to grey in a thread
 (:func:`~rce_gtsam.track.sources.prefetched`). With ``LKConfig.threads=2`` the refinement pass runs in a
 second thread, node by node right behind the first pass, and the tracks are bit-identical (tested); it is
 off by default because it was slower on the shared machine (the per-node Python holds the GIL, and a re-match
@@ -154,6 +156,34 @@ compiled kernels the refinement pass is a sixth of the time, and on seed 0 a 0.0
 a third of the re-matches). Cutting the search crop at an integer position or as float (no uint8 rounding), or
 the frame-0 template without rounding, changed the 99th percentile on 400 frames of seeds 1 / 3 by -0.24 to
 +0.06 px, i.e. within the figures' resolution, and was not kept.
+Against revision 7cf087e (profiled on the 120-frame seed-0 render: 8.8 ms a frame, of which ~2.3 ms Python and
+numpy glue around the kernels, 3 ms the node measurement, 1.8 ms the segment search, 1.5 ms the two pyramidal LK
+calls, and 0.3 ms the frame-0 set-up spread over the clip): the segment search is one compiled call (angles,
+correlations, the peak and its parabola, the child's position), its taps read a float64 copy of the disc the
+strip sweeps with the border branch hoisted out of the loop; the match returns frame-pixel scalars instead of
+an array the caller shifts; the per-node constants (incident segments, band stacks, frame-0 directions) are
+built once; the in-image taps of the window sums, the segment sums, the articulated template and the LK patch
+sampler use unsigned flat indices, so no negative-index wraparound code runs per tap (the window sums' vectorised
+reduction is unchanged: the correlation maps were bit-identical on 12,000 captured calls); and the frame-0
+chromaticity and colour mask are compiled (numpy's float32 arithmetic, 27 ms of every ``track`` at 640x480).
+Every output is bit-identical: the tracks, visibility, sigmas and counters on the accuracy clips (seeds 0-4) and,
+on 120 frames of seed 0, with ``threads=2``, without a graph, with ``anchor_highpass_px=4``,
+``segment_fallback`` and without rotated or masked templates. Measured in one ``bench_track.py --baseline
+7cf087e`` run (best of 5, the machine's load average 2.3-2.5 from another process): tracking alone 144.5 ->
+190.1 frames/s wall (6.92 -> 5.26 ms/frame), 117 -> 146 frames/s CPU time; straight from the mp4 136 -> 177
+frames/s; with ``threads=2`` 205 frames/s alone and 189 from the mp4 (it now wins on an idle second core, but
+costs CPU time, 131 frames/s, and lost under load before; still off by default). In alternating processes under
+heavier load (another process taking 1.3 of the 2 cores, load average 3-4; 9 runs each): best 128 -> 176 frames/s
+alone (median 123 -> 171), from the mp4 best 113 -> 152 (median 110 -> 143): the decode thread then competes for
+the cores. Where a frame goes now (profiled, 6.3 ms): the node measurement 2.2 ms (articulated template 0.7,
+correlation map 1.0, forward and backward LK 0.5), the segment search 1.4 ms, the pyramidal LK 1.45 ms, Python
+and ``getRectSubPix`` 0.8 ms, the set-up 0.1 ms (13 ms a clip). The first ``track`` of a process loads the
+compiled kernels from numba's cache (0.5 s); they are compiled once per machine and change (16 s, measured).
+Tried for this and dropped: the segment sums with the angles innermost (numba emitted no gathers: no faster), a
+two-pass articulated template (band weights first, then image samples) and taking the background sample only where
+no band reaches (no faster), cutting the search crop in a kernel (no formula reproduced OpenCV 5's uint8
+``getRectSubPix`` exactly), and the pyramidal LK on a crop around the nodes (not exact near the crop's edge, and
+the nodes of a frame span ~200x300 px, so the crop with the level-3 margins is most of the frame).
 
 Limits: the template is rotated, not scaled (a branch that moves a lot toward the camera changes scale);
 a node hidden from frame 0 onwards cannot be tracked.
@@ -230,7 +260,9 @@ class LKConfig:
         ``threads=1``, the default, which runs the two passes one after the other). The compiled kernels and
         OpenCV release the GIL, but the per-node Python between them does not, and a re-match is short (a
         2-px search): on the shared 2-core machine (load 4-6) two threads were 0.75-0.98x as fast as one
-        (``benchmarks/bench_track.py``, ``current2`` row), so one thread is the default.
+        (``benchmarks/bench_track.py``, ``current2`` row), so one thread is the default. With less Python per node
+        (see the module docstring's Speed paragraph) two threads were 1.08x as fast alone and 1.06x from the mp4 at
+        load 2.3-2.5, for 1.1x the CPU time.
     """
 
     patch_radius_px: int | None = None
@@ -315,9 +347,10 @@ def _rotation_about(cx: float, cy: float, theta: float, dx: float, dy: float) ->
     return np.array([[a, b, (1 - a) * cx - b * cy + dx], [-b, a, b * cx + (1 - a) * cy + dy]])
 
 
-def _turn(a, b, a0, b0) -> float:
-    """Rotation (radians, wrapped to (-pi, pi]) of the vector a->b relative to a0->b0."""
-    d = math.atan2(b[1] - a[1], b[0] - a[0]) - math.atan2(b0[1] - a0[1], b0[0] - a0[0])
+def _turn(a, b, ang0: float) -> float:
+    """Rotation (radians, wrapped to (-pi, pi]) of the vector a->b relative to the direction ``ang0`` (radians,
+    ``atan2`` of the frame-0 vector: ``LKTracker._ang0``)."""
+    d = math.atan2(b[1] - a[1], b[0] - a[0]) - ang0
     return (d + math.pi) % (2 * math.pi) - math.pi
 
 
@@ -355,6 +388,13 @@ class LKTracker:
         if h < 2:
             raise InputError(source, f"patch radius must be >= 2 px, got {h}")
         self.h = h
+        self._margin = self._rematch_radius()
+        # segments incident to each node (the parent's first), and each segment's frame-0 direction (radians, by its
+        # child: ``_turn``)
+        self._inc = [([(self.parent[i], i)] if self.parent[i] >= 0 else []) + [(i, c) for c in self.children[i]]
+                     for i in range(n)]
+        self._ang0 = [math.atan2(q[c][1] - q[p][1], q[c][0] - q[p][0]) if p >= 0 else 0.0
+                      for c, p in enumerate(self.parent)]
         # refinement pass (see ``_refine``): at position k of the order, the nodes read that the pass has not
         # re-matched yet, and how many first-pass nodes must be finished before node order[k] is re-matched
         pos = {i: k for k, i in enumerate(self.order)}
@@ -449,7 +489,13 @@ class LKTracker:
             st = st - st.mean()
             nrm = float(np.sqrt((st * st).sum()))
             if nrm > 1e-3:
-                self._strip[(p, c)] = (uu, vv, st / nrm, ln)
+                # segment search (``_segment_search``): rotations within atan(2h / L0) of the last one, steps of
+                # half a pixel at the child, about the frame-0 direction of the segment
+                span, step = math.atan2(2 * h, ln), 0.5 / ln
+                self._strip[(p, c)] = (uu, vv, st / nrm, np.arange(-span, span + step / 2, step),
+                                       math.atan2(q[c][1] - q[p][1], q[c][0] - q[p][0]), step, *map(float, q[c] - q[p]))
+        # each node's articulated-template inputs (``_band_stack``)
+        self._stacks = [self._node_stack(i) for i in range(len(q))]
         return True
 
     @staticmethod
@@ -464,9 +510,9 @@ class LKTracker:
         branch. A pixel is kept when its normalised distance is below 3.41 = sqrt(chi2_2(0.997)), the
         two-dimensional 3-sigma bound: 99.7 % of branch pixels are kept if the spread is Gaussian.
         """
-        img = rgb.astype(np.float32)
-        s = img.sum(axis=2) + 1e-3
-        chroma = np.stack([img[..., 0] / s, img[..., 1] / s], axis=2)
+        from . import match_kernels  # the per-pixel float32 arithmetic of numpy, compiled (10x faster, same values)
+
+        chroma = match_kernels.chromaticity(rgb)
         samples = []
         for p, c in graph.edges:
             d = q[c] - q[p]
@@ -478,8 +524,7 @@ class LKTracker:
         smp = np.concatenate(samples, axis=0)
         med = np.median(smp, axis=0)
         spread = np.maximum(1.4826 * np.median(np.abs(smp - med), axis=0), 0.01)
-        dist = np.sqrt((((chroma - med) / spread) ** 2).sum(axis=2))
-        return (dist < 3.41).astype(np.float32)
+        return match_kernels.chroma_mask(chroma, med, spread, 3.41)
 
     def _anchor_image(self, gray: np.ndarray) -> np.ndarray:
         """The image every measurement against frame 0 is made in (see ``LKConfig.anchor_highpass_px``)."""
@@ -502,26 +547,10 @@ class LKTracker:
         item = self._strip.get((p, c))
         if item is None:
             return None
-        uu, vv, st0, ln = item
-        span = math.atan2(2 * self.h, ln)
-        step = 0.5 / ln
-        phis = phi_prev + np.arange(-span, span + step / 2, step)
-        a0 = math.atan2(q0[c][1] - q0[p][1], q0[c][0] - q0[p][0])
-        ang = a0 + phis
-        ex, ey = np.cos(ang).astype(np.float32), np.sin(ang).astype(np.float32)  # (A,)
-        ncc = self._kernels.segment_ncc(gray, float(xp[0]), float(xp[1]), ex, ey, uu, vv, st0,
-                                        gray.dtype == np.uint8)
-        A = len(phis)
-        k = int(np.argmax(ncc))
-        dk = 0.0
-        if 0 < k < A - 1:
-            a_, b_, c_ = ncc[k - 1], ncc[k], ncc[k + 1]
-            den = float(a_ - 2 * b_ + c_)
-            dk = 0.0 if den >= 0 else min(max(0.5 * float(a_ - c_) / den, -0.5), 0.5)
-        phi = float(phis[k] + dk * step)
-        ct, sn = math.cos(phi), math.sin(phi)
-        v0 = q0[c] - q0[p]
-        return xp + np.array([ct * v0[0] - sn * v0[1], sn * v0[0] + ct * v0[1]]), phi, float(ncc[k])
+        uu, vv, st0, offs, a0, step, v0x, v0y = item
+        x, y, phi, ncc = self._kernels.segment_search(gray, float(xp[0]), float(xp[1]), phi_prev, offs, a0, step,
+                                                      v0x, v0y, uu, vv, st0, gray.dtype == np.uint8)
+        return (x, y), phi, ncc
 
     def _rotation(self, i: int, est: np.ndarray, vis: np.ndarray, q0: np.ndarray, last: np.ndarray,
                   now: np.ndarray, done: np.ndarray) -> float:
@@ -544,56 +573,59 @@ class LKTracker:
         return float(last[i])
 
     # -- measurement against frame 0 ------------------------------------------------------------
-    def _band_stack(self, i, seg_theta):
-        """Node i's articulated-template inputs for :func:`~rce_gtsam.track.match_kernels.articulated_template`:
-        ``(rotations (S,) rad, bands (S, n, n), background segment, smallest band weight sum)``.
+    def _node_stack(self, i):
+        """Node i's articulated-template inputs for :func:`~rce_gtsam.track.match_kernels.articulated_template`
+        but the rotations: ``(bands (S, n, n), background segment, smallest band weight sum)``, S = its incident
+        segments, the parent's first (``self._inc[i]``), or None for a node on no segment.
 
-        ``seg_theta`` maps each segment (p, c) incident to node i to its rotation (radians) since frame 0. The
-        template is *articulated*: each incident segment's band of the frame-0 image is rotated about the node
+        The template is *articulated*: each incident segment's band of the frame-0 image is rotated about the node
         by that segment's own rotation (a node is a joint: the parent segment and the child segments turn by
         different angles, and one rotation for the whole patch biases the match in proportion to the bend).
         """
-        keys = tuple(seg_theta)
-        stack = self._band_stacks.get((i, keys))
-        if stack is None:  # the incident segments' bands in ``seg_theta``'s order, and the background one
-            bg = max((n for n, (_, sc) in enumerate(keys) if sc == i), default=0)
-            # fewer pixels than a 2-px-wide strip: use the full patch -- except at a tip, whose band is short
-            # by construction (one segment, the thinnest stem), down to _TIP_MIN_BAND_PX
-            min_band = _TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * self.h + 1)
-            stack = self._band_stacks[(i, keys)] = (
-                np.stack([self._seg_band[(sp, sc, i)] for sp, sc in keys]), bg, float(min_band))
-        return (np.fromiter(seg_theta.values(), float), *stack)
+        keys = self._inc[i]
+        if not keys:
+            return None
+        bg = max((n for n, (_, sc) in enumerate(keys) if sc == i), default=0)
+        # fewer pixels than a 2-px-wide strip: use the full patch -- except at a tip, whose band is short
+        # by construction (one segment, the thinnest stem), down to _TIP_MIN_BAND_PX
+        min_band = _TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * self.h + 1)
+        return np.stack([self._seg_band[(sp, sc, i)] for sp, sc in keys]), bg, float(min_band)
 
-    def _anchor(self, gray0, gray, i, p0, q, theta, r, seg_theta=None):
+    def _anchor(self, gray0, gray, i, p0, q, theta, r, thetas=None):
         """Locate node i (frame-0 position p0) near q in ``gray`` within r px, with its frame-0 appearance posed
-        for this frame: articulated (see ``_band_stack``) with branch bands, else the whole frame-0 patch
-        rotated by ``theta``.
+        for this frame: articulated (see ``_node_stack``; ``thetas``: the rotations of its incident segments since
+        frame 0, radians, in ``self._inc[i]``'s order) with branch bands, else the whole frame-0 patch rotated by
+        ``theta``.
 
         Returns (xy, ncc, fb, sigma, second-peak ncc, template weight sum, second-peak xy) or None.
         """
         h = self.h
         k = 2 * (h + r) + 1
-        c = float(h + r)
         # the frame-0 crop is only searched by the backward LK, which starts at its centre: a margin of
         # ``_rematch_radius`` px around the template suffices, whatever the search radius r in this frame
-        margin = self._rematch_radius()
+        margin = self._margin
         px, py = float(p0[0]), float(p0[1])
-        cur = cv2.getRectSubPix(gray, (k, k), (float(q[0]), float(q[1]))).astype(np.float32)
-        if self._band is not None and seg_theta:
-            m, wsum = self._kernels.match_articulated(gray0, px, py, *self._band_stack(i, seg_theta), h, margin,
-                                                      gray0.dtype == np.uint8, cur, r)
-        else:
-            cp = float(h + margin)
-            kp = 2 * (h + margin) + 1
-            prev = cv2.warpAffine(gray0, _rotation_about(px, py, theta, cp - px, cp - py), (kp, kp),
-                                  flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
-            tmpl = np.ascontiguousarray(prev[margin:margin + 2 * h + 1, margin:margin + 2 * h + 1])
-            wsum = float(tmpl.size)
-            m = self._kernels.match_node(cur, tmpl, np.ones_like(tmpl), prev, r, h, cp)
+        qx, qy = float(q[0]), float(q[1])
+        cur = cv2.getRectSubPix(gray, (k, k), (qx, qy))
+        stack = self._stacks[i] if self._band is not None and thetas else None
+        if stack is not None:
+            ok, x, y, score, fb, s_lk, second, x2, y2, has2, wsum = self._kernels.match_articulated(
+                gray0, px, py, np.array(thetas), *stack, h, margin, gray0.dtype == np.uint8, cur, r, qx, qy)
+            if not ok:
+                return None
+            return (x, y), score, fb, s_lk, second, wsum, ((x2, y2) if has2 else None)
+        c = float(h + r)
+        cp = float(h + margin)
+        kp = 2 * (h + margin) + 1
+        prev = cv2.warpAffine(gray0, _rotation_about(px, py, theta, cp - px, cp - py), (kp, kp),
+                              flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
+        tmpl = np.ascontiguousarray(prev[margin:margin + 2 * h + 1, margin:margin + 2 * h + 1])
+        wsum = float(tmpl.size)
+        m = self._kernels.match_node(cur.astype(np.float32), tmpl, np.ones_like(tmpl), prev, r, h, cp)
         if not m[0]:
             return None
-        xy = q + (m[1:3] - c)
-        return xy, m[3], m[4], m[5], m[6], wsum, (q + (m[7:9] - c) if m[9] else None)
+        return ((qx + (m[1] - c), qy + (m[2] - c)), m[3], m[4], m[5], m[6], wsum,
+                ((qx + (m[7] - c), qy + (m[8] - c)) if m[9] else None))
 
     def _rematch_radius(self) -> int:
         """Radius (px) of the refinement pass's re-match: max(2, h // 4) (the first pass is within a pixel)."""
@@ -605,13 +637,12 @@ class LKTracker:
         correlation below ``min_ncc`` or forward-backward error above ``fb_max``)."""
         cfg = self.config
         p = self.parent[i]
-        seg_theta = {}
-        if p >= 0:
-            seg_theta[(p, i)] = _turn(est[p], est[i], q0[p], q0[i])
+        ang0 = self._ang0
+        tp = _turn(est[p], est[i], ang0[i]) if p >= 0 else 0.0
+        thetas = [tp] if p >= 0 else []
         for ch in self.children[i]:
-            seg_theta[(i, ch)] = (_turn(est[i], est[ch], q0[i], q0[ch]) if vis[ch]
-                                  else seg_theta.get((p, i), 0.0))
-        m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, self._rematch_radius(), seg_theta)
+            thetas.append(_turn(est[i], est[ch], ang0[ch]) if vis[ch] else tp)
+        m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, self._margin, thetas)
         if m is not None and m[1] >= cfg.min_ncc and m[2] <= fb_max:
             xy, _, fb, s_lk = m[:4]
             return xy, math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
@@ -688,6 +719,7 @@ class LKTracker:
         from . import match_kernels  # numba: imported (and compiled, once per machine) only when tracking
         self._kernels = match_kernels
         h, n = self.h, len(q0)
+        ang0 = self._ang0
         fb_max = max(cfg.min_fb_px, cfg.max_fb_fraction * h)
         lk_params = dict(winSize=(2 * h + 1, 2 * h + 1), maxLevel=cfg.pyr_levels, criteria=_LK_CRITERIA)
         xs, vis_all, sig_all = [], [], []
@@ -747,7 +779,7 @@ class LKTracker:
                     # is done, so only the visibility needs its own merged copy
                     cur_vis = prev_vis.copy()
                     # the refinement pass follows the first one node by node in the second thread (``_refine``)
-                    first = _Progress()
+                    first = _Progress() if pool is not None else None
                     refine = None
                     if self._band is not None and cfg.refine_pass:
                         refine = True if pool is None else pool.submit(self._refine, gray0, ga, q0, new_est,
@@ -776,22 +808,18 @@ class LKTracker:
                             counts["predicted_from_graph"] += 1
                         else:
                             pred, r = (f2f[i] if f2f_ok[i] else prev_est[i]), 2 * h
-                        seg_theta = None
+                        thetas = None  # rotations of the segments at node i (``self._inc[i]``)
                         if self._band is not None:
-                            xi = pred
-                            seg_theta = {}
-                            if p >= 0:
-                                seg_theta[(p, i)] = _turn(new_est[p], xi, q0[p], q0[i])
+                            tp = _turn(new_est[p], pred, ang0[i]) if p >= 0 else theta
+                            thetas = [tp] if p >= 0 else []
                             for ch in self.children[i]:
-                                if f2f_ok[ch] and prev_vis[ch]:
-                                    seg_theta[(i, ch)] = _turn(xi, f2f[ch], q0[i], q0[ch])
-                                else:  # child not followed: assume the branch continues straight
-                                    seg_theta[(i, ch)] = seg_theta.get((p, i), theta)
+                                # a child not followed: assume the branch continues straight
+                                thetas.append(_turn(pred, f2f[ch], ang0[ch]) if f2f_ok[ch] and prev_vis[ch] else tp)
                         # a wide search (no frame-to-frame or segment prediction to trust) is a re-acquisition
                         # whatever the previous frame said: the same ambiguity and geometry checks apply
                         reacquiring = not prev_vis[i] or r > h
                         preds[i], wide[i] = pred, r > h
-                        m = self._anchor(gray0, ga, i, q0[i], pred, theta, r, seg_theta)
+                        m = self._anchor(gray0, ga, i, q0[i], pred, theta, r, thetas)
                         ok = m is not None
                         if not ok:
                             counts["lost_match"] += 1
@@ -805,7 +833,8 @@ class LKTracker:
                                 ok = False
                                 counts["rejected_ambiguous"] += 1
                             elif (cfg.distinct_follow and ambiguous and xy2 is not None
-                                  and math.hypot(*(xy2 - pred)) < math.hypot(*(xy - pred))):
+                                  and math.hypot(xy2[0] - pred[0], xy2[1] - pred[1])
+                                  < math.hypot(xy[0] - pred[0], xy[1] - pred[1])):
                                 # followed (not re-acquired), two indistinguishable peaks, and the prediction
                                 # points at the other one: which of the two the node is would be a guess
                                 ok = False
@@ -820,7 +849,7 @@ class LKTracker:
                                 ok = False
                                 counts["rejected_unanchored"] += 1
                             elif p >= 0 and new_vis[p]:
-                                d = math.hypot(*(xy - new_est[p]))
+                                d = math.hypot(xy[0] - new_est[p, 0], xy[1] - new_est[p, 1])
                                 l0 = self.rest_len[i]
                                 if d > (1 + cfg.max_stretch) * l0 + cfg.length_tol_px or d < cfg.min_length_fraction * l0 - cfg.length_tol_px:
                                     ok = False
@@ -828,7 +857,7 @@ class LKTracker:
                         if ok:
                             new_est[i], new_vis[i] = xy, True
                             if p >= 0:
-                                seg_rot[i] = _turn(new_est[p], xy, q0[p], q0[i])
+                                seg_rot[i] = _turn(new_est[p], xy, ang0[i])
                                 if new_vis[p]:
                                     bend_rot[i] = seg_rot[i] - seg_rot[p]
                             sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
@@ -848,7 +877,8 @@ class LKTracker:
                             counts["invisible"] += 1
                         done[i] = True
                         cur_vis[i] = new_vis[i]
-                        first.advance()
+                        if first is not None:
+                            first.advance()
                     if refine is not None:
                         out = refine.result() if pool is not None else self._refine(gray0, ga, q0, new_est,
                                                                                      new_vis, fb_max)

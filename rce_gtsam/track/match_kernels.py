@@ -15,9 +15,15 @@ same arithmetic in one compiled call per node, on the crops the tracker cuts wit
 * :func:`match_node` -- one node's measurement: correlation peak and the best peak outside h/2 of it,
   parabolic sub-pixel peak, forward LK from it and the forward-backward error (the matched patch searched
   for in the frame-0 crop).
+* :func:`segment_search` -- the segment search: :func:`segment_ncc` of the frame-0 strip over the rotations
+  around the last one, the best by a parabola, and the child's position there.
+* :func:`chromaticity`, :func:`chroma_mask` -- the frame-0 colour mask's per-pixel float32 arithmetic, as numpy
+  does it (equal arrays).
 
 All positions are in pixels of the crop passed in (pixel centres at integers). Results equal the
 OpenCV/numpy implementation they replace to float rounding (float64 sums instead of OpenCV's float32).
+Taps known to lie inside an array (checked once per call) index it through unsigned flat offsets: numba then
+emits no negative-index wraparound code per tap (the same taps and arithmetic; 1.1-1.2x).
 Every kernel releases the GIL (``nogil``): the tracker's refinement thread matches while the first pass does.
 """
 
@@ -63,14 +69,20 @@ def sample_patch(img, cx, cy, out):
     w01 = a * (1 - b)
     w10 = (1 - a) * b
     w11 = a * b
-    inside = ix >= 0 and iy >= 0 and ix + tw < W and iy + th < H
+    if ix >= 0 and iy >= 0 and ix + tw < W and iy + th < H:
+        # inside: unsigned flat indices, so no negative-index wraparound per tap (same taps, same arithmetic)
+        flat = img.ravel()
+        one, uw = np.uint64(1), np.uint64(W)
+        for i in range(th):
+            o = np.uint64((iy + i) * W + ix)
+            for j in range(tw):
+                out[i, j] = (w00 * flat[o] + w01 * flat[o + one] + w10 * flat[o + uw] + w11 * flat[o + uw + one])
+                o += one
+        return
     for i in range(th):
         for j in range(tw):
-            if inside:
-                r0, r1, c0, c1 = iy + i, iy + i + 1, ix + j, ix + j + 1
-            else:
-                r0, r1 = _clamp(iy + i, H), _clamp(iy + i + 1, H)
-                c0, c1 = _clamp(ix + j, W), _clamp(ix + j + 1, W)
+            r0, r1 = _clamp(iy + i, H), _clamp(iy + i + 1, H)
+            c0, c1 = _clamp(ix + j, W), _clamp(ix + j + 1, W)
             out[i, j] = (w00 * img[r0, c0] + w01 * img[r0, c1] + w10 * img[r1, c0] + w11 * img[r1, c1])
 
 
@@ -239,7 +251,7 @@ def _window_sums(img, a, m, m2, n):
     th, tw = a.shape
     H, W = img.shape
     rh, rw = H - th + 1, W - tw + 1
-    off = np.empty(n, np.int64)  # flat offset of each weighted pixel in a window
+    off = np.empty(n, np.uint64)  # flat offset of each weighted pixel in a window (unsigned: no wraparound code)
     fa = np.empty(n)
     fm = np.empty(n)
     fm2 = np.empty(n)
@@ -253,7 +265,7 @@ def _window_sums(img, a, m, m2, n):
     out = np.empty((4, rh, rw))
     for v in range(rh):
         for u in range(rw):
-            base = v * W + u
+            base = np.uint64(v * W + u)
             s_a = s_m = s_m2 = s_i2 = 0.0
             for k in range(n):
                 p = float(flat[base + off[k]])
@@ -328,24 +340,13 @@ def match_node(cur, tmpl, wts, prev, r, h, c_prev):
 
 
 @njit(cache=True, nogil=True)
-def segment_ncc(img, x0, y0, ex, ey, uu, vv, strip, round_out):
-    """Zero-mean NCC of the frame-0 ``strip`` (V, U; zero mean, unit norm) with ``img`` sampled along each
-    rotation a: point (u, v) of the strip at (x0, y0) + u (ex[a], ey[a]) + v (-ey[a], ex[a]) px.
-
-    Sampling as ``cv2.remap(..., INTER_LINEAR, BORDER_REPLICATE)`` (OpenCV 5) with float32 maps: bilinear at
-    the float32 positions, rounded to integers when ``round_out`` (a uint8 image). Returns (A,) NCC.
-    """
-    H, W = img.shape
+def _segment_sums(src, W, ox0, oy0, x0, y0, ex, ey, uu, vv, strip, round_out, out):
+    """:func:`segment_ncc` for strips whose every bilinear tap lies in ``src`` (flat, row length W, pixel (x, y) of
+    the image at ``(y - oy0) * W + x - ox0``): no border handling, float64 pixels (no per-tap conversion)."""
     A, V, U = ex.shape[0], vv.shape[0], uu.shape[0]
     n = V * U
-    out = np.empty(A)
     fx0, fy0 = np.float32(x0), np.float32(y0)
-    reach = 0.0  # farthest sample from (x0, y0): with a 2-px margin inside the image, no border handling
-    for iu in range(U):
-        for iv in range(V):
-            reach = max(reach, math.sqrt(float(uu[iu]) ** 2 + float(vv[iv]) ** 2))
-    inside = x0 - reach - 2 >= 0 and y0 - reach - 2 >= 0 and x0 + reach + 2 < W - 1 and y0 + reach + 2 < H - 1
-    flat = img.ravel()
+    one, uw = np.uint64(1), np.uint64(W)  # unsigned flat indices: no negative-index wraparound code per tap
     cu = np.empty(U, np.float32)
     su = np.empty(U, np.float32)
     for a in range(A):
@@ -361,14 +362,63 @@ def segment_ncc(img, x0, y0, ex, ey, uu, vv, strip, round_out):
             for iu in range(U):
                 mx = float((cu[iu] - sv) + fx0)
                 my = float((su[iu] + cv) + fy0)
-                if inside:
-                    ix, iy = int(mx), int(my)
-                    fx, fy = mx - ix, my - iy
-                    o = iy * W + ix
-                    p = ((1 - fx) * (1 - fy) * flat[o] + fx * (1 - fy) * flat[o + 1]
-                         + (1 - fx) * fy * flat[o + W] + fx * fy * flat[o + W + 1])
-                else:
-                    p = _bilinear(img, mx, my)
+                ix, iy = int(mx), int(my)
+                fx, fy = mx - ix, my - iy
+                o = np.uint64((iy - oy0) * W + (ix - ox0))
+                p = ((1 - fx) * (1 - fy) * src[o] + fx * (1 - fy) * src[o + one]
+                     + (1 - fx) * fy * src[o + uw] + fx * fy * src[o + uw + one])
+                if round_out:
+                    p = math.floor(p + 0.5)
+                p -= 128.0
+                s1 += p
+                s2 += p * p
+                d += p * strip[iv, iu]
+        out[a] = d / (math.sqrt(max(s2 - s1 * s1 / n, 0.0)) + 1e-6)
+
+
+@njit(cache=True, nogil=True)
+def segment_ncc(img, x0, y0, ex, ey, uu, vv, strip, round_out):
+    """Zero-mean NCC of the frame-0 ``strip`` (V, U; zero mean, unit norm) with ``img`` sampled along each
+    rotation a: point (u, v) of the strip at (x0, y0) + u (ex[a], ey[a]) + v (-ey[a], ex[a]) px.
+
+    Sampling as ``cv2.remap(..., INTER_LINEAR, BORDER_REPLICATE)`` (OpenCV 5) with float32 maps: bilinear at
+    the float32 positions, rounded to integers when ``round_out`` (a uint8 image). Returns (A,) NCC.
+    """
+    H, W = img.shape
+    A, V, U = ex.shape[0], vv.shape[0], uu.shape[0]
+    n = V * U
+    out = np.empty(A)
+    reach = 0.0  # farthest sample from (x0, y0): with a 2-px margin inside the image, no border handling
+    for iu in range(U):
+        for iv in range(V):
+            reach = max(reach, math.sqrt(float(uu[iu]) ** 2 + float(vv[iv]) ** 2))
+    inside = x0 - reach - 2 >= 0 and y0 - reach - 2 >= 0 and x0 + reach + 2 < W - 1 and y0 + reach + 2 < H - 1
+    if inside:
+        # the disc the strip sweeps, copied once as float64: the taps then need neither clamping nor conversion
+        ox0, oy0 = int(math.floor(x0 - reach - 2)), int(math.floor(y0 - reach - 2))
+        ww = int(math.ceil(x0 + reach + 2)) + 2 - ox0
+        hh = int(math.ceil(y0 + reach + 2)) + 2 - oy0
+        loc = np.empty(hh * ww)
+        for y in range(hh):
+            for x in range(ww):
+                loc[y * ww + x] = img[oy0 + y, ox0 + x]
+        _segment_sums(loc, ww, ox0, oy0, x0, y0, ex, ey, uu, vv, strip, round_out, out)
+        return out
+    fx0, fy0 = np.float32(x0), np.float32(y0)
+    cu = np.empty(U, np.float32)
+    su = np.empty(U, np.float32)
+    for a in range(A):
+        s1 = s2 = d = 0.0
+        ca, sa = ex[a], ey[a]
+        for iu in range(U):
+            cu[iu] = ca * uu[iu]
+            su[iu] = sa * uu[iu]
+        for iv in range(V):
+            v = vv[iv]
+            sv = sa * v
+            cv = ca * v
+            for iu in range(U):
+                p = _bilinear(img, float((cu[iu] - sv) + fx0), float((su[iu] + cv) + fy0))
                 if round_out:
                     p = math.floor(p + 0.5)
                 p -= 128.0
@@ -377,6 +427,45 @@ def segment_ncc(img, x0, y0, ex, ey, uu, vv, strip, round_out):
                 d += p * strip[iv, iu]
         out[a] = d / (math.sqrt(max(s2 - s1 * s1 / n, 0.0)) + 1e-6)
     return out
+
+
+@njit(cache=True, nogil=True)
+def segment_search(img, xp, yp, phi_prev, offs, a0, step, v0x, v0y, uu, vv, strip, round_out):
+    """The segment search of ``LKTracker._segment_search`` in one call: :func:`segment_ncc` over the rotations
+    ``phi_prev + offs`` (radians since frame 0; ``a0`` = the segment's frame-0 direction) hinged at (xp, yp), the
+    best one refined by a parabola through its neighbours (``step`` apart), and the child there.
+
+    Returns ``(x, y, phi, ncc)``: the child's position (px; frame-0 segment vector (v0x, v0y) rotated by phi from
+    the hinge), the rotation and the correlation peak.
+    """
+    A = offs.shape[0]
+    phis = np.empty(A)
+    ex = np.empty(A, np.float32)
+    ey = np.empty(A, np.float32)
+    for a in range(A):
+        phis[a] = phi_prev + offs[a]
+        ang = a0 + phis[a]
+        ex[a] = np.float32(math.cos(ang))
+        ey[a] = np.float32(math.sin(ang))
+    ncc = segment_ncc(img, xp, yp, ex, ey, uu, vv, strip, round_out)
+    k = 0  # numpy's argmax: the first maximum (the first NaN if any)
+    for a in range(A):
+        if math.isnan(ncc[a]):
+            k = a
+            break
+        if ncc[a] > ncc[k]:
+            k = a
+    dk = 0.0
+    if 0 < k < A - 1:
+        a_, b_, c_ = ncc[k - 1], ncc[k], ncc[k + 1]
+        den = a_ - 2 * b_ + c_
+        if not den >= 0:
+            dk = 0.5 * (a_ - c_) / den
+            dk = -0.5 if dk < -0.5 else dk  # Python's max(dk, -0.5), min(., 0.5)
+            dk = 0.5 if 0.5 < dk else dk
+    phi = phis[k] + dk * step
+    ct, sn = math.cos(phi), math.sin(phi)
+    return xp + (ct * v0x - sn * v0y), yp + (sn * v0x + ct * v0y), phi, ncc[k]
 
 
 @njit(cache=True, nogil=True)
@@ -399,6 +488,16 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
     wacc_all = np.empty((k, k), np.float32)
     cos_t = np.cos(thetas)
     sin_t = np.sin(thetas)
+    # every sample lies within ``reach`` of the node (the crop's corner, rotated, plus the bilinear tap): when the
+    # band crops and the image hold that disc, the taps need no bounds checks (unsigned flat indices, no clamping;
+    # the same taps and arithmetic)
+    H, W = gray0.shape
+    reach = c * math.sqrt(2.0) + 2.0
+    band_in = reach < cs - 1.0
+    img_in = px - reach >= 0 and py - reach >= 0 and px + reach < W - 1 and py + reach < H - 1
+    fb = bands.ravel()
+    fg = gray0.ravel()
+    one, ubs, uw = np.uint64(1), np.uint64(bs), np.uint64(W)
     for y in range(k):
         for x in range(k):
             dx, dy = x - c, y - c
@@ -414,20 +513,36 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
                 jx, jy = int(fbx), int(fby)
                 ax, ay = bx - fbx, by - fby
                 w = 0.0
-                if jy >= 0 and jy < bs:
-                    if jx >= 0 and jx < bs:
-                        w += (1 - ax) * (1 - ay) * bands[s, jy, jx]
-                    if jx + 1 >= 0 and jx + 1 < bs:
-                        w += ax * (1 - ay) * bands[s, jy, jx + 1]
-                if jy + 1 >= 0 and jy + 1 < bs:
-                    if jx >= 0 and jx < bs:
-                        w += (1 - ax) * ay * bands[s, jy + 1, jx]
-                    if jx + 1 >= 0 and jx + 1 < bs:
-                        w += ax * ay * bands[s, jy + 1, jx + 1]
+                if band_in:
+                    o = np.uint64((s * bs + jy) * bs + jx)
+                    w += (1 - ax) * (1 - ay) * fb[o]
+                    w += ax * (1 - ay) * fb[o + one]
+                    w += (1 - ax) * ay * fb[o + ubs]
+                    w += ax * ay * fb[o + ubs + one]
+                else:
+                    if jy >= 0 and jy < bs:
+                        if jx >= 0 and jx < bs:
+                            w += (1 - ax) * (1 - ay) * bands[s, jy, jx]
+                        if jx + 1 >= 0 and jx + 1 < bs:
+                            w += ax * (1 - ay) * bands[s, jy, jx + 1]
+                    if jy + 1 >= 0 and jy + 1 < bs:
+                        if jx >= 0 and jx < bs:
+                            w += (1 - ax) * ay * bands[s, jy + 1, jx]
+                        if jx + 1 >= 0 and jx + 1 < bs:
+                            w += ax * ay * bands[s, jy + 1, jx + 1]
                 wf = np.float32(w)
                 if wf == 0 and s != bg:
                     continue  # adds exactly nothing: skip the image sample (most of a patch is off every band)
-                g = _bilinear(gray0, px + ox, py + oy)  # image: replicated border
+                gx, gy = px + ox, py + oy
+                if img_in:
+                    fgx, fgy = math.floor(gx), math.floor(gy)
+                    ix, iy = int(fgx), int(fgy)
+                    fx, fy = gx - fgx, gy - fgy
+                    o = np.uint64(iy * W + ix)
+                    g = ((1 - fx) * (1 - fy) * fg[o] + fx * (1 - fy) * fg[o + one]
+                         + (1 - fx) * fy * fg[o + uw] + fx * fy * fg[o + uw + one])
+                else:
+                    g = _bilinear(gray0, gx, gy)  # image: replicated border
                 if round_out:
                     g = math.floor(g + 0.5)
                 gf = np.float32(g)
@@ -453,8 +568,52 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
 
 
 @njit(cache=True, nogil=True)
-def match_articulated(gray0, px, py, thetas, bands, bg, min_band, h, margin, round_out, cur, r):
+def match_articulated(gray0, px, py, thetas, bands, bg, min_band, h, margin, round_out, cur, r, qx, qy):
     """:func:`articulated_template` of the node at (px, py) in ``gray0``, then :func:`match_node` of it in
-    ``cur`` within r px, in one call: ``(match_node's array, template weight sum)``."""
+    ``cur`` (the search crop, any dtype, centred on (qx, qy) in the frame) within r px, in one call.
+
+    Returns ``(ok, x, y, ncc, fb, s_lk, second, x2, y2, has_second, wsum)``: :func:`match_node`'s results with the
+    match (x, y) and the second peak (x2, y2) in frame pixels, and the template weight sum ``wsum``.
+    """
     prev, tmpl, wts, wsum = articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, round_out)
-    return match_node(cur, tmpl, wts, prev, r, h, float(h + margin)), wsum
+    curf = np.empty(cur.shape, np.float32)
+    curf[:] = cur
+    m = match_node(curf, tmpl, wts, prev, r, h, float(h + margin))
+    c = float(h + r)
+    return (m[0] != 0, qx + (m[1] - c), qy + (m[2] - c), m[3], m[4], m[5], m[6], qx + (m[7] - c), qy + (m[8] - c),
+            m[9] != 0, wsum)
+
+
+@njit(cache=True, nogil=True)
+def chromaticity(rgb):
+    """(H, W, 2) float32 chromaticity (r, g) = (R, G) / (R + G + B + 0.001) of an (H, W, 3) image, in float32 as
+    numpy computes ``img / (img.sum(axis=2) + 1e-3)`` on ``rgb.astype(np.float32)`` (the three-term sum of integer
+    levels is exact in any order)."""
+    H, W = rgb.shape[0], rgb.shape[1]
+    out = np.empty((H, W, 2), np.float32)
+    eps = np.float32(1e-3)
+    for y in range(H):
+        for x in range(W):
+            r = np.float32(rgb[y, x, 0])
+            g = np.float32(rgb[y, x, 1])
+            s = (r + g + np.float32(rgb[y, x, 2])) + eps
+            out[y, x, 0] = r / s
+            out[y, x, 1] = g / s
+    return out
+
+
+@njit(cache=True, nogil=True)
+def chroma_mask(chroma, med, spread, limit):
+    """(H, W) float32: 1 where the normalised chromaticity distance sqrt(sum(((c - med) / spread)^2)) is below
+    ``limit``, else 0 -- in float32, as numpy computes it for float32 ``chroma``, ``med`` and ``spread``."""
+    H, W = chroma.shape[0], chroma.shape[1]
+    out = np.empty((H, W), np.float32)
+    m0, m1, s0, s1 = np.float32(med[0]), np.float32(med[1]), np.float32(spread[0]), np.float32(spread[1])
+    lim = np.float32(limit)
+    for y in range(H):
+        for x in range(W):
+            d0 = (chroma[y, x, 0] - m0) / s0
+            d1 = (chroma[y, x, 1] - m1) / s1
+            dist = np.float32(math.sqrt(np.float32(d0 * d0 + d1 * d1)))
+            out[y, x] = 1.0 if dist < lim else 0.0
+    return out
