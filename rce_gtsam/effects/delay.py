@@ -148,7 +148,7 @@ class Delay(Effect):
         1-2 Hz sway it points elsewhere. ``s`` is measured from the excitation's clock, so that z is moved by
         the lag relative to where it was estimated (a rank-1 excitation is a blend of the segments' lagged
         loads, in phase near their weighted centroid). Measured through the pipeline (20 seeds per strength,
-        p <= 0.005): 13/15/14/13 -> 13/15/16/17 at 0.5/1/2/3x default, effect-free 0/40 (0/40 before)."""
+        p <= 0.005): 13/15/14/13 -> 13/15/16/17 of 20 at 0.5/1/2/3x default, effect-free 0/40 both."""
         z = np.asarray(z, float)
         T = z.size
         G = []
