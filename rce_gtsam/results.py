@@ -137,22 +137,27 @@ def report_dict(result) -> dict:
     })
 
 
+CSV_CHUNK_ROWS = 20_000  # rows formatted at a time by write_csv (bounded memory; the bytes do not depend on it)
+
+
 def write_csv(df: pd.DataFrame, path: str | Path) -> None:
     """``df.to_csv(path, index=False)``: the same bytes, in half the time for the big all-numeric tables
     (integer and float columns, NaN written empty; floats as Python's shortest round-trip repr, which is
-    what pandas writes through numpy). Other tables go through pandas."""
+    what pandas writes through numpy). Other tables go through pandas. Rows are formatted ``CSV_CHUNK_ROWS``
+    at a time: the text of a whole 50,000-frame table at once (a Python string per value) took the peak memory
+    of ``rce analyze`` on 50,000 frames x 20 nodes from 1.27 to 2.06 GB."""
     simple = df.shape[1] >= 2 and all(isinstance(c, str) and c.isidentifier() for c in df.columns)
     if not simple or not all(dt.kind in "iuf" for dt in df.dtypes):
         df.to_csv(path, index=False)
         return
-    cols = []
-    for name in df.columns:
-        values = df[name].to_numpy().tolist()
-        cols.append(["" if v != v else repr(v) for v in values] if df[name].dtype.kind == "f" else
-                    [str(v) for v in values])
+    arrays = [(df[name].to_numpy(), df[name].dtype.kind == "f") for name in df.columns]
     with open(path, "w", encoding="utf-8") as f:
         f.write(",".join(df.columns) + "\n")
-        if len(df):
+        for start in range(0, len(df), CSV_CHUNK_ROWS):
+            cols = []
+            for values, is_float in arrays:
+                chunk = values[start:start + CSV_CHUNK_ROWS].tolist()
+                cols.append(["" if v != v else repr(v) for v in chunk] if is_float else [str(v) for v in chunk])
             f.write("\n".join(map(",".join, zip(*cols))) + "\n")
 
 
