@@ -142,8 +142,8 @@ def test_the_delay_scan_finds_a_long_lag_the_first_order_direction_misses():
     """A 45-frame tip lag, a quarter of the sway's main period (~200 frames in these matrices): the first-order
     direction -kappa s dz/dt (the delay's Taylor term at tau = 0) is far from the delayed prediction, and the
     test along it is blind (p = 0.62 / 0.96 at noise 0.3 / 0.6 on this seed); the scan over lags finds it
-    (p = 1/401, the smallest 400 surrogates give, at a 42-frame lag). (Through the pipeline, 20 seeds at 3x default: p <= 0.005 in 13/20 with the
-    first-order direction, 17/20 with the scan; effect-free 0/40 both.)"""
+    (p = 1/401, the smallest 400 surrogates give, at a 42-frame lag). Through the pipeline, 20 seeds at 3x
+    default: p <= 0.005 in 13/20 with the first-order direction, 17/20 with the scan; effect-free 0/40 both."""
     from rce_gtsam.diagnosis.score_test import excitation_clock
 
     Y, s, *_ = synth("delay", seed=2, E=12, T=600, noise=0.6, strength=45.0)
