@@ -36,7 +36,7 @@ set by their number, whatever the length of the recording. This test uses every 
 * **Power and its limit.** Delay through the pipeline, 20 seeds per strength, p <= 0.005: 13/15/16/17 of 20
   at 0.5/1/2/3x default (first-order direction: 13/15/14/13). The oracle, whose direction is the noise-free
   response itself, reaches 20/20 from 0.5x; the same scan with the true excitation in place of the other
-  row set's (known z, unknown lag) 18/20 at 0.5x. What costs power is estimating z from the other set: the
+  row set's (known z, unknown lag) 19/20 at 0.5x. What costs power is estimating z from the other set: the
   node-disjoint sets hold 6 and 4 of the 18 segments (median), so each set's directions come from 4-6
   segments. A Wiener filter on that z (its noise spectrum from the set's residuals) did not help (13/20).
 * **Where it does not apply.** Effects whose signature has no fixed direction (a second excitation's w_t, a
