@@ -29,7 +29,8 @@ strength, white + low-pass noise): delay p <= 0.05 in 2/20 seeds and effect-free
 7/8. Through the full pipeline (benchmarks/bench_diagnose.py, default preset, 900 frames, 20 seeds per
 strength 0.5/1/1.5/2/3x) the verdicts it decides: delay recordings named dynamics 0/3/1/1/1, dynamics
 recordings named delay 0/2/0/0/0; right verdicts delay 13/15/17/16/17 and dynamics 0/15/19/20/20 (with the fold
-t in its place and the same models: delay 14/20 and dynamics 7/20 at 1x). The diagnosis uses it only between two
+t in its place and the same models: delay 14/20 and dynamics 7/20 at 1x). Re-measured after the delay's score
+test became a lag scan: delay 13/15/18/17/18, dynamics unchanged, confusions 0/2/0/0/1 and 0/3/0/0/0. The diagnosis uses it only between two
 candidates that are both supported (see :func:`choose_verdict <rce_gtsam.diagnose.choose_verdict>`).
 
 Units: degrees (residuals, predictions), frames (time); p and z are unitless.

@@ -144,8 +144,8 @@ class Delay(Effect):
     def test_directions(self, kappa, z, s):
         """A scan over the tip lag: kappa_e z(t - tau s_e) for every tau of :meth:`scan_lags`, combined by the
         largest standardised score. The first-order direction (:meth:`score_directions`) is the Taylor
-        expansion of the delay at tau = 0 and holds while omega tau << 1: behind a 30-45-frame tip lag of a
-        1-2 Hz sway it points elsewhere. ``s`` is measured from the excitation's clock, so that z is moved by
+        expansion of the delay at tau = 0 and holds while omega tau << 1: once the tip lag is a sizeable part of
+        the sway's period (45 frames of a ~200-frame sway in tests/test_score_test.py) it points elsewhere. ``s`` is measured from the excitation's clock, so that z is moved by
         the lag relative to where it was estimated (a rank-1 excitation is a blend of the segments' lagged
         loads, in phase near their weighted centroid). Measured through the pipeline (20 seeds per strength,
         p <= 0.005): 13/15/14/13 -> 13/15/16/17 of 20 at 0.5/1/2/3x default, effect-free 0/40 both."""
