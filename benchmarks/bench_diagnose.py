@@ -69,6 +69,24 @@ def case(effect, seed, frames, matrices, mult=1.0, noise_free=False):
     return r.Y, W, r.root_distance, k, y, tp, [f"{j}->{c}" for j, c in r.edges]
 
 
+def cached_case(cache, effect, seed, frames, matrices, mult=1.0, noise_free=False):
+    """:func:`case`, its pipeline output kept in (and read back from) the folder ``cache`` when one is given
+    (one .npz per effect, strength, seed, length and noise setting; the pipeline seconds of a cached case
+    are 0)."""
+    if cache is None or matrices:
+        return case(effect, seed, frames, matrices, mult, noise_free)
+    path = Path(cache) / f"{effect or 'none'}_{mult:g}_{seed}_{frames}{'_noisefree' if noise_free else ''}.npz"
+    if path.exists():
+        d = np.load(path)
+        return d["Y"], (d["W"] if d["W"].size else None), d["s"], d["k"], d["y"], 0.0, list(d["labels"])
+    Y, W, s, k, y, tp, labels = case(effect, seed, frames, matrices, mult, noise_free)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".part.npz")
+    np.savez(tmp, Y=Y, W=W if W is not None else np.array([]), s=s, k=k, y=y, labels=np.array(labels))
+    tmp.replace(path)
+    return Y, W, s, k, y, tp, labels
+
+
 def ceiling(Y, y):
     """Held-out improvement (%) an oracle knowing the true response would get over the rank-1 model."""
     y = on_rest_reference(Y, y)
@@ -114,6 +132,8 @@ def main() -> int:
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--frames", type=int, default=900)
+    ap.add_argument("--cache", default=None,
+                    help="folder that keeps each case's pipeline output, so a re-run only re-diagnoses")
     ap.add_argument("--matrices", action="store_true")
     ap.add_argument("--noise-free", action="store_true", help="noise-free tracks (the pipeline still runs)")
     ap.add_argument("--strength-mult", default="1",
@@ -141,7 +161,8 @@ def main() -> int:
             okz, ok2, conf2, ok3, orc3, conf3, n_sep, conf_sep = 0, 0, 0, 0, 0, 0, 0, 0
             okf, orcf, ok, orc, conf, imp_v, imp_h, ceil, kb, ka, ts, tps, tru, nsr = 0, 0, 0, 0, 0, [], [], [], [], [], [], [], [], []
             for sd in range(a.first_seed, a.first_seed + a.seeds):
-                Y, W, s, k, y, tp, labels = case(hidden, sd, a.frames, a.matrices, mult, a.noise_free)
+                Y, W, s, k, y, tp, labels = cached_case(a.cache, hidden, sd, a.frames, a.matrices, mult,
+                                                        a.noise_free)
                 t = time.perf_counter()
                 d = diagnose(Y, weights=W, root_distance=s, seed=0, edge_labels=labels, n_folds=a.folds,
                              config=config)

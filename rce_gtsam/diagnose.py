@@ -31,9 +31,10 @@ extended by that effect (:mod:`rce_gtsam.effects`), and compares them on **held-
   on effect-free pipeline data stay 0/40. An effect is *significant* when evidence exceeds the one-sided t quantile at
   alpha / (number of candidates) (Bonferroni) with n_folds - 1 degrees of freedom.
 * Full-data test: an effect with a fixed signature in the residuals (delay, dynamics:
-  :meth:`~rce_gtsam.effects.Effect.score_directions`) also gets a score test on every frame at once, cross-
-  fitted between the two node-disjoint row sets and calibrated by phase-randomised residuals
-  (:mod:`rce_gtsam.diagnosis.score_test`); its power does not stop at the number of folds. Such an effect is
+  :meth:`~rce_gtsam.effects.Effect.score_directions`) also gets a score test on every frame at once,
+  calibrated by phase-randomised residuals (:mod:`rce_gtsam.diagnosis.score_test`: the delay's directions
+  from the full fit's excitation with a refitted null, dynamics' cross-fitted between the two node-disjoint
+  row sets); its power does not stop at the number of folds. Such an effect is
   significant when either test is, each at half its share of alpha (Bonferroni again), so the family-wise
   false-alarm rate stays <= alpha. *Supported* = significant AND a lower held-out RMSE AND a lower AIC than
   the baseline's AND at least ``resolution`` of the bending variance off the held-out error: the held-out
@@ -64,7 +65,8 @@ from .diagnosis.budget import VarianceBudget, variance_budget
 from .diagnosis.encompassing import encompassing_test
 from .diagnosis.maxt import sign_flip_max_t
 from .diagnosis.noise_floor import NoiseFloor
-from .diagnosis.score_test import cross_fitted_score_test, effect_directions, half_fits, is_significant
+from .diagnosis.score_test import (cross_fitted_score_test, effect_directions, half_fits, is_significant,
+                                    refitted_score_test)
 from .diagnosis.statistics import ResidualContext, autocorrelation
 from .diagnosis.sysid import ResidualAnalysis, residual_analysis
 from .model import ModelFit, ResponseModel, render_fit_report, validate_inputs
@@ -487,8 +489,11 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                  "full_data_t": dm["t"], "full_data_dof": dm["dof"], "full_data_batch_frames": dm["batch_frames"]}
         gain_share = (b_rmse ** 2 - rmse ** 2) / total_var if total_var > 0 else 0.0
         extra["heldout_gain_share"] = gain_share
-        score = (cross_fitted_score_test(halves, hfits, effect_directions(eff), seed=seed)
-                 if hfits is not None else None)
+        score = None
+        if hfits is not None and eff.score_excitation == "own":
+            score = refitted_score_test(base_model, base, Y, W, s, eff.test_directions, hfits, halves, seed=seed)
+        elif hfits is not None:
+            score = cross_fitted_score_test(halves, hfits, effect_directions(eff), seed=seed)
         if score is None:
             significant = is_significant(ev, t_crit, None, p_crit_score)
         else:
@@ -655,8 +660,13 @@ def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str
     if eff.test_directions(base.kappa, base.z, s) is not None and st.get("node_disjoint_halves"):
         # the full-data score test along the true signature: the noise-free truth of each row set (its rank-1
         # part is projected out by the test), i.e. the direction a test that knew the effect would use
-        score = cross_fitted_score_test(halves, half_fits(base.model, base.Y, W, s, halves),
-                                        lambda i, kappa, z, s_: y[halves[i]][None], seed=st["seed"])
+        hfits = half_fits(base.model, base.Y, W, s, halves)
+        if eff.score_excitation == "own":
+            score = refitted_score_test(base.model, base, base.Y, W, s, lambda kappa, z, s_: y[None], hfits,
+                                        halves, seed=st["seed"])
+        else:
+            score = cross_fitted_score_test(halves, hfits, lambda i, kappa, z, s_: y[halves[i]][None],
+                                            seed=st["seed"])
     if score is None:
         out = _scored_test(diag, Y, pred)
     else:

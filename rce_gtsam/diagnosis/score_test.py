@@ -1,4 +1,4 @@
-"""A calibrated full-data test of an effect: a cross-fitted score test with a phase-randomised null.
+"""A calibrated full-data test of an effect: a score test with a phase-randomised null.
 
 The held-out fold test (:func:`rce_gtsam.diagnose.diagnose`) compares 16 fold-level error ratios; its power is
 set by their number, whatever the length of the recording. This test uses every frame at once.
@@ -13,32 +13,38 @@ set by their number, whatever the length of the recording. This test uses every 
   derivative at tau = 0 points elsewhere once the lag is a sizeable part of the sway's period).
 * **Clock.** A rank-1 excitation is a blend of the segments' responses, in phase near their weighted
   centroid of root distance (:func:`excitation_clock`); directions get the root distances measured from there.
-* **Cross-fitting.** G is built from an excitation z estimated on *other* segments than the R it is paired
-  with: the rows are split into two sets that share no tracked node (:func:`rce_gtsam.diagnose.node_disjoint_split`),
-  each set's baseline is fitted on its own, and set A's residuals are paired with directions from set B's
-  excitation and vice versa. Tracking noise in z would otherwise enter both R and G (dz/dt, d2z/dt2
-  amplify it): measured on effect-free pipeline data, the same test with the segments' own z called second-
-  order dynamics significant at 1 % in 34/40 seeds.
-* **Null.** The residuals of both sets are replaced by multivariate Fourier surrogates
-  (:func:`rce_gtsam.compliance.phase_randomised_residuals`: every segment's spectrum and every cross-spectrum
-  kept, only *when* the noise happens is new), with the directions held fixed. For a stationary Gaussian
-  residual, S is then exactly a draw from the surrogates' distribution, whatever the noise's colour; the
-  p-value is the share of surrogates whose statistic reaches the observed one. Measured on 40 effect-free
-  pipeline seeds (default preset, 900 frames): the delay's lag scan 0/40 below p = 0.005 (the level the
-  diagnosis uses), 1/40 below 0.01 and 6/40 below 0.05 (its first-order direction alone: 0/40, 3/40, 4/40;
-  a calibrated test shows 6 or more of 40 below 0.05 in 1.4 % of such runs, so the scan's null is slightly
-  heavy in its body, not in the tail the diagnosis uses); dynamics 2/40 below 0.01. Anchoring the scan's
-  lags at the root instead of the excitation's clock fired in 5/40 below 0.005: the pipeline's effect-free angles
-  carry a small root-anchored lag signature that no held-out error rewards (the delay candidate's held-out
-  change on those seeds: -0.2 to +0.2 %). A block sign-flip null (30- or 60-frame blocks, robust to
-  variance that changes over time) gave the same delay counts and took dynamics to 0/40 below 0.005 but
-  5/40 below 0.05: not adopted.
-* **Power and its limit.** Delay through the pipeline, 20 seeds per strength, p <= 0.005: 13/15/16/17 of 20
-  at 0.5/1/2/3x default (first-order direction: 13/15/14/13). The oracle, whose direction is the noise-free
-  response itself, reaches 20/20 from 0.5x; the same scan with the true excitation in place of the other
-  row set's (known z, unknown lag) 19/20 at 0.5x. What costs power is estimating z from the other set: the
-  node-disjoint sets hold 6 and 4 of the 18 segments (median), so each set's directions come from 4-6
-  segments. A Wiener filter on that z (its noise spectrum from the set's residuals) did not help (13/20).
+* **Where z comes from: two versions** (an effect picks one, :attr:`~rce_gtsam.effects.Effect.score_excitation`).
+  Tracking noise in z enters both R and G when G is built from the fit's own z.
+
+  - ``"own"`` (:func:`refitted_score_test`, the delay): G from the full fit's z, every row's. The null
+    refits: each surrogate data set is the fitted prediction plus phase surrogates of the residuals and of
+    z's own noise (:func:`excitation_noise_spectrum`), the baseline is refitted and its scores computed from
+    its own z, so the noise in z acts on surrogates as on the data; scores are measured from the surrogates'
+    mean. Delay through the pipeline (40 effect-free and 20 delay seeds per strength, default preset, 900
+    frames): effect-free 0/40 below p = 0.05; delay p <= 0.005 in 18/19/20/20 of 20 at 0.5/1/2/3x default.
+    It needs 400 baseline refits (about 3 s on 18 segments x 900 frames).
+  - ``"other_rows"`` (:func:`cross_fitted_score_test`, dynamics): G from an excitation estimated on *other*
+    segments than the R it is paired with: the rows are split into two sets that share no tracked node
+    (:func:`rce_gtsam.diagnose.node_disjoint_split`), each set's baseline is fitted on its own, and set A's
+    residuals are paired with directions from set B's excitation and vice versa. Each set's directions then
+    come from 4-6 of 18 segments (median), which costs power: the delay's lag scan so cross-fitted found
+    13/15/16/17 of 20 at 0.5/1/2/3x. Dynamics keeps it because its own-z version is not calibrated on
+    effect-free pipeline data, refitted null or not (16/40 below p = 0.005): the smoother attenuates
+    curvature most where tracking is noisiest, toward the tip, which *is* a kappa_e s_e d2z/dt2 signature;
+    the other set's noisier z sees less of it (2/40 below 0.01). A shift is not what a symmetric smoother
+    does, and the delay's own-z test stays calibrated.
+* **Null of the cross-fitted version.** The residuals of both sets are replaced by multivariate Fourier
+  surrogates (:func:`rce_gtsam.compliance.phase_randomised_residuals`: every segment's spectrum and every
+  cross-spectrum kept, only *when* the noise happens is new), with the directions held fixed. For a
+  stationary Gaussian residual, S is then exactly a draw from the surrogates' distribution, whatever the
+  noise's colour; the p-value is the share of surrogates whose statistic reaches the observed one. Measured on
+  40 effect-free pipeline seeds (default preset, 900 frames): dynamics 2/40 below 0.01; the delay's lag scan
+  (before it moved to the refitted version) 0/40 below 0.005, 1/40 below 0.01, 6/40 below 0.05. Anchoring
+  the delay's lags at the root instead of the excitation's clock fired in 5/40 below 0.005. A block
+  sign-flip null (30- or 60-frame blocks) took dynamics to 0/40 below 0.005 but 5/40 below 0.05: not adopted.
+* **Power and its limit.** The oracle, whose direction is the noise-free response itself, reaches 20/20
+  delay seeds from 0.5x; the cross-fitted scan with the true excitation in place of the other set's 19/20 at
+  0.5x, which is what the refitted version, with every row's z, now reaches toward.
 * **Where it does not apply.** Effects whose signature has no fixed direction (a second excitation's w_t, a
   per-segment offset or creep: they have a direction per segment, or none) or whose null calibration failed
   (a saturation's z^3 direction: 10/40 effect-free seeds below 0.01, the pipeline's own small non-linearity and
@@ -49,6 +55,7 @@ Units: degrees (residuals), frames (time); p-values and Q are unitless.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -57,6 +64,7 @@ from scipy import stats
 from ..compliance import draw_phases, residual_spectrum, surrogate_residuals
 
 N_SURROGATES = 2000  # phase surrogates of the null (p-value resolution 1/2001)
+N_REFITS = 400  # refitted surrogates of :func:`refitted_score_test` (p-value resolution 1/401)
 SURROGATE_BATCH = 250  # surrogates drawn and scored at a time (memory: batch x E x T floats)
 
 
@@ -150,6 +158,31 @@ def _quadratic(S: np.ndarray, Vi: np.ndarray) -> np.ndarray:
     return np.einsum("...i,ij,...j->...", S, Vi, S)
 
 
+def combine_scores(S: np.ndarray, Ss: np.ndarray, statistic: str, centre: bool = False):
+    """(q, q_null, peak): the J scores S (J,) and their surrogates Ss (n, J) combined into one statistic as
+    ``statistic`` says (``"max"``: the largest standardised score, peak its index; ``"quadratic"``: S' V^-1 S
+    with V the surrogates' covariance, peak None). ``centre``: scores measured from the surrogates' mean
+    first (a test whose null scores have a non-zero mean, :func:`refitted_score_test`)."""
+    if centre:
+        mu = Ss.mean(axis=0)
+        S, Ss = S - mu, Ss - mu
+    if statistic == "max":
+        sd = np.maximum(Ss.std(axis=0), 1e-300)
+        peak = int(np.argmax(S / sd))
+        return float(S[peak] / sd[peak]), np.max(Ss / sd, axis=1), peak
+    if statistic == "quadratic":
+        Vi = np.linalg.pinv(np.atleast_2d(np.cov(Ss.T)), rcond=1e-10)
+        return float(_quadratic(S, Vi)), _quadratic(Ss, Vi), None
+    raise ValueError(f"score test statistic {statistic!r}: expected 'quadratic' or 'max'")
+
+
+def _score_test(q: float, qs: np.ndarray, n_directions: int, statistic: str, peak) -> ScoreTest:
+    n = len(qs)
+    p = float((1 + np.sum(qs >= q)) / (n + 1))
+    return ScoreTest(p=p, q=q, n_directions=n_directions, n_surrogates=n, z_equivalent=float(stats.norm.isf(p)),
+                     statistic=statistic, peak=peak)
+
+
 def cross_fitted_score_test(halves, fits, directions, n_surrogates: int = N_SURROGATES, seed: int = 0
                             ) -> ScoreTest | None:
     """The test for one effect, given the two node-disjoint row sets.
@@ -176,18 +209,73 @@ def cross_fitted_score_test(halves, fits, directions, n_surrogates: int = N_SURR
         Rs.append(f.residuals)
     H = np.concatenate(parts, axis=1)            # (J, E_A + E_B, T)
     R = np.vstack(Rs)
-    J = H.shape[0]
     S, Ss = scores_with_null(R, H, n_surrogates, seed)
-    peak = None
-    if statistic == "max":
-        sd = np.maximum(Ss.std(axis=0), 1e-300)
-        peak = int(np.argmax(S / sd))
-        q, qs = float(S[peak] / sd[peak]), np.max(Ss / sd, axis=1)
-    elif statistic == "quadratic":
-        Vi = np.linalg.pinv(np.atleast_2d(np.cov(Ss.T)), rcond=1e-10)
-        q, qs = float(_quadratic(S, Vi)), _quadratic(Ss, Vi)
-    else:
-        raise ValueError(f"score test statistic {statistic!r}: expected 'quadratic' or 'max'")
-    p = float((1 + np.sum(qs >= q)) / (n_surrogates + 1))
-    return ScoreTest(p=p, q=q, n_directions=J, n_surrogates=n_surrogates, z_equivalent=float(stats.norm.isf(p)),
-                     statistic=statistic, peak=peak)
+    q, qs, peak = combine_scores(S, Ss, statistic)
+    return _score_test(q, qs, H.shape[0], statistic, peak)
+
+
+def fit_scores(fit, directions):
+    """(S (J,), statistic) or None: the scores sum_{e,t} W R G_j of a fit's residuals along the directions that
+    ``directions(kappa, z, s)`` builds from the fit's own kappa and excitation (s: root distances measured from
+    the fit's :func:`excitation_clock`), their rank-1 tangent projected out."""
+    G = directions(fit.kappa, fit.z, fit.root_distance - excitation_clock(fit))
+    if G is None:
+        return None
+    G, statistic = G if isinstance(G, tuple) else (G, "quadratic")
+    ok = np.isfinite(fit.residuals)
+    W = np.where(ok, fit.weights, 0.0)
+    H = W[None] * remove_rank1_tangent(np.asarray(G, float), fit.kappa, fit.z, W)
+    return H.reshape(H.shape[0], -1) @ np.where(ok, fit.residuals, 0.0).ravel(), statistic
+
+
+def excitation_noise_spectrum(fit, fits, halves) -> np.ndarray:
+    """(1, K) Fourier spectrum (amplitudes, as :func:`rce_gtsam.compliance.residual_spectrum`) of the noise the
+    full fit's excitation z carries, estimated without the model under test: the difference of the two
+    node-disjoint row sets' excitations (on z's scale) is their two noises only (the sets share no tracked
+    node), and each set's noise variance goes as 1 / (its information sum W kappa^2), so the full z's is that
+    difference's times 1 / (I (1 / I_A + 1 / I_B))."""
+    info = np.sum(np.where(np.isfinite(fit.residuals), fit.weights, 0.0) * fit.kappa[:, None] ** 2, axis=1)
+    ia, ib, i_all = (float(info[halves[0]].sum()), float(info[halves[1]].sum()), float(info.sum()))
+    diff = on_scale_of(fits[0].z, fit.z) - on_scale_of(fits[1].z, fit.z)
+    scale = 1.0 / (i_all * (1.0 / max(ia, 1e-300) + 1.0 / max(ib, 1e-300))) if i_all > 0 else 0.0
+    return residual_spectrum(diff[None]) * math.sqrt(scale)
+
+
+def refitted_score_test(model, fit, Y, W, s, directions, fits, halves, n_surrogates: int = N_REFITS,
+                        seed: int = 0) -> ScoreTest | None:
+    """The test for one effect with directions built from the fit's *own* excitation, calibrated by refitting.
+
+    ``fit``: ``model`` (the baseline) solved on all rows of Y (E, T, degrees; weights W, root distances s);
+    ``directions``: (kappa, z, s) -> (G, statistic) as for :func:`cross_fitted_score_test` (its ``s``: root
+    distances from the fit's own clock), or None (no test); ``fits``, ``halves``: the baseline on each node-
+    disjoint row set, used only to estimate the noise in z (:func:`excitation_noise_spectrum`).
+
+    Each of ``n_surrogates`` data sets is the fitted prediction plus a multivariate phase surrogate of the
+    residuals plus kappa_e nu_t, nu a phase surrogate of z's own noise (the residuals lack the part of the
+    noise z absorbed); the baseline is refitted to it and its scores are computed as the observed ones, from
+    its own excitation. Noise in z then enters the surrogates' residuals and directions as it enters the
+    data's, and the statistic is measured from the surrogates' mean (:func:`combine_scores` with ``centre``).
+    Every row's excitation uses all rows, where the cross-fitted test builds each set's directions from the
+    other set's 4-6 segments. Returns None when ``directions`` gives none."""
+    observed = fit_scores(fit, directions)
+    if observed is None:
+        return None
+    S, statistic = observed
+    E, T = Y.shape
+    obs = np.isfinite(Y) & (W > 0)
+    prediction = fit.kappa[:, None] * fit.z[None]
+    rng = np.random.default_rng(seed)
+    phase, dc = draw_phases(rng, n_surrogates, T)
+    z_phase, z_dc = draw_phases(rng, n_surrogates, T)
+    spectrum = residual_spectrum(fit.residuals)
+    z_spectrum = excitation_noise_spectrum(fit, fits, halves)
+    Ss = np.empty((n_surrogates, len(S)))
+    for i in range(0, n_surrogates, SURROGATE_BATCH):
+        sl = slice(i, i + SURROGATE_BATCH)
+        noise = surrogate_residuals(spectrum, T, phase[sl], None if dc is None else dc[sl])
+        nu = surrogate_residuals(z_spectrum, T, z_phase[sl], None if z_dc is None else z_dc[sl])[:, 0]
+        for j in range(len(noise)):
+            Ys = np.where(obs, prediction + noise[j] + fit.kappa[:, None] * nu[j][None], np.nan)
+            Ss[i + j] = fit_scores(model.solve(Ys, W, s), directions)[0]
+    q, qs, peak = combine_scores(S, Ss, statistic, centre=True)
+    return _score_test(q, qs, len(S), statistic, peak)

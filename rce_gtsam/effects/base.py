@@ -69,6 +69,11 @@ class Effect:
     kind: ClassVar[str] = "additive"
     #: What a verdict for this effect means physically and what to check (plain text, no API names).
     physics: ClassVar[str] = ""
+    #: Where the score test's directions get their excitation z (:mod:`rce_gtsam.diagnosis.score_test`):
+    #: "other_rows" (cross-fitted: each node-disjoint row set's directions from the other set's z) or "own"
+    #: (the full fit's z, the null from refitted surrogates). "own" only where effect-free data measured it
+    #: calibrated: the pipeline's smoother leaves a signature of its own along some directions (see Dynamics).
+    score_excitation: ClassVar[str] = "other_rows"
 
     # -- description ------------------------------------------------------------------------------
     def parameters(self, n_edges: int) -> tuple[Parameter, ...]:
