@@ -168,7 +168,8 @@ class Delay(Effect):
         the sway's period (45 frames of a ~200-frame sway in tests/test_score_test.py) it points elsewhere. ``s`` is measured from the excitation's clock, so that z is moved by
         the lag relative to where it was estimated (a rank-1 excitation is a blend of the segments' lagged
         loads, in phase near their weighted centroid). Measured through the pipeline (20 seeds per strength,
-        p <= 0.005): 13/15/14/13 -> 13/15/16/17 of 20 at 0.5/1/2/3x default, effect-free 0/40 both."""
+        p <= 0.005, cross-fitted): 13/15/14/13 -> 13/15/16/17 of 20 at 0.5/1/2/3x default, effect-free 0/40
+        both; with the full fit's z and a refitted null (the delay's ``score_excitation``) 18/19/18/15."""
         return kappa[None, :, None] * shifted(np.asarray(z, float), np.outer(self.scan_lags(), s)), "max"
 
     def align(self, X, state, s):
