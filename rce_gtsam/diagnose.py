@@ -499,7 +499,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         else:
             extra.update({"score_p": score.p, "score_q": score.q, "score_directions": score.n_directions,
                           "score_threshold_p": p_crit_score, "threshold_t": t_crit_split,
-                          "score_z": score.z_equivalent, "score_statistic": score.statistic})
+                          "score_z": score.z_equivalent, "score_statistic": score.statistic,
+                          "score_excitation": eff.score_excitation})
             significant = is_significant(ev, t_crit_split, score.p, p_crit_score)
         extra["significant"] = significant
         supported = bool(significant and _earns_its_place(rmse, b_rmse, daic, gain_share, resolution))
@@ -1001,9 +1002,14 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
                    f"{-c.improvement_pct:+7.1f}% {c.evidence:11.2f} {'-' if sp is None else f'{sp:.4f}':>9} "
                    f"{c.delta_aic:10.1f} {c.delta_bic:10.1f}  {'yes' if c.supported else 'no'}")
     if any(c.extra.get("score_p") is not None for c in diag.candidates):
-        out.append(f"    score p: full-data score test (cross-fitted, phase-randomised null) where an effect has one; "
+        how = {"own": "its directions from the fit's own excitation, null from refitted surrogates",
+               "other_rows": "its directions from the other node-disjoint segments' excitation"}
+        methods = "; ".join(f"{c.effect}: {how.get(c.extra.get('score_excitation'), 'phase-randomised null')}"
+                            for c in diag.candidates if c.extra.get("score_p") is not None)
+        out.append(f"    score p: full-data score test where an effect has one ({methods}); "
                    f"such an effect is significant when t > {st['evidence_threshold_t_split']:.2f} or p <= "
-                   f"{st['score_threshold_p']:.3g} (each test at half its alpha)")
+                   f"{st['score_threshold_p']:.3g} (each test at half its alpha), and supported only if the "
+                   f"held-out RMSE also falls")
     enc = (st.get("parsimony") or {}).get("encompassing_p") or {}
     if enc:
         lo = st["parsimony"]["lowest_heldout"]

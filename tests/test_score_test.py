@@ -105,6 +105,7 @@ def test_diagnose_runs_the_score_test_where_an_effect_has_one_and_splits_alpha()
     for c in d.candidates:
         if c.effect in NEAR_NULL:
             assert 0 < c.extra["score_p"] <= 1 and c.extra["threshold_t"] == d.settings["evidence_threshold_t_split"]
+            assert c.extra["score_excitation"] == effects.make(c.effect).score_excitation  # which test ran
             assert c.extra["significant"] == bool(c.evidence > c.extra["threshold_t"]
                                                   or c.extra["score_p"] <= c.extra["score_threshold_p"])
         else:
