@@ -501,6 +501,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                           "score_threshold_p": p_crit_score, "threshold_t": t_crit_split,
                           "score_z": score.z_equivalent, "score_statistic": score.statistic,
                           "score_excitation": eff.score_excitation})
+            if score.peak is not None:
+                extra["score_peak"] = eff.scan_label(score.peak)
             significant = is_significant(ev, t_crit_split, score.p, p_crit_score)
         extra["significant"] = significant
         supported = bool(significant and _earns_its_place(rmse, b_rmse, daic, gain_share, resolution))

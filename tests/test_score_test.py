@@ -106,6 +106,8 @@ def test_diagnose_runs_the_score_test_where_an_effect_has_one_and_splits_alpha()
         if c.effect in NEAR_NULL:
             assert 0 < c.extra["score_p"] <= 1 and c.extra["threshold_t"] == d.settings["evidence_threshold_t_split"]
             assert c.extra["score_excitation"] == effects.make(c.effect).score_excitation  # which test ran
+            if c.effect == "delay":  # the scan's strongest lag, for the report
+                assert c.extra["score_peak"]["tip_lag_frames"] in effects.make("delay").scan_lags()
             assert c.extra["significant"] == bool(c.evidence > c.extra["threshold_t"]
                                                   or c.extra["score_p"] <= c.extra["score_threshold_p"])
         else:

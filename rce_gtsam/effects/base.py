@@ -172,6 +172,14 @@ class Effect:
         G = self.score_directions(kappa, z, s)
         return None if G is None else (G, "quadratic")
 
+    def scan_label(self, peak: int) -> dict:
+        """For a ``"max"`` test (a scan over one parameter): {name_unit: value} of the scanned value whose score
+        was largest (``peak`` indexes the directions of :meth:`test_directions`), kept in ``diagnosis.json`` as
+        ``score_peak``. It is where the test saw most, not an estimate of the parameter (the extended fit gives
+        that: on a 15-frame synthetic lag the delay's scan peaked at 1.9 frames, whose direction after the
+        projection has the least noise). Default: {}."""
+        return {}
+
     def align(self, X: np.ndarray, state: dict, s: np.ndarray) -> np.ndarray | None:
         """(E, T) the rows of X (degrees; NaN = missing) moved onto the excitation's clock by undoing this effect's
         operator at ``state`` (``s``: the rows' root distances), NaN where that is undefined; None (the default):

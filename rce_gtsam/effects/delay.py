@@ -161,6 +161,10 @@ class Delay(Effect):
         lags = self.max_lag / np.sqrt(2.0) ** np.arange(n)
         return np.concatenate([lags, -lags])
 
+    def scan_label(self, peak: int) -> dict:
+        """The tip lag (frames, from the excitation's clock) whose direction scored highest."""
+        return {"tip_lag_frames": float(self.scan_lags()[peak])}
+
     def test_directions(self, kappa, z, s):
         """A scan over the tip lag: kappa_e z(t - tau s_e) for every tau of :meth:`scan_lags`, combined by the
         largest standardised score. The first-order direction (:meth:`score_directions`) is the Taylor
