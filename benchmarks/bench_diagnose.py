@@ -22,7 +22,8 @@ candidate with its true shared parameters (fitted to the noise-free truth, then 
 kappa and the held-out excitation estimated from the noisy data as for every candidate): "oracle" counts the
 cases where it passes the verdict's threshold, the ceiling the verdict reaches toward with this test. For delay and
 dynamics, which the verdict also tests on all frames at once (:mod:`rce_gtsam.diagnosis.score_test`), the oracle's
-full-data score test runs along the true signature (the noise-free truth of each row set), with the same split
+full-data score test runs along the true signature (the noise-free truth: of each row set for dynamics' cross-fitted
+test, of all rows for the delay's refitted one), with the same split
 thresholds: fold t or score p, each at half the level. "knows z" counts the same for the noise-free truth itself as the prediction (it knows the
 excitation and kappa without estimating them, and fires on effect-free data too: not a ceiling for a diagnosis).
 
@@ -30,6 +31,8 @@ Usage: python benchmarks/bench_diagnose.py [--seeds 10] [--frames 900] [--effect
        [--strength-mult 0.5,1,1.5,2,3]  (hidden effect strengths, x the simulator's defaults)
        [--noise-free]  (noise-free tracks through the same pipeline)
        [--matrices]  (fast: simulator equations + noise instead of the pipeline, for development)
+       [--cache DIR]  (keep each case's pipeline output there: a re-run after a change to the diagnosis only
+                       re-diagnoses; the pipeline seconds of a cached case print as 0)
 """
 
 from __future__ import annotations
