@@ -65,8 +65,7 @@ from .diagnosis.budget import VarianceBudget, variance_budget
 from .diagnosis.encompassing import encompassing_test
 from .diagnosis.maxt import sign_flip_max_t
 from .diagnosis.noise_floor import NoiseFloor
-from .diagnosis.score_test import (cross_fitted_score_test, effect_directions, half_fits, is_significant,
-                                    refitted_score_test)
+from .diagnosis.score_test import effect_score_test, half_fits, is_significant
 from .diagnosis.statistics import ResidualContext, autocorrelation
 from .diagnosis.sysid import ResidualAnalysis, residual_analysis
 from .model import ModelFit, ResponseModel, render_fit_report, validate_inputs
@@ -489,11 +488,9 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                  "full_data_t": dm["t"], "full_data_dof": dm["dof"], "full_data_batch_frames": dm["batch_frames"]}
         gain_share = (b_rmse ** 2 - rmse ** 2) / total_var if total_var > 0 else 0.0
         extra["heldout_gain_share"] = gain_share
-        score = None
-        if hfits is not None and eff.score_excitation == "own":
-            score = refitted_score_test(base_model, base, Y, W, s, eff.test_directions, hfits, halves, seed=seed)
-        elif hfits is not None:
-            score = cross_fitted_score_test(halves, hfits, effect_directions(eff), seed=seed)
+        score = (effect_score_test(eff.score_excitation, base_model, base, Y, W, s, hfits, halves,
+                                   lambda rows, kappa, z, s_: eff.test_directions(kappa, z, s_), seed=seed)
+                 if hfits is not None else None)
         if score is None:
             significant = is_significant(ev, t_crit, None, p_crit_score)
         else:
@@ -663,13 +660,9 @@ def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str
     if eff.test_directions(base.kappa, base.z, s) is not None and st.get("node_disjoint_halves"):
         # the full-data score test along the true signature: the noise-free truth of each row set (its rank-1
         # part is projected out by the test), i.e. the direction a test that knew the effect would use
-        hfits = half_fits(base.model, base.Y, W, s, halves)
-        if eff.score_excitation == "own":
-            score = refitted_score_test(base.model, base, base.Y, W, s, lambda kappa, z, s_: y[None], hfits,
-                                        halves, seed=st["seed"])
-        else:
-            score = cross_fitted_score_test(halves, hfits, lambda i, kappa, z, s_: y[halves[i]][None],
-                                            seed=st["seed"])
+        score = effect_score_test(eff.score_excitation, base.model, base, base.Y, W, s,
+                                  half_fits(base.model, base.Y, W, s, halves), halves,
+                                  lambda rows, kappa, z, s_: y[rows][None], seed=st["seed"])
     if score is None:
         out = _scored_test(diag, Y, pred)
     else:

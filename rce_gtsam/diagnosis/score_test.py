@@ -117,11 +117,17 @@ def effect_directions(effect):
     return lambda i, kappa, z, s: effect.test_directions(kappa, z, s)
 
 
+def row_information(fit) -> np.ndarray:
+    """(E,) each row's information about a rank-1 fit's excitation z: sum_t W kappa_e^2 over its observed
+    frames (1 / deg^2 per unit of z^2)."""
+    return np.sum(np.where(np.isfinite(fit.residuals), fit.weights, 0.0), axis=1) * fit.kappa ** 2
+
+
 def excitation_clock(fit) -> float:
     """The root distance at which a rank-1 fit's excitation z is in phase with its segments: their root
-    distances' mean weighted by each segment's share of z's information (sum_t W kappa_e^2). Under a lag that
-    grows along the branch, z is a blend of the segments' lagged responses weighted so."""
-    info = np.sum(np.where(np.isfinite(fit.residuals), fit.weights, 0.0), axis=1) * fit.kappa ** 2
+    distances' mean weighted by each segment's share of z's information (:func:`row_information`). Under a lag
+    that grows along the branch, z is a blend of the segments' lagged responses weighted so."""
+    info = row_information(fit)
     total = float(np.sum(info))
     return float(np.sum(info * fit.root_distance) / total) if total > 0 else 0.0
 
@@ -185,6 +191,19 @@ def _score_test(q: float, qs: np.ndarray, n_directions: int, statistic: str, pea
                      statistic=statistic, peak=peak)
 
 
+def weighted_directions(fit, G) -> np.ndarray:
+    """W G (J, E, T) with the part of G a change of the fit's kappa or z could absorb removed
+    (:func:`remove_rank1_tangent`), W the fit's weights (0 where a residual is missing): the score of the fit's
+    residuals R along G_j is then sum W R G_j = sum of this times R."""
+    W = np.where(np.isfinite(fit.residuals), fit.weights, 0.0)
+    return W[None] * remove_rank1_tangent(np.asarray(G, float), fit.kappa, fit.z, W)
+
+
+def _with_statistic(G):
+    """(G, statistic) from what a directions function returned: a bare G combines quadratically."""
+    return G if isinstance(G, tuple) else (G, "quadratic")
+
+
 def cross_fitted_score_test(halves, fits, directions, n_surrogates: int = N_SURROGATES, seed: int = 0
                             ) -> ScoreTest | None:
     """The test for one effect, given the two node-disjoint row sets.
@@ -196,18 +215,14 @@ def cross_fitted_score_test(halves, fits, directions, n_surrogates: int = N_SURR
     :meth:`~rce_gtsam.effects.Effect.test_directions` (see :func:`effect_directions`); for the benchmark's
     oracle the noise-free truth of the set's rows. Returns None when there are no directions."""
     parts, Rs = [], []
-    statistic = "quadratic"
     for i in (0, 1):
         f, o = fits[i], fits[1 - i]
         z_other = on_scale_of(o.z, f.z)
         G = directions(i, f.kappa, z_other, f.root_distance - excitation_clock(o))
         if G is None:
             return None
-        if isinstance(G, tuple):
-            G, statistic = G
-        ok = np.isfinite(f.residuals)
-        W = np.where(ok, f.weights, 0.0)
-        parts.append(W[None] * remove_rank1_tangent(np.asarray(G, float), f.kappa, f.z, W))
+        G, statistic = _with_statistic(G)
+        parts.append(weighted_directions(f, G))
         Rs.append(f.residuals)
     H = np.concatenate(parts, axis=1)            # (J, E_A + E_B, T)
     R = np.vstack(Rs)
@@ -223,11 +238,9 @@ def fit_scores(fit, directions):
     G = directions(fit.kappa, fit.z, fit.root_distance - excitation_clock(fit))
     if G is None:
         return None
-    G, statistic = G if isinstance(G, tuple) else (G, "quadratic")
-    ok = np.isfinite(fit.residuals)
-    W = np.where(ok, fit.weights, 0.0)
-    H = W[None] * remove_rank1_tangent(np.asarray(G, float), fit.kappa, fit.z, W)
-    return H.reshape(H.shape[0], -1) @ np.where(ok, fit.residuals, 0.0).ravel(), statistic
+    G, statistic = _with_statistic(G)
+    H = weighted_directions(fit, G)
+    return H.reshape(H.shape[0], -1) @ np.where(np.isfinite(fit.residuals), fit.residuals, 0.0).ravel(), statistic
 
 
 def excitation_noise_spectrum(fit, fits, halves) -> np.ndarray:
@@ -236,7 +249,7 @@ def excitation_noise_spectrum(fit, fits, halves) -> np.ndarray:
     node-disjoint row sets' excitations (on z's scale) is their two noises only (the sets share no tracked
     node), and each set's noise variance goes as 1 / (its information sum W kappa^2), so the full z's is that
     difference's times 1 / (I (1 / I_A + 1 / I_B))."""
-    info = np.sum(np.where(np.isfinite(fit.residuals), fit.weights, 0.0) * fit.kappa[:, None] ** 2, axis=1)
+    info = row_information(fit)
     ia, ib, i_all = (float(info[halves[0]].sum()), float(info[halves[1]].sum()), float(info.sum()))
     diff = on_scale_of(fits[0].z, fit.z) - on_scale_of(fits[1].z, fit.z)
     scale = 1.0 / (i_all * (1.0 / max(ia, 1e-300) + 1.0 / max(ib, 1e-300))) if i_all > 0 else 0.0
@@ -263,7 +276,7 @@ def refitted_score_test(model, fit, Y, W, s, directions, fits, halves, n_surroga
     if observed is None:
         return None
     S, statistic = observed
-    E, T = Y.shape
+    T = Y.shape[1]
     obs = np.isfinite(Y) & (W > 0)
     prediction = fit.kappa[:, None] * fit.z[None]
     rng = np.random.default_rng(seed)
@@ -281,3 +294,20 @@ def refitted_score_test(model, fit, Y, W, s, directions, fits, halves, n_surroga
             Ss[i + j] = fit_scores(model.solve(Ys, W, s), directions)[0]
     q, qs, peak = combine_scores(S, Ss, statistic, centre=True)
     return _score_test(q, qs, len(S), statistic, peak)
+
+
+def effect_score_test(excitation: str, model, fit, Y, W, s, fits, halves, directions,
+                      seed: int = 0) -> ScoreTest | None:
+    """The full-data score test an effect asks for (its :attr:`~rce_gtsam.effects.Effect.score_excitation`):
+    ``"own"``: :func:`refitted_score_test`; ``"other_rows"``: :func:`cross_fitted_score_test`. ``fit``: the
+    baseline ``model`` on all rows of Y (E, T, degrees; weights W, root distances s); ``fits``: it on each
+    node-disjoint row set of ``halves``; ``directions(rows, kappa, z, s)``: the directions for those rows of Y
+    (all of them, or one set's), from that kappa and excitation, as :func:`cross_fitted_score_test` takes them."""
+    if excitation == "own":
+        every = np.arange(len(Y))
+        return refitted_score_test(model, fit, Y, W, s, lambda kappa, z, s_: directions(every, kappa, z, s_),
+                                   fits, halves, seed=seed)
+    if excitation == "other_rows":
+        return cross_fitted_score_test(halves, fits, lambda i, kappa, z, s_: directions(halves[i], kappa, z, s_),
+                                       seed=seed)
+    raise ValueError(f"score_excitation {excitation!r}: expected 'own' or 'other_rows'")
