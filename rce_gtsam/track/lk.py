@@ -490,10 +490,10 @@ class LKTracker:
             nrm = float(np.sqrt((st * st).sum()))
             if nrm > 1e-3:
                 # segment search (``_segment_search``): rotations within atan(2h / L0) of the last one, steps of
-                # half a pixel at the child, about the frame-0 direction of the segment
+                # half a pixel at the child, about the frame-0 direction of the segment (``_ang0``, by its child)
                 span, step = math.atan2(2 * h, ln), 0.5 / ln
                 self._strip[(p, c)] = (uu, vv, st / nrm, np.arange(-span, span + step / 2, step),
-                                       math.atan2(q[c][1] - q[p][1], q[c][0] - q[p][0]), step, *map(float, q[c] - q[p]))
+                                       self._ang0[c], step, *map(float, q[c] - q[p]))
         # each node's articulated-template inputs (``_band_stack``)
         self._stacks = [self._node_stack(i) for i in range(len(q))]
         return True
