@@ -367,9 +367,11 @@ def worst_edges_and_frames(fit: ModelFit, labels, block_length: int, frames=None
     """The n edges and the n non-overlapping ``block_length``-frame windows with the largest residual RMS."""
     R = fit.residuals
     E, T = R.shape
-    with np.errstate(invalid="ignore"):
-        edge_rms = np.sqrt(np.nanmean(R * R, axis=1))
-        frame_ms = np.nanmean(R * R, axis=0)
+    ok = np.isfinite(R)
+    R2 = np.where(ok, R * R, 0.0)
+    # mean squares over the observed entries, NaN for an edge or frame with none (a frame every edge lost)
+    edge_rms = np.sqrt(np.where(ok.any(axis=1), R2.sum(axis=1) / np.maximum(ok.sum(axis=1), 1), np.nan))
+    frame_ms = np.where(ok.any(axis=0), R2.sum(axis=0) / np.maximum(ok.sum(axis=0), 1), np.nan)
     overall = float(np.sqrt(np.nanmean(R * R)))
     order = np.argsort(-np.nan_to_num(edge_rms, nan=-1))
     worst_e = [{"edge": str(labels[i]), "row": int(i), "residual_rms_deg": float(edge_rms[i]),

@@ -184,3 +184,21 @@ def test_no_effect_named_below_the_resolution_on_noise_free_data():
     Y, s, *_ = synth("offset", seed=1, E=16, noise=0.0)
     d = diagnose(Y, root_distance=s, effects=FAST, edge_nodes=[{i} for i in range(16)])
     assert d.verdict == "offset"
+
+
+def test_the_worst_edges_and_frames_of_a_recording_with_a_lost_frame_warn_nothing():
+    """A frame that every edge lost (an occlusion of the whole branch) and an edge never seen are skipped
+    without a RuntimeWarning ("Mean of empty slice" reached users of noise-free saturation data); the worst
+    edge and window are those of the observed entries."""
+    import types
+    import warnings
+
+    from rce_gtsam.diagnose import worst_edges_and_frames
+    R = np.random.default_rng(0).standard_normal((4, 60)) * np.array([[1.0], [3.0], [1.0], [1.0]])
+    R[:, 10] = np.nan
+    R[2] = np.nan
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        worst_e, worst_f, _ = worst_edges_and_frames(types.SimpleNamespace(residuals=R), list("abcd"), 5)
+    assert worst_e[0]["edge"] == "b" and all(w["edge"] != "c" for w in worst_e)
+    assert worst_f
