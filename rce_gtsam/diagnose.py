@@ -34,10 +34,12 @@ extended by that effect (:mod:`rce_gtsam.effects`), and compares them on **held-
   :meth:`~rce_gtsam.effects.Effect.score_directions`) also gets a score test on every frame at once,
   calibrated by phase-randomised residuals (:mod:`rce_gtsam.diagnosis.score_test`: the delay's directions
   from the full fit's excitation with a refitted null, dynamics' cross-fitted between the two node-disjoint
-  row sets); its power does not stop at the number of folds. Such an effect is
+  row sets; the second excitation, whose time course is unknown but common to the segments, asks whether the
+  two sets' residuals move together); its power does not stop at the number of folds. Such an effect is
   significant when either test is, each at half its share of alpha (Bonferroni again), so the family-wise
   false-alarm rate stays <= alpha. *Supported* = significant AND a lower held-out RMSE AND a lower AIC than
-  the baseline's AND at least ``resolution`` of the bending variance off the held-out error: the held-out
+  the baseline's (waived when the full-data score test is significant: the AIC guards the fold t) AND at
+  least ``resolution`` of the bending variance off the held-out error: the held-out
   error stays what the user watches fall. AIC/BIC and the likelihood-ratio test use the effective sample of serially correlated
   residuals (n_eff = sum_e n_e (1 - rho_e) / (1 + rho_e), per-frame latents counted as n_eff / E values,
   :func:`effective_sample`); with rho ~ 0.9-0.97 the nominal AIC favours every extra term.
@@ -659,10 +661,14 @@ def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str
     pred = np.full(Y.shape, np.nan)
     heldout_errors(model, full, base.Y, W, s, blocks, halves, gap, cv_iter=CV_ITER, prediction=pred)
     score = None
-    if eff.test_directions(base.kappa, base.z, s) is not None and st.get("node_disjoint_halves"):
+    has_test = eff.score_excitation == "between_rows" or eff.test_directions(base.kappa, base.z, s) is not None
+    if has_test and st.get("node_disjoint_halves"):
         # the full-data score test along the true signature: the noise-free truth of each row set (its rank-1
-        # part is projected out by the test), i.e. the direction a test that knew the effect would use
-        score = effect_score_test(eff.score_excitation, base.model, base, base.Y, W, s,
+        # part is projected out by the test), i.e. the direction a test that knew the effect would use; an
+        # effect tested without directions (a second excitation: its w is unknown) is tested along its truth
+        # like the effects whose directions come from the other rows
+        excitation = "other_rows" if eff.score_excitation == "between_rows" else eff.score_excitation
+        score = effect_score_test(excitation, base.model, base, base.Y, W, s,
                                   half_fits(base.model, base.Y, W, s, halves), halves,
                                   lambda rows, kappa, z, s_: y[rows][None], seed=st["seed"])
     if score is None:
@@ -1000,7 +1006,8 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
                    f"{c.delta_aic:10.1f} {c.delta_bic:10.1f}  {'yes' if c.supported else 'no'}")
     if any(c.extra.get("score_p") is not None for c in diag.candidates):
         how = {"own": "its directions from the fit's own excitation, null from refitted surrogates",
-               "other_rows": "its directions from the other node-disjoint segments' excitation"}
+               "other_rows": "its directions from the other node-disjoint segments' excitation",
+               "between_rows": "do two node-disjoint sets of segments' residuals move together"}
         methods = "; ".join(f"{c.effect}: {how.get(c.extra.get('score_excitation'), 'phase-randomised null')}"
                             for c in diag.candidates if c.extra.get("score_p") is not None)
         out.append(f"    score p: full-data score test where an effect has one ({methods}); "

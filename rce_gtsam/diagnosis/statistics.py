@@ -81,3 +81,23 @@ class ResidualContext:
     def from_fit(cls, fit) -> "ResidualContext":
         R = fit.residuals
         return cls(R=R, kappa=fit.kappa, z=fit.z, s=fit.root_distance, inflation=ar1_inflation(R))
+
+
+def noise_correlation(R: np.ndarray, shrink: float = 0.05) -> np.ndarray:
+    """(E, E) correlation between edges of the noise in a residual matrix R (E, T), NaN = missing.
+
+    From frame-to-frame differences (pairwise over frames where both rows have both frames), shrunk by
+    ``shrink`` toward the identity so that it stays well conditioned with few frames."""
+    E = R.shape[0]
+    D = np.diff(R, axis=1)
+    ok = np.isfinite(D)
+    D0 = np.where(ok, D, 0.0)
+    n = ok.astype(float) @ ok.T.astype(float)
+    C = (D0 @ D0.T) / np.maximum(n, 1.0)
+    d = np.sqrt(np.clip(np.diag(C), 1e-300, None))
+    corr = C / np.outer(d, d)
+    corr[~np.isfinite(corr)] = 0.0
+    np.fill_diagonal(corr, 1.0)
+    corr = (1 - shrink) * corr + shrink * np.eye(E)
+    vals, vecs = np.linalg.eigh(0.5 * (corr + corr.T))
+    return (vecs * np.clip(vals, 1e-3, None)) @ vecs.T

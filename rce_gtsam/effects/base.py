@@ -73,6 +73,8 @@ class Effect:
     #: "other_rows" (cross-fitted: each node-disjoint row set's directions from the other set's z) or "own"
     #: (the full fit's z, the null from refitted surrogates). "own" only where effect-free data measured it
     #: calibrated: the pipeline's smoother leaves a signature of its own along some directions (see Dynamics).
+    #: "between_rows": no directions; the test asks whether two node-disjoint row sets' residuals share a time
+    #: course (an effect with a latent series common to all segments, see SecondMode).
     score_excitation: ClassVar[str] = "other_rows"
 
     # -- description ------------------------------------------------------------------------------

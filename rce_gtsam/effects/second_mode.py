@@ -21,6 +21,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..diagnosis.statistics import noise_correlation
 from .base import Effect, Parameter
 
 
@@ -29,6 +30,10 @@ class SecondMode(Effect):
 
     name = "second_mode"
     kind = "additive"
+    # no direction to score along (w is unknown), but w is common to all segments: the full-data test asks whether
+    # two node-disjoint row sets' residuals move together (score_test.shared_time_course_test; effect-free
+    # pipeline seeds 1/40 at p <= 0.005, 3/40 at p <= 0.05)
+    score_excitation = "between_rows"
     equation = "y_e(t) = kappa_e z_t + mu_e w_t   (w: RMS 1, mu in degrees)"
     fitting = ("alternating generalised least squares on the partial residual with the noise's correlation "
                "between edges (from frame-to-frame residual differences): mu given w, then w_t per frame as "
@@ -142,26 +147,6 @@ class SecondMode(Effect):
                 f"{statistics.get('s1_over_s2', float('nan')):.2f}x the next one; the second mode's RMS amplitude is "
                 f"{summary.get('rms_amplitude_deg', float('nan')):.2f} deg.")
 
-
-
-def noise_correlation(R: np.ndarray, shrink: float = 0.05) -> np.ndarray:
-    """(E, E) correlation between edges of the noise in a residual matrix R (E, T), NaN = missing.
-
-    From frame-to-frame differences (pairwise over frames where both rows have both frames), shrunk by
-    ``shrink`` toward the identity so that it stays well conditioned with few frames."""
-    E = R.shape[0]
-    D = np.diff(R, axis=1)
-    ok = np.isfinite(D)
-    D0 = np.where(ok, D, 0.0)
-    n = ok.astype(float) @ ok.T.astype(float)
-    C = (D0 @ D0.T) / np.maximum(n, 1.0)
-    d = np.sqrt(np.clip(np.diag(C), 1e-300, None))
-    corr = C / np.outer(d, d)
-    corr[~np.isfinite(corr)] = 0.0
-    np.fill_diagonal(corr, 1.0)
-    corr = (1 - shrink) * corr + shrink * np.eye(E)
-    vals, vecs = np.linalg.eigh(0.5 * (corr + corr.T))
-    return (vecs * np.clip(vals, 1e-3, None)) @ vecs.T
 
 
 def _frame_precisions(corr: np.ndarray, W: np.ndarray) -> np.ndarray:
