@@ -202,3 +202,15 @@ def test_the_worst_edges_and_frames_of_a_recording_with_a_lost_frame_warn_nothin
         worst_e, worst_f, _ = worst_edges_and_frames(types.SimpleNamespace(residuals=R), list("abcd"), 5)
     assert worst_e[0]["edge"] == "b" and all(w["edge"] != "c" for w in worst_e)
     assert worst_f
+
+
+def test_a_significant_score_test_waives_the_aic_hurdle_but_not_the_held_out_error():
+    """Supported = significant AND held-out RMSE falls AND (AIC falls OR the full-data score test is significant)
+    AND the gain reaches the resolution. The AIC guards the 16-number fold t; a second excitation's free w pays
+    ~2 AIC per frame for what the held-out error already charges (pipeline, 1x: p = 0.0005, held-out -1.1 %,
+    no verdict before)."""
+    from rce_gtsam.diagnose import earns_its_place
+    assert not earns_its_place(0.99, 1.0, +30.0, 0.01, 0.001)
+    assert earns_its_place(0.99, 1.0, +30.0, 0.01, 0.001, calibrated=True)
+    assert not earns_its_place(1.01, 1.0, -30.0, 0.01, 0.001, calibrated=True)   # held-out error must fall
+    assert not earns_its_place(0.99, 1.0, -30.0, 1e-4, 0.001, calibrated=True)   # and by the resolution
