@@ -885,6 +885,25 @@ def _resolve_effects(effects, n_edges):
 # Explanation and reports
 # ----------------------------------------------------------------------------------------------------------
 
+def significant_but_not_named(diag: Diagnosis) -> str:
+    """A sentence for a diagnosis without a verdict whose candidates include significant ones (fold t or full-
+    data score test) that were not supported (held-out error, AIC or resolution): the residuals hold structure
+    of their kind that none of the fitted forms predicts on held-out frames. Empty when there are none."""
+    sig = [c for c in diag.candidates if c.extra.get("significant") and not c.supported]
+    if not sig:
+        return ""
+
+    def why(c) -> str:
+        sp = c.extra.get("score_p")
+        test = (f"full-data score test p = {sp:.2g}" if sp is not None and sp <= c.extra["score_threshold_p"]
+                else f"evidence t = {c.evidence:.2f}")
+        return f"{c.effect} ({test}; held-out RMSE {-c.improvement_pct:+.1f}%)"
+
+    return (" Significant but not named: " + ", ".join(why(c) for c in sig) + ". The residuals hold structure "
+            "of that kind, but the extended model does not predict held-out frames better (or costs more AIC than "
+            "it gains), so that form of the effect is not what the data show.")
+
+
 def explain(diag: Diagnosis) -> str:
     """Plain-language explanation of the verdict with the numbers behind it."""
     base = diag.baseline_heldout_rmse
@@ -897,6 +916,7 @@ def explain(diag: Diagnosis) -> str:
                        f"({-best.improvement_pct:+.1f}%), evidence t = {best.evidence:.2f} against the threshold "
                        f"{best.extra.get('threshold_t', diag.settings['evidence_threshold_t']):.2f}"
                        + ("" if sp is None else f", full-data score test p = {sp:.2g}") + ".")
+        closest += significant_but_not_named(diag)
         b = diag.budget
         if b is None:
             return (f"No candidate effect improves the held-out error beyond its sampling noise (rank-1 held-out RMSE "

@@ -204,6 +204,22 @@ def test_the_worst_edges_and_frames_of_a_recording_with_a_lost_frame_warn_nothin
     assert worst_f
 
 
+def test_a_significant_candidate_without_held_out_support_is_named_in_the_explanation():
+    """No verdict, but a candidate whose test is significant and whose held-out error rises (plant 2: the delay's
+    and the second excitation's full-data tests): the explanation says so with both numbers, instead of only
+    naming the closest candidate."""
+    Y, s, *_ = synth(None, seed=2)
+    d = diagnose(Y, root_distance=s, effects=FAST)
+    assert d.verdict is None and "Significant but not named" not in d.explanation
+    c = d.candidates[-1]
+    assert not c.supported
+    c.extra.update(significant=True, score_p=0.001, score_threshold_p=0.005)
+    from rce_gtsam.diagnose import explain
+    text = explain(d)
+    assert f"Significant but not named: {c.effect} (full-data score test p = 0.001; held-out RMSE " in text
+    assert f"{-c.improvement_pct:+.1f}%)" in text
+
+
 def test_a_significant_score_test_waives_the_aic_hurdle_but_not_the_held_out_error():
     """Supported = significant AND held-out RMSE falls AND (AIC falls OR the full-data score test is significant)
     AND the gain reaches the resolution. The AIC guards the 16-number fold t; a second excitation's free w pays
