@@ -72,6 +72,11 @@ def case(effect, seed, frames, matrices, mult=1.0, noise_free=False):
     return r.Y, W, r.root_distance, k, y, tp, [f"{j}->{c}" for j, c in r.edges]
 
 
+def score_p(p) -> str:
+    """' p=...' for a case line: a full-data score test's p, or nothing for an effect without one."""
+    return "" if p is None else f" p={p:.4f}"
+
+
 def cached_case(cache, effect, seed, frames, matrices, mult=1.0, noise_free=False):
     """:func:`case`, its pipeline output kept in (and read back from) the folder ``cache`` when one is given
     (one .npz per effect, strength, seed, length and noise setting; the pipeline seconds of a cached case
@@ -209,9 +214,12 @@ def main() -> int:
                 nsr.append(noise_to_signal(Y, y))
                 print(f"  {eff} x{mult:g} seed {sd}: verdict {d.verdict} (same-kind parsimony: {v2}; max-T: {v3}{'' if not o3 else ', oracle max-T*'}; full-data test: {fv}), oracle t={o['t']:.1f}"
                       f"{'*' if o['supported'] else ''} (knows z t={o['knows_z']['t']:.1f}"
-                      f"{'*' if o['knows_z']['supported'] else ''}) ft={o.get('full_data_t', float('nan')):.1f}; " + ", ".join(
+                      f"{'*' if o['knows_z']['supported'] else ''}) ft={o.get('full_data_t', float('nan')):.1f}"
+                      f"{score_p(o.get('score_p'))}; " + ", ".join(
                     f"{c.effect} {c.improvement_pct:+.1f}% t={c.evidence:.1f}{'*' if c.supported else ''} "
-                    f"ft={c.extra.get('full_data_t', float('nan')):.1f}" for c in d.candidates)
+                    f"ft={c.extra.get('full_data_t', float('nan')):.1f}{score_p(c.extra.get('score_p'))} "
+                    f"dAIC={c.delta_aic:.1f}"
+                    for c in d.candidates)
                     + f" (diagnose {ts[-1]:.1f} s, pipeline {tp:.1f} s)", flush=True)
             med = lambda v: float(np.median(v)) if v else float("nan")  # noqa: E731
             n = a.seeds
