@@ -887,21 +887,29 @@ def _resolve_effects(effects, n_edges):
 
 def significant_but_not_named(diag: Diagnosis) -> str:
     """A sentence for a diagnosis without a verdict whose candidates include significant ones (fold t or full-
-    data score test) that were not supported (held-out error, AIC or resolution): the residuals hold structure
-    of their kind that none of the fitted forms predicts on held-out frames. Empty when there are none."""
+    data score test) that were not supported, each with what it lacked (a held-out error that falls, an AIC that
+    falls, or the resolution): the residuals hold structure of their kind that none of the fitted forms earns
+    its place with. Empty when there are none."""
     sig = [c for c in diag.candidates if c.extra.get("significant") and not c.supported]
     if not sig:
         return ""
 
     def why(c) -> str:
         sp = c.extra.get("score_p")
-        test = (f"full-data score test p = {sp:.2g}" if sp is not None and sp <= c.extra["score_threshold_p"]
-                else f"evidence t = {c.evidence:.2f}")
-        return f"{c.effect} ({test}; held-out RMSE {-c.improvement_pct:+.1f}%)"
+        calibrated = sp is not None and sp <= c.extra["score_threshold_p"]
+        test = f"full-data score test p = {sp:.2g}" if calibrated else f"evidence t = {c.evidence:.2f}"
+        if c.heldout_rmse >= diag.baseline_heldout_rmse:
+            lacks = f"held-out RMSE {-c.improvement_pct:+.1f}%"
+        elif c.delta_aic >= 0 and not calibrated:
+            lacks = f"held-out RMSE {-c.improvement_pct:+.1f}% but AIC {c.delta_aic:+.1f} on the effective sample"
+        else:
+            lacks = (f"held-out RMSE {-c.improvement_pct:+.1f}%, below the resolution of "
+                     f"{100 * diag.settings.get('resolution', 0.0):.2g}% of the variance")
+        return f"{c.effect} ({test}; {lacks})"
 
     return (" Significant but not named: " + ", ".join(why(c) for c in sig) + ". The residuals hold structure "
-            "of that kind, but the extended model does not predict held-out frames better (or costs more AIC than "
-            "it gains), so that form of the effect is not what the data show.")
+            "of that kind, but the extended model does not earn its place, so that form of the effect is not what "
+            "the data show.")
 
 
 def explain(diag: Diagnosis) -> str:

@@ -217,7 +217,14 @@ def test_a_significant_candidate_without_held_out_support_is_named_in_the_explan
     from rce_gtsam.diagnose import explain
     text = explain(d)
     assert f"Significant but not named: {c.effect} (full-data score test p = 0.001; held-out RMSE " in text
-    assert f"{-c.improvement_pct:+.1f}%)" in text
+    assert c.heldout_rmse >= d.baseline_heldout_rmse and f"{-c.improvement_pct:+.1f}%)" in text
+    # plant 1's offset: fold t above its threshold and held-out error lower, but the AIC rises
+    c.extra.update(score_p=None)
+    object.__setattr__(c, "heldout_rmse", 0.9 * d.baseline_heldout_rmse)
+    object.__setattr__(c, "improvement_pct", 10.0)
+    object.__setattr__(c, "delta_aic", 12.6)
+    assert f"{c.effect} (evidence t = {c.evidence:.2f}; held-out RMSE -10.0% but AIC +12.6 on the effective sample)" \
+        in explain(d)
 
 
 def test_a_significant_score_test_waives_the_aic_hurdle_but_not_the_held_out_error():
