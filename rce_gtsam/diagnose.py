@@ -29,8 +29,9 @@ extended by that effect (:mod:`rce_gtsam.effects`), and compares them on **held-
   ~3). :data:`N_FOLDS` = 16 folds (t quantile 2.60 at 15 dof instead of 3.00 at 7, and sqrt(2) more folds)
   instead of 8 keeps the test blocks >= 2 x the 25-frame buffer on a 900-frame clip; measured false verdicts
   on effect-free pipeline data stay 0/40 (1/40 since the second excitation's full-data test, with the AIC
-  hurdle waived for a significant full-data test: p = 0.0045, held-out RMSE 0.4 % lower). An effect is *significant* when evidence exceeds the one-sided t quantile at
-  alpha / (number of candidates) (Bonferroni) with n_folds - 1 degrees of freedom.
+  hurdle waived for a significant full-data test: p = 0.0045, held-out RMSE 0.4 % lower). An effect is
+  *significant* when evidence exceeds the one-sided t quantile at alpha / (number of candidates)
+  (Bonferroni) with n_folds - 1 degrees of freedom.
 * Full-data test: an effect with a fixed signature in the residuals (delay, dynamics:
   :meth:`~rce_gtsam.effects.Effect.score_directions`) also gets a score test on every frame at once,
   calibrated by phase-randomised residuals (:mod:`rce_gtsam.diagnosis.score_test`: the delay's directions

@@ -82,8 +82,9 @@ class ScoreTest:
     S' V^-1 S; ``"max"``: the largest standardised score); n_directions: J; n_surrogates: surrogates drawn;
     z_equivalent: the standard-normal quantile of 1 - p (a size the report can compare across effects);
     statistic: how the J scores were combined (``"shared"``: :func:`shared_time_course_test`, q the largest
-    singular value of the two row sets' residual cross-product, J = 1); peak: for ``"max"``, the index of the direction with the
-    largest score (for the delay, which lag of :meth:`~rce_gtsam.effects.Delay.scan_lags`), else None."""
+    singular value of the two row sets' residual cross-product, J = 1); peak: for ``"max"``, the index of the
+    direction with the largest score (for the delay, which lag of :meth:`~rce_gtsam.effects.Delay.scan_lags`),
+    else None."""
 
     p: float
     q: float

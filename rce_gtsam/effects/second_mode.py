@@ -148,7 +148,6 @@ class SecondMode(Effect):
                 f"{summary.get('rms_amplitude_deg', float('nan')):.2f} deg.")
 
 
-
 def _frame_precisions(corr: np.ndarray, W: np.ndarray) -> np.ndarray:
     """(T, E, E) noise precision per frame: D^1/2 inv(C_oo) D^1/2 over the edges observed (W > 0), 0 elsewhere.
 
