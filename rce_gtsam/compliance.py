@@ -502,6 +502,13 @@ def surrogate_residuals(F: np.ndarray, n_frames: int, phase: np.ndarray, dc_phas
     return np.fft.irfft(Fs, n=T, axis=2)
 
 
+def surrogate_slice(F: np.ndarray, n_frames: int, draws: tuple, sl: slice) -> np.ndarray:
+    """:func:`surrogate_residuals` for the surrogates ``sl`` of one :func:`draw_phases` result ``draws`` (its
+    phases and mean phases, the latter None for a single frame): how the batched callers take a slice."""
+    phase, dc_phase = draws
+    return surrogate_residuals(F, n_frames, phase[sl], None if dc_phase is None else dc_phase[sl])
+
+
 def excitation_dof(R: np.ndarray, z: np.ndarray) -> float:
     """Effective number of independent noise samples that kappa's error rests on (>= 1).
 
@@ -600,10 +607,9 @@ def _phase_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, fit: Rank
     # phases are drawn ``chunk`` resamples at a time (so the random stream, and the result, do not depend
     # on the recording's length); the surrogates are made and refitted ``batch`` at a time
     for s in range(0, config.n_boot, chunk):
-        phase, dc_phase = draw_phases(rng, min(chunk, config.n_boot - s), T)
-        for b in range(0, len(phase), batch):
-            sl = slice(b, b + batch)
-            Yb = pred[None] + surrogate_residuals(spectrum, T, phase[sl], None if dc_phase is None else dc_phase[sl])
+        draws = draw_phases(rng, min(chunk, config.n_boot - s), T)
+        for b in range(0, len(draws[0]), batch):
+            Yb = pred[None] + surrogate_slice(spectrum, T, draws, slice(b, b + batch))
             Yb[:, ~mask] = np.nan
             Wb = None if weights is None else np.broadcast_to(weights, Yb.shape)
             samples[s + b:s + b + len(Yb)] = np.abs(_fit_batch(Yb, config, Wb, precision)[0])

@@ -69,7 +69,7 @@ from .diagnosis.budget import VarianceBudget, variance_budget
 from .diagnosis.encompassing import encompassing_test
 from .diagnosis.maxt import sign_flip_max_t
 from .diagnosis.noise_floor import NoiseFloor
-from .diagnosis.score_test import effect_score_test, half_fits, is_significant
+from .diagnosis.score_test import effect_score_test, half_fits, is_significant, score_is_significant
 from .diagnosis.statistics import ResidualContext, autocorrelation
 from .diagnosis.sysid import ResidualAnalysis, residual_analysis
 from .model import ModelFit, ResponseModel, render_fit_report, validate_inputs
@@ -508,7 +508,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                 extra["score_peak"] = eff.scan_label(score.peak)
             significant = is_significant(ev, t_crit_split, score.p, p_crit_score)
         extra["significant"] = significant
-        calibrated = score is not None and score.p <= p_crit_score
+        calibrated = score_is_significant(None if score is None else score.p, p_crit_score)
         supported = bool(significant and earns_its_place(rmse, b_rmse, daic, gain_share, resolution, calibrated))
         results.append(CandidateResult(effect=eff.name, fit=full, heldout_rmse=rmse, fold_mse=mse, evidence=ev,
                                        improvement_pct=imp, delta_aic=daic, delta_bic=dbic, supported=supported,
@@ -898,7 +898,7 @@ def significant_but_not_named(diag: Diagnosis) -> str:
 
     def why(c) -> str:
         sp = c.extra.get("score_p")
-        calibrated = sp is not None and sp <= c.extra["score_threshold_p"]
+        calibrated = score_is_significant(sp, c.extra.get("score_threshold_p", 0.0))
         test = f"full-data score test p = {sp:.2g}" if calibrated else f"evidence t = {c.evidence:.2f}"
         if c.heldout_rmse >= diag.baseline_heldout_rmse:
             lacks = f"held-out RMSE {-c.improvement_pct:+.1f}%"

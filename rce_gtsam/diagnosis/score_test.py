@@ -67,7 +67,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from ..compliance import draw_phases, residual_spectrum, surrogate_residuals
+from ..compliance import draw_phases, residual_spectrum, surrogate_slice
 from .statistics import noise_correlation
 
 N_SURROGATES = 2000  # phase surrogates of the null (p-value resolution 1/2001)
@@ -112,10 +112,15 @@ def remove_rank1_tangent(G: np.ndarray, kappa: np.ndarray, z: np.ndarray, W: np.
     return G - a[:, :, None] * z[None, None] - kappa[None, :, None] * b[:, None, :]
 
 
+def score_is_significant(score_p: float | None, score_threshold_p: float) -> bool:
+    """A full-data score test's p at or below its threshold (False for an effect without one, ``score_p`` None)."""
+    return score_p is not None and score_p <= score_threshold_p
+
+
 def is_significant(t: float, threshold_t: float, score_p: float | None, score_threshold_p: float) -> bool:
     """The diagnosis' significance rule: the held-out fold t above its threshold, or (for an effect with a score
     test, ``score_p`` not None) the score test's p at or below its threshold."""
-    return bool((np.isfinite(t) and t > threshold_t) or (score_p is not None and score_p <= score_threshold_p))
+    return bool((np.isfinite(t) and t > threshold_t) or score_is_significant(score_p, score_threshold_p))
 
 
 def effect_directions(effect):
@@ -161,9 +166,8 @@ def scores_with_null(R: np.ndarray, H: np.ndarray, n_surrogates: int = N_SURROGA
     S = Hf @ np.where(mask, R, 0.0).ravel()
     spectrum = residual_spectrum(R)
     rng = np.random.default_rng(seed)
-    phase, dc = draw_phases(rng, n_surrogates, T)
-    Ss = np.vstack([(surrogate_residuals(spectrum, T, phase[i:i + SURROGATE_BATCH],
-                                         None if dc is None else dc[i:i + SURROGATE_BATCH]) * mask
+    draws = draw_phases(rng, n_surrogates, T)
+    Ss = np.vstack([(surrogate_slice(spectrum, T, draws, slice(i, i + SURROGATE_BATCH)) * mask
                      ).reshape(-1, Hf.shape[1]) @ Hf.T
                     for i in range(0, n_surrogates, SURROGATE_BATCH)])
     return S, Ss
@@ -287,15 +291,15 @@ def refitted_score_test(model, fit, Y, W, s, directions, fits, halves, n_surroga
     obs = np.isfinite(Y) & (W > 0)
     prediction = fit.kappa[:, None] * fit.z[None]
     rng = np.random.default_rng(seed)
-    phase, dc = draw_phases(rng, n_surrogates, T)
-    z_phase, z_dc = draw_phases(rng, n_surrogates, T)
+    draws = draw_phases(rng, n_surrogates, T)
+    z_draws = draw_phases(rng, n_surrogates, T)
     spectrum = residual_spectrum(fit.residuals)
     z_spectrum = excitation_noise_spectrum(fit, fits, halves)
     Ss = np.empty((n_surrogates, len(S)))
     for i in range(0, n_surrogates, SURROGATE_BATCH):
         sl = slice(i, i + SURROGATE_BATCH)
-        noise = surrogate_residuals(spectrum, T, phase[sl], None if dc is None else dc[sl])
-        nu = surrogate_residuals(z_spectrum, T, z_phase[sl], None if z_dc is None else z_dc[sl])[:, 0]
+        noise = surrogate_slice(spectrum, T, draws, sl)
+        nu = surrogate_slice(z_spectrum, T, z_draws, sl)[:, 0]
         for j in range(len(noise)):
             Ys = np.where(obs, prediction + noise[j] + fit.kappa[:, None] * nu[j][None], np.nan)
             Ss[i + j] = fit_scores(model.solve(Ys, W, s), directions)[0]
@@ -343,9 +347,8 @@ def shared_time_course_test(fit, halves, n_surrogates: int = N_SURROGATES, seed:
     q = float(np.linalg.svd(XA @ XB.T, compute_uv=False)[0])
     T = XA.shape[1]
     spectrum = residual_spectrum(np.where(observed, XA, np.nan))
-    phase, dc = draw_phases(np.random.default_rng(seed), n_surrogates, T)
-    qs = np.concatenate([np.linalg.svd((surrogate_residuals(spectrum, T, phase[i:i + SURROGATE_BATCH],
-                                                            None if dc is None else dc[i:i + SURROGATE_BATCH])
+    draws = draw_phases(np.random.default_rng(seed), n_surrogates, T)
+    qs = np.concatenate([np.linalg.svd((surrogate_slice(spectrum, T, draws, slice(i, i + SURROGATE_BATCH))
                                         * observed) @ XB.T, compute_uv=False)[:, 0]
                          for i in range(0, n_surrogates, SURROGATE_BATCH)])
     return _score_test(q, qs, 1, "shared", None)
