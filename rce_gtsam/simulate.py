@@ -67,6 +67,29 @@ EFFECT_MEANING: dict[str, str] = {
 }
 
 
+#: The form each effect takes in the simulator: the first is the default (the one the diagnosis' candidates are
+#: written in); the others are *held-out forms*, physics the candidates do not model exactly, so that the
+#: diagnosis can be checked on data it was not shaped on (``benchmarks/bench_diagnose.py --form``). Never
+#: tune the diagnosis on them: they stand in for another simulator and for real plants.
+EFFECT_FORMS: dict[str, dict[str, str]] = {
+    "delay": {"linear": "lag tau_tip * s_e, linear in root distance",
+              "quadratic": "lag tau_tip * s_e^2: a bending wave that slows toward the thinner tip"},
+    "dynamics": {"graded": "natural period falling linearly from T_tip at the tip to T_tip/3 at the root; zeta "
+                           "uniform in [0.1, 0.3]",
+                 "scattered": "each joint's period log-uniform in [T_tip/3, T_tip] whatever its place on the "
+                              "branch; zeta uniform in [0.05, 0.5]"},
+    "second_mode": {"gusts": "w_t made like z (gusts and a slow sway); pattern a half-cosine along the branch "
+                             "plus per-joint variation",
+                    "flutter": "w_t a narrow-band flutter at 1.5-2.5 Hz (a leaf or a side shoot); pattern on the "
+                               "distal half of the branch only"},
+    "offset": {"linear": "c_e + d_e t/T: a constant and a linear creep",
+               "relaxation": "c_e + d_e (1 - exp(-t / (T/4))): a creep that relaxes toward a new rest"},
+    "nonlinear": {"symmetric": "y_s tanh(u / y_s): joints stiffen in both directions",
+                  "one_sided": "only deflections toward the prevailing wind saturate (the branch comes to rest "
+                               "against a stop or a neighbour)"},
+}
+
+
 @dataclass(frozen=True)
 class NoiseConfig:
     """Tracker-like noise on node positions (what TAPIR gives on real footage). Units: pixels, frames.
@@ -125,6 +148,7 @@ class SimulationConfig:
     fps: float = 30.0
     effects: tuple[str, ...] = ()
     effect_strength: dict | None = None
+    effect_form: dict | None = None
     noise: NoiseConfig = field(default_factory=NoiseConfig)
     seed: int = 0
     image_size: tuple[int, int] = (640, 480)
@@ -138,6 +162,10 @@ class SimulationConfig:
         """The strength of ``effect`` (override or default)."""
         over = self.effect_strength or {}
         return float(over.get(effect, EFFECT_DEFAULTS[effect]))
+
+    def form(self, effect: str) -> str:
+        """The form of ``effect`` (override or the first of :data:`EFFECT_FORMS`)."""
+        return str((self.effect_form or {}).get(effect, next(iter(EFFECT_FORMS[effect]))))
 
     def validate(self) -> None:
         src = "simulation config"
@@ -159,6 +187,11 @@ class SimulationConfig:
                 raise InputError(src, f"effect_strength names an unknown effect {k!r}; known: {', '.join(EFFECTS)}")
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise InputError(src, f"effect_strength[{k!r}] must be a finite number >= 0, got {v!r}")
+        for k, v in (self.effect_form or {}).items():
+            if k not in EFFECTS:
+                raise InputError(src, f"effect_form names an unknown effect {k!r}; known: {', '.join(EFFECTS)}")
+            if v not in EFFECT_FORMS[k]:
+                raise InputError(src, f"effect_form[{k!r}] must be one of {', '.join(EFFECT_FORMS[k])}, got {v!r}")
         w, h = self.image_size
         if w < 64 or h < 64:
             raise InputError(src, f"image_size must be at least 64x64, got {self.image_size}")
@@ -233,8 +266,12 @@ def oscillator_response(u: np.ndarray, omega: float, zeta: float) -> np.ndarray:
 
 
 def bend_response(kappa: np.ndarray, s: np.ndarray, z: np.ndarray, effects: tuple[str, ...],
-                  strength: dict[str, float], fps: float, rng: np.random.Generator) -> tuple[np.ndarray, dict]:
+                  strength: dict[str, float], fps: float, rng: np.random.Generator,
+                  forms: dict[str, str] | None = None) -> tuple[np.ndarray, dict]:
     """True bend responses y[e, t] in degrees and the parameters of every active effect.
+
+    ``forms``: per effect, one of :data:`EFFECT_FORMS` (default: the first, described below; the held-out forms
+    change the law as :data:`EFFECT_FORMS` says, at the same strength and in the same units).
 
     Parameters: ``kappa`` (E,) compliance; ``s`` (E,) child's root distance normalised to [0, 1];
     ``z`` (F,) excitation in degrees; ``strength`` per effect (see :data:`EFFECT_MEANING`).
@@ -264,15 +301,20 @@ def bend_response(kappa: np.ndarray, s: np.ndarray, z: np.ndarray, effects: tupl
     params: dict[str, dict] = {}
     base = np.outer(kappa, z)
     u = base
+    form = {e: (forms or {}).get(e, next(iter(EFFECT_FORMS[e]))) for e in EFFECTS}
     if "delay" in effects:
         tau_tip = strength["delay"]
-        tau = tau_tip * s
+        tau = tau_tip * (s ** 2 if form["delay"] == "quadratic" else s)
         u = np.stack([kappa[e] * delayed(z, tau[e]) for e in range(E)])
         params["delay"] = {"tau_tip_frames": tau_tip, "tau_frames": tau.tolist()}
     if "dynamics" in effects:
         T_tip = strength["dynamics"]
-        period_s = T_tip / 3 + (T_tip - T_tip / 3) * s
-        zeta = rng.uniform(0.1, 0.3, E)
+        if form["dynamics"] == "scattered":
+            period_s = T_tip / 3 * np.exp(np.log(3.0) * rng.uniform(0, 1, E))
+            zeta = rng.uniform(0.05, 0.5, E)
+        else:
+            period_s = T_tip / 3 + (T_tip - T_tip / 3) * s
+            zeta = rng.uniform(0.1, 0.3, E)
         if T_tip > 0:
             omega = 2 * np.pi / (period_s * fps)
             u = np.stack([oscillator_response(u[e], omega[e], zeta[e]) for e in range(E)])
@@ -286,15 +328,25 @@ def bend_response(kappa: np.ndarray, s: np.ndarray, z: np.ndarray, effects: tupl
         q = float(np.quantile(np.abs(base), 0.99))
         if ratio > 0 and q > 0:
             y_s = q / ratio
-            u = y_s * np.tanh(u / y_s)
+            # one-sided: only deflections toward the prevailing wind (the sign of z's mean) saturate
+            side = np.sign(np.mean(base)) or 1.0
+            u = (np.where(side * u > 0, y_s * np.tanh(u / y_s), u) if form["nonlinear"] == "one_sided"
+                 else y_s * np.tanh(u / y_s))
         else:
             y_s = math.inf
         params["nonlinear"] = {"q_deg": q, "y_s_deg": y_s, "ratio": ratio}
     y = u
     ref_rms = float(np.sqrt(np.mean(base ** 2)))
     if "second_mode" in effects:
-        w = make_excitation(F, fps, rng, rms_deg=1.0)
-        mu = np.cos(np.pi * s) + 0.5 * rng.standard_normal(E)
+        if form["second_mode"] == "flutter":
+            f0 = rng.uniform(1.5, 2.5)
+            w = signal.sosfiltfilt(signal.butter(2, [0.8 * f0, 1.25 * f0], "bandpass", fs=fps, output="sos"),
+                                   rng.standard_normal(F))
+            w /= max(float(np.sqrt(np.mean(w ** 2))), 1e-12)
+            mu = np.where(s > 0.5, 1.0 + 0.5 * rng.standard_normal(E), 0.0)
+        else:
+            w = make_excitation(F, fps, rng, rms_deg=1.0)
+            mu = np.cos(np.pi * s) + 0.5 * rng.standard_normal(E)
         term = np.outer(mu, w)
         r = np.sqrt(np.mean(term ** 2))
         scale = strength["second_mode"] * ref_rms / r if r > 0 else 0.0
@@ -305,12 +357,16 @@ def bend_response(kappa: np.ndarray, s: np.ndarray, z: np.ndarray, effects: tupl
         c = rng.standard_normal(E)
         d = rng.standard_normal(E)
         tt = np.arange(F) / F
+        if form["offset"] == "relaxation":
+            tt = 1.0 - np.exp(-np.arange(F) / (F / 4))
         term = c[:, None] + d[:, None] * tt[None, :]
         r = np.sqrt(np.mean(term ** 2))
         scale = strength["offset"] * ref_rms / r if r > 0 else 0.0
         c, d = c * scale, d * scale
         y = y + c[:, None] + d[:, None] * tt[None, :]
         params["offset"] = {"ratio": strength["offset"], "c_deg": c.tolist(), "d_deg": d.tolist()}
+    for e in params:
+        params[e]["form"] = form[e]
     return y, params
 
 
@@ -604,7 +660,8 @@ def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
     kappa = np.exp(logk - logk.mean())
     z = make_excitation(F, config.fps, r_z, rms_deg=config.z_rms_deg)
     strength = {e: config.strength(e) for e in EFFECTS}
-    y, params = bend_response(kappa, s_edge, z, tuple(config.effects), strength, config.fps, r_eff)
+    y, params = bend_response(kappa, s_edge, z, tuple(config.effects), strength, config.fps, r_eff,
+                              {e: config.form(e) for e in EFFECTS})
     turn = {b.edge: rest[b.edge] + y[i] for i, b in enumerate(bends)}
     sway = config.root_sway_deg * z / max(np.sqrt(np.mean(z ** 2)), 1e-12)
     pos0 = forward_kinematics(graph, lengths, np.radians(sway), turn)

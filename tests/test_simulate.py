@@ -209,3 +209,41 @@ def test_committed_samples_are_current():
         truth = json.loads((folder / "truth.json").read_text())
         assert truth["effects"] == list(effects)
         np.testing.assert_allclose(truth["z_true"], sim.z_true, atol=1e-5)
+
+
+def test_held_out_forms_are_other_physics_at_a_like_strength():
+    """Each effect's held-out form (EFFECT_FORMS, for checking the diagnosis on data it was not written for)
+    changes the response, leaves a rank-1 misfit of the same order as the default form's, and naming an effect's
+    first form changes nothing. A form that is not listed is refused naming the option."""
+    from rce_gtsam.simulate import EFFECT_FORMS, rank1_misfit
+    for effect, forms in EFFECT_FORMS.items():
+        default, held_out = list(forms)[:2]
+        cfg = dict(effects=(effect,), seed=1, n_frames=300)
+        plain = simulate(SimulationConfig(**cfg)).response_true
+        named = simulate(SimulationConfig(**cfg, effect_form={effect: default})).response_true
+        other = simulate(SimulationConfig(**cfg, effect_form={effect: held_out}))
+        assert np.array_equal(plain, named)
+        assert not np.allclose(plain, other.response_true)
+        assert other.effect_params[effect]["form"] == held_out
+        m0, r0 = rank1_misfit(plain)
+        m1, r1 = rank1_misfit(other.response_true)
+        assert 0.5 < (m1 / r1) / (m0 / r0) < 2.0, (effect, m0 / r0, m1 / r1)
+    with pytest.raises(InputError, match=r"effect_form\['delay'\]"):
+        simulate(SimulationConfig(effects=("delay",), effect_form={"delay": "cubic"}))
+
+
+def test_cli_form_picks_a_held_out_form_and_names_a_bad_one(tmp_path, capsys):
+    from rce_gtsam.cli import main
+    out = tmp_path / "run"
+    assert main(["simulate", "--out", str(out), "--effect", "delay", "--form", "delay=quadratic",
+                 "--frames", "60", "--nodes", "8"]) == 0
+    assert "delay (strength 15, held-out form quadratic)" in capsys.readouterr().out
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["effect_params"]["delay"]["form"] == "quadratic"
+    tau = np.array(truth["effect_params"]["delay"]["tau_frames"])
+    assert tau.max() == pytest.approx(15.0) and np.all(tau <= 15.0 * np.linspace(0, 1, len(tau)).max())
+    for bad, says in ((["--effect", "delay", "--form", "delay=cubic"], "--form: expected NAME=FORM"),
+                      (["--form", "offset=relaxation"], "offset's form is set but the effect is not switched on")):
+        assert main(["simulate", "--out", str(tmp_path / "bad"), "--frames", "60", *bad]) == 2
+        assert says in capsys.readouterr().err
+        assert not (tmp_path / "bad").exists()

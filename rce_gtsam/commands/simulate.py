@@ -50,6 +50,20 @@ def _strengths(values: list[str] | None) -> dict[str, float] | None:
     return out
 
 
+def _forms(values: list[str] | None) -> dict[str, str] | None:
+    if not values:
+        return None
+    from ..simulate import EFFECT_FORMS
+    out = {}
+    for v in values:
+        name, sep, form = (x.strip() for x in v.partition("="))
+        if not sep or name not in EFFECT_FORMS or form not in EFFECT_FORMS[name]:
+            choices = "; ".join(f"{k}={'|'.join(f)}" for k, f in EFFECT_FORMS.items())
+            raise InputError("--form", f"expected NAME=FORM, one of {choices}; got {v!r}")
+        out[name] = form
+    return out
+
+
 def _effects_epilog() -> str:
     from ..simulate import EFFECT_DEFAULTS, EFFECT_MEANING, EFFECTS
     return "effects and the meaning of their strengths: " + "; ".join(
@@ -73,6 +87,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="hidden effect to switch on, repeatable or comma-separated (names below; default: none)")
     p.add_argument("--strength", action="append", metavar="NAME=VALUE",
                    help="override an effect's strength, e.g. --strength delay=10 (units: see below)")
+    p.add_argument("--form", action="append", metavar="NAME=FORM",
+                   help="an effect's form, e.g. --form delay=quadratic: the first listed is the default, the others "
+                        "are held-out physics the diagnosis does not model exactly (rce_gtsam.simulate.EFFECT_FORMS): "
+                        + "; ".join(["delay=linear|quadratic", "dynamics=graded|scattered",
+                                     "second_mode=gusts|flutter", "offset=linear|relaxation",
+                                     "nonlinear=symmetric|one_sided"]))
     p.add_argument("--seed", type=int, default=0, help="master random seed (default 0)")
     p.add_argument("--frames", type=int, default=900, help="number of video frames (default 900 = 30 s)")
     p.add_argument("--nodes", type=int, default=20, help="number of tracked nodes (default 20)")
@@ -92,7 +112,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..nuisance import REALISM
-    from ..simulate import NoiseConfig, SimulationConfig, simulate
+    from ..simulate import EFFECT_FORMS, NoiseConfig, SimulationConfig, simulate
 
     from ..validate import check_output_dir, check_seed
 
@@ -103,9 +123,13 @@ def run(args: argparse.Namespace) -> int:
         if name not in effects:
             raise InputError("--strength", f"{name}'s strength is set but the effect is not switched on; add "
                                            f"--effect {name}")
+    for name in (_forms(args.form) or {}):
+        if name not in effects:
+            raise InputError("--form", f"{name}'s form is set but the effect is not switched on; add --effect {name}")
     noise = NoiseConfig(enabled=not args.clean, emit_sigma=args.sigma)
     cfg = SimulationConfig(n_nodes=args.nodes, n_frames=args.frames, effects=_effect_list(args.effect),
-                           effect_strength=_strengths(args.strength), noise=noise, seed=args.seed,
+                           effect_strength=_strengths(args.strength), effect_form=_forms(args.form),
+                           noise=noise, seed=args.seed,
                            branch_layout=args.layout)
     if args.z_rms is not None:
         if not args.z_rms > 0:
@@ -116,7 +140,10 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     sim = simulate(cfg)
     files = sim.write(args.out, video=args.video, render=REALISM[args.realism])
-    eff = ", ".join(f"{e} (strength {cfg.strength(e):g})" for e in cfg.effects) or "none"
+    eff = ", ".join(f"{e} (strength {cfg.strength(e):g}"
+                    + (f", held-out form {cfg.form(e)})" if e in (cfg.effect_form or {})
+                       and cfg.form(e) != next(iter(EFFECT_FORMS[e])) else ")")
+                    for e in cfg.effects) or "none"
     obs = sim.tracks.observed
     print(f"simulated {len(sim.graph.nodes)} nodes x {cfg.n_frames} frames (seed {cfg.seed}, {cfg.branch_layout}); "
           f"hidden effects: {eff}; {100 * (1 - obs.mean()):.1f} % of observations occluded "
