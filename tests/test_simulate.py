@@ -247,3 +247,19 @@ def test_cli_form_picks_a_held_out_form_and_names_a_bad_one(tmp_path, capsys):
         assert main(["simulate", "--out", str(tmp_path / "bad"), "--frames", "60", *bad]) == 2
         assert says in capsys.readouterr().err
         assert not (tmp_path / "bad").exists()
+
+
+def test_cli_output_cut_short_by_its_reader_ends_quietly(tmp_path):
+    """``rce simulate ... | head -1``: the reader goes away after one line; no traceback, exit 141 as Unix tools."""
+    import os
+    import subprocess
+    import sys
+    cmd = [sys.executable, "-c", "import sys; from rce_gtsam.cli import main; sys.exit(main())", "simulate",
+           "--out", str(tmp_path / "run"), "--frames", "30", "--nodes", "5"]
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    p.stdout.readline()
+    p.stdout.close()
+    err = p.stderr.read().decode()
+    assert p.wait(timeout=120) == 141, err
+    assert "Traceback" not in err and "BrokenPipe" not in err
