@@ -36,6 +36,17 @@ def straight_lines(Y: np.ndarray, W: np.ndarray, tt: np.ndarray) -> np.ndarray:
     return a[:, None] + b[:, None] * tc
 
 
+def common_line(lines: np.ndarray, W: np.ndarray, kappa: np.ndarray, tt: np.ndarray) -> np.ndarray:
+    """(T,) the straight line g = a + b t (degrees) whose kappa_e g best fits the rows' straight lines ``lines``
+    (E, T) in weighted least squares (W (E, T), 0 = missing): the part of them a change of the excitation z
+    carries."""
+    basis = np.stack([np.ones_like(tt), tt - tt.mean()])                 # (2, T)
+    wk2 = W * kappa[:, None] ** 2
+    M = np.einsum("et,it,jt->ij", wk2, basis, basis)
+    r = np.einsum("et,e,et,it->i", W, kappa, lines, basis)
+    return np.linalg.lstsq(M, r, rcond=None)[0] @ basis
+
+
 def shrink_toward_zero(est: np.ndarray, var: np.ndarray) -> np.ndarray:
     """Empirical-Bayes (James-Stein type) shrinkage of per-edge estimates ``est`` with sampling variances
     ``var`` toward a N(0, tau^2) prior, tau^2 = max(0, mean(est^2 - var)) by the method of moments across
@@ -95,12 +106,15 @@ class Offset(Effect):
         plain = self.update(st, view, frozen=False)
         if not self.trend:
             return plain
+        lines = straight_lines(view.Y0, view.W, view.tt)
         detrended = view.copy_with(view.model, view.states)
-        detrended.Y0 = np.where(view.W > 0, view.Y0 - straight_lines(view.Y0, view.W, view.tt), 0.0)
+        detrended.Y0 = np.where(view.W > 0, view.Y0 - lines, 0.0)
         for _ in range(5):
             core_step(detrended)
         trial = view.copy_with(view.model, view.states)
-        trial.kappa, trial.z = detrended.kappa, detrended.z
+        # the lines' part along kappa is the excitation's own slow trend (kappa_e (a + b t) is z + a + b t): it goes
+        # back to z, and only what kappa cannot carry is left to the offsets
+        trial.kappa, trial.z = detrended.kappa, detrended.z + common_line(lines, view.W, detrended.kappa, view.tt)
         moved = self.update(st, trial, frozen=False)
         if self._wsse(trial, moved) < self._wsse(view, plain):
             return {**moved, "core_start": (trial.kappa.copy(), trial.z.copy())}
