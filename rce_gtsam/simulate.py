@@ -69,8 +69,9 @@ EFFECT_MEANING: dict[str, str] = {
 
 #: The form each effect takes in the simulator: the first is the default (the one the diagnosis' candidates are
 #: written in); the others are *held-out forms*, physics the candidates do not model exactly, so that the
-#: diagnosis can be checked on data it was not shaped on (``benchmarks/bench_diagnose.py --form``). Never
-#: tune the diagnosis on them: they stand in for another simulator and for real plants.
+#: diagnosis can be checked on data it was not shaped on (``benchmarks/bench_diagnose.py --held-out``,
+#: ``rce simulate --form``). Never tune the diagnosis on them: they stand in for another simulator and for real
+#: plants.
 EFFECT_FORMS: dict[str, dict[str, str]] = {
     "delay": {"linear": "lag tau_tip * s_e, linear in root distance",
               "quadratic": "lag tau_tip * s_e^2: a bending wave that slows toward the thinner tip"},
@@ -302,6 +303,9 @@ def bend_response(kappa: np.ndarray, s: np.ndarray, z: np.ndarray, effects: tupl
     base = np.outer(kappa, z)
     u = base
     form = {e: (forms or {}).get(e, next(iter(EFFECT_FORMS[e]))) for e in EFFECTS}
+    for e, f in form.items():
+        if f not in EFFECT_FORMS[e]:
+            raise ValueError(f"form {f!r} of {e}: expected one of {', '.join(EFFECT_FORMS[e])}")
     if "delay" in effects:
         tau_tip = strength["delay"]
         tau = tau_tip * (s ** 2 if form["delay"] == "quadratic" else s)

@@ -49,6 +49,11 @@ def test_simulate_realism_choices_match_the_presets():
     realism = next(a for a in sub._actions if a.dest == "realism")
     assert set(realism.choices) == set(REALISM)
     assert "nonlinear (default" in sub.format_help()  # the lazily built epilog
+    from rce_gtsam.simulate import EFFECT_FORMS
+    helptext = " ".join(sub.format_help().split())
+    assert "Forms (--form NAME=FORM)" in helptext
+    assert all(f"{k}: {next(iter(forms))} (" in helptext and all(f"{f} (" in helptext for f in forms)
+               for k, forms in EFFECT_FORMS.items())  # every form listed, the default first
 
 
 def test_cli_wording_names_the_command():

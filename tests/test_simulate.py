@@ -230,6 +230,10 @@ def test_held_out_forms_are_other_physics_at_a_like_strength():
         assert 0.5 < (m1 / r1) / (m0 / r0) < 2.0, (effect, m0 / r0, m1 / r1)
     with pytest.raises(InputError, match=r"effect_form\['delay'\]"):
         simulate(SimulationConfig(effects=("delay",), effect_form={"delay": "cubic"}))
+    from rce_gtsam.simulate import EFFECT_DEFAULTS, bend_response
+    with pytest.raises(ValueError, match="form 'cubic' of delay"):
+        bend_response(np.ones(3), np.linspace(0, 1, 3), np.zeros(50), ("delay",), EFFECT_DEFAULTS, 30.0,
+                      np.random.default_rng(0), {"delay": "cubic"})
 
 
 def test_cli_form_picks_a_held_out_form_and_names_a_bad_one(tmp_path, capsys):

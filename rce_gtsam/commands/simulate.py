@@ -65,9 +65,11 @@ def _forms(values: list[str] | None) -> dict[str, str] | None:
 
 
 def _effects_epilog() -> str:
-    from ..simulate import EFFECT_DEFAULTS, EFFECT_MEANING, EFFECTS
-    return "effects and the meaning of their strengths: " + "; ".join(
+    from ..simulate import EFFECT_DEFAULTS, EFFECT_FORMS, EFFECT_MEANING, EFFECTS
+    return ("effects and the meaning of their strengths: " + "; ".join(
         f"{k} (default {EFFECT_DEFAULTS[k]:g}: {EFFECT_MEANING[k]})" for k in EFFECTS)
+        + ". Forms (--form NAME=FORM): " + "; ".join(
+            f"{k}: " + ", ".join(f"{f} ({d})" for f, d in forms.items()) for k, forms in EFFECT_FORMS.items()))
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -88,11 +90,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--strength", action="append", metavar="NAME=VALUE",
                    help="override an effect's strength, e.g. --strength delay=10 (units: see below)")
     p.add_argument("--form", action="append", metavar="NAME=FORM",
-                   help="an effect's form, e.g. --form delay=quadratic: the first listed is the default, the others "
-                        "are held-out physics the diagnosis does not model exactly (rce_gtsam.simulate.EFFECT_FORMS): "
-                        + "; ".join(["delay=linear|quadratic", "dynamics=graded|scattered",
-                                     "second_mode=gusts|flutter", "offset=linear|relaxation",
-                                     "nonlinear=symmetric|one_sided"]))
+                   help="an effect's form, e.g. --form delay=quadratic (forms below: the first of each is the default, "
+                        "the others are held-out physics the diagnosis does not model exactly)")
     p.add_argument("--seed", type=int, default=0, help="master random seed (default 0)")
     p.add_argument("--frames", type=int, default=900, help="number of video frames (default 900 = 30 s)")
     p.add_argument("--nodes", type=int, default=20, help="number of tracked nodes (default 20)")
