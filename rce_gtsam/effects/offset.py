@@ -24,16 +24,19 @@ def residual_variance_inflated(resid: np.ndarray, W: np.ndarray) -> np.ndarray:
     return var * (1 + rho) / (1 - rho)
 
 
-def straight_lines(Y: np.ndarray, W: np.ndarray, tt: np.ndarray) -> np.ndarray:
-    """(E, T) each row's weighted least-squares straight line a_e + b_e t over ``tt`` (T,), fitted to Y (E, T,
-    degrees) with weights W (0 = missing)."""
+def weighted_lines(Y: np.ndarray, W: np.ndarray, tt: np.ndarray):
+    """Each row's weighted least-squares straight line through Y (E, T, degrees; weights W, 0 = missing) over the
+    times ``tt`` (T,), written on the orthogonal columns [1, t - t_mean]: (level (E,) at the weighted mean time,
+    slope (E,) in degrees per unit of ``tt``, 0 where the row's times have no spread; t_mean (E,); the sums
+    s0 = sum W and s2 = sum W (t - t_mean)^2 (E,); spread (E,) bool)."""
     s0 = W.sum(axis=1)
     tm = (W * tt[None, :]).sum(axis=1) / np.maximum(s0, 1e-12)
     tc = tt[None, :] - tm[:, None]
     s2 = (W * tc * tc).sum(axis=1)
-    a = (W * Y).sum(axis=1) / np.maximum(s0, 1e-12)
-    b = (W * tc * Y).sum(axis=1) / np.maximum(s2, 1e-12)
-    return a[:, None] + b[:, None] * tc
+    level = (W * Y).sum(axis=1) / np.maximum(s0, 1e-12)
+    spread = s2 > 1e-12 * np.maximum(s0, 1e-300)
+    slope = np.where(spread, (W * tc * Y).sum(axis=1) / np.where(spread, s2, 1.0), 0.0)
+    return level, slope, tm, s0, s2, spread
 
 
 def common_line(lines: np.ndarray, W: np.ndarray, kappa: np.ndarray, tt: np.ndarray) -> np.ndarray:
@@ -106,7 +109,8 @@ class Offset(Effect):
         plain = self.update(st, view, frozen=False)
         if not self.trend:
             return plain
-        lines = straight_lines(view.Y0, view.W, view.tt)
+        level, slope, tm, *_ = weighted_lines(view.Y0, view.W, view.tt)
+        lines = level[:, None] + slope[:, None] * (view.tt[None, :] - tm[:, None])
         detrended = view.copy_with(view.model, view.states)
         detrended.Y0 = np.where(view.W > 0, view.Y0 - lines, 0.0)
         for _ in range(5):
@@ -137,14 +141,10 @@ class Offset(Effect):
         obs = W > 0
         # per edge, weighted least squares on [1, t - t_mean] (orthogonal columns), then empirical-Bayes
         # shrinkage of both coefficients toward 0 (see shrink_toward_zero)
-        s0 = W.sum(axis=1)
-        tm = (W * view.tt[None, :]).sum(axis=1) / np.maximum(s0, 1e-12)
-        tc = np.where(obs, view.tt[None, :] - tm[:, None], 0.0)
-        s2 = (W * tc * tc).sum(axis=1)
-        c0 = (W * target).sum(axis=1) / np.maximum(s0, 1e-12)
-        has_trend = self.trend & (s2 > 1e-12 * np.maximum(s0, 1e-300))
-        d = np.where(has_trend, (W * tc * target).sum(axis=1) / np.where(has_trend, s2, 1.0), 0.0)
-        resid = np.where(obs, target - c0[:, None] - d[:, None] * tc, np.nan)
+        c0, slope, tm, s0, s2, spread = weighted_lines(target, W, view.tt)
+        has_trend = self.trend & spread
+        d = np.where(has_trend, slope, 0.0)
+        resid = np.where(obs, target - c0[:, None] - d[:, None] * (view.tt[None, :] - tm[:, None]), np.nan)
         infl = residual_variance_inflated(resid, W)
         c0, fc = shrink_toward_zero(c0, infl / np.maximum(s0, 1e-12))
         dof = float(fc.sum())
