@@ -91,6 +91,11 @@ EFFECT_FORMS: dict[str, dict[str, str]] = {
 }
 
 
+def default_form(effect: str) -> str:
+    """The form of ``effect`` the diagnosis' candidates are written in: the first of :data:`EFFECT_FORMS`."""
+    return next(iter(EFFECT_FORMS[effect]))
+
+
 @dataclass(frozen=True)
 class NoiseConfig:
     """Tracker-like noise on node positions (what TAPIR gives on real footage). Units: pixels, frames.
@@ -166,7 +171,7 @@ class SimulationConfig:
 
     def form(self, effect: str) -> str:
         """The form of ``effect`` (override or the first of :data:`EFFECT_FORMS`)."""
-        return str((self.effect_form or {}).get(effect, next(iter(EFFECT_FORMS[effect]))))
+        return str((self.effect_form or {}).get(effect, default_form(effect)))
 
     def validate(self) -> None:
         src = "simulation config"
@@ -302,7 +307,7 @@ def bend_response(kappa: np.ndarray, s: np.ndarray, z: np.ndarray, effects: tupl
     params: dict[str, dict] = {}
     base = np.outer(kappa, z)
     u = base
-    form = {e: (forms or {}).get(e, next(iter(EFFECT_FORMS[e]))) for e in EFFECTS}
+    form = {e: (forms or {}).get(e, default_form(e)) for e in EFFECTS}
     for e, f in form.items():
         if f not in EFFECT_FORMS[e]:
             raise ValueError(f"form {f!r} of {e}: expected one of {', '.join(EFFECT_FORMS[e])}")

@@ -111,25 +111,22 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..nuisance import REALISM
-    from ..simulate import EFFECT_FORMS, NoiseConfig, SimulationConfig, simulate
+    from ..simulate import NoiseConfig, SimulationConfig, default_form, simulate
 
     from ..validate import check_output_dir, check_seed
 
     check_seed(args.seed)
     check_output_dir(args.out)
     effects = _effect_list(args.effect)
-    for name in (_strengths(args.strength) or {}):
-        if name not in effects:
-            raise InputError("--strength", f"{name}'s strength is set but the effect is not switched on; add "
-                                           f"--effect {name}")
-    for name in (_forms(args.form) or {}):
-        if name not in effects:
-            raise InputError("--form", f"{name}'s form is set but the effect is not switched on; add --effect {name}")
+    strengths, forms = _strengths(args.strength), _forms(args.form)
+    for option, what, given in (("--strength", "strength", strengths), ("--form", "form", forms)):
+        for name in (given or {}):
+            if name not in effects:
+                raise InputError(option, f"{name}'s {what} is set but the effect is not switched on; add "
+                                         f"--effect {name}")
     noise = NoiseConfig(enabled=not args.clean, emit_sigma=args.sigma)
-    cfg = SimulationConfig(n_nodes=args.nodes, n_frames=args.frames, effects=_effect_list(args.effect),
-                           effect_strength=_strengths(args.strength), effect_form=_forms(args.form),
-                           noise=noise, seed=args.seed,
-                           branch_layout=args.layout)
+    cfg = SimulationConfig(n_nodes=args.nodes, n_frames=args.frames, effects=effects, effect_strength=strengths,
+                           effect_form=forms, noise=noise, seed=args.seed, branch_layout=args.layout)
     if args.z_rms is not None:
         if not args.z_rms > 0:
             raise InputError("--z-rms", f"must be > 0 degrees, got {args.z_rms}")
@@ -140,8 +137,7 @@ def run(args: argparse.Namespace) -> int:
     sim = simulate(cfg)
     files = sim.write(args.out, video=args.video, render=REALISM[args.realism])
     eff = ", ".join(f"{e} (strength {cfg.strength(e):g}"
-                    + (f", held-out form {cfg.form(e)})" if e in (cfg.effect_form or {})
-                       and cfg.form(e) != next(iter(EFFECT_FORMS[e])) else ")")
+                    + ("" if cfg.form(e) == default_form(e) else f", held-out form {cfg.form(e)}") + ")"
                     for e in cfg.effects) or "none"
     obs = sim.tracks.observed
     print(f"simulated {len(sim.graph.nodes)} nodes x {cfg.n_frames} frames (seed {cfg.seed}, {cfg.branch_layout}); "
