@@ -56,6 +56,35 @@ def test_effect_fits_owns_evidence_and_explains(name):
 
 
 @pytest.mark.parametrize("name", BUILTIN)
+def test_alternative_starts_are_valid_states_the_model_fits_from(name):
+    """Effect.alternative_starts (optional): every proposed start has the state's shape, parameters inside their
+    bounds, and the model fits from it; solve_from_starts then keeps the start with the smallest cross-prediction
+    error (and an effect without alternatives gets exactly its plain fit)."""
+    from rce_gtsam.diagnose import node_disjoint_split, shared_node_matrix
+    from rce_gtsam.model import validate_inputs
+    from rce_gtsam.model.starts import cross_prediction_error, solve_from_starts
+    Y, s, *_ = synth(name, seed=2, E=12, T=300, noise=0.3)
+    Y, W, s = validate_inputs(Y, None, s)
+    eff = effects.make(name)
+    model = ResponseModel() + eff
+    base = ResponseModel().solve(Y, W, s)
+    plain = model.solve(Y, W, s, start=base.warm_start(), max_iter=10)
+    alts = eff.alternative_starts(plain.states[0])
+    bounds = {p.name: p for p in eff.parameters(len(s))}
+    for st in alts:
+        assert set(st["params"]) == set(plain.states[0]["params"])
+        for k, v in st["params"].items():
+            assert np.all((np.asarray(v) >= bounds[k].lower) & (np.asarray(v) <= bounds[k].upper)), (k, v)
+    halves = node_disjoint_split(s, shared_node_matrix(s), 0)
+    fit, record = solve_from_starts(model, Y, W, s, halves, start=base.warm_start(), max_iter=10)
+    if not alts:
+        assert record == {} and np.array_equal(fit.kappa, plain.kappa) and fit.wsse == plain.wsse
+    else:
+        assert len(record["errors"]) == 1 + len(alts)
+        assert cross_prediction_error(fit, halves) == pytest.approx(min(record["errors"]))
+
+
+@pytest.mark.parametrize("name", BUILTIN)
 def test_an_effect_that_can_be_undone_undoes_its_own_operator(name):
     """Effect.align (optional; the encompassing test needs it of the simpler candidate): where it is not None,
     it moves the effect's own fitted operator's output back onto the excitation's clock."""

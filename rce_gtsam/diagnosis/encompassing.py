@@ -7,7 +7,7 @@ dynamics candidate fits too, and on one with inertia so does the delay. The fold
 something in the simpler model's residuals that the richer model predicts?
 
 * **Residuals.** The simpler model S (the rank-1 core plus one operator effect that can be undone, e.g. the
-  delay) is fitted on each node-disjoint row set alone (:func:`rce_gtsam.diagnose.node_disjoint_split`); its
+  delay) is fitted on each node-disjoint row set alone (:func:`rce_gtsam.model.row_sets.node_disjoint_split`); its
   residuals are moved onto the excitation's clock by S's own operator (:meth:`~rce_gtsam.effects.Effect.align`).
   There S is the rank-1 model again, plus its own parameter's direction (its ``score_directions``).
 * **Direction (cross-fitted).** For the rows of one set: the richer model C's prediction minus S's, each built

@@ -27,7 +27,7 @@ set by their number, whatever the length of the recording. This test uses every 
     (about 3 s on 18 segments x 900 frames).
   - ``"other_rows"`` (:func:`cross_fitted_score_test`, dynamics): G from an excitation estimated on *other*
     segments than the R it is paired with: the rows are split into two sets that share no tracked node
-    (:func:`rce_gtsam.diagnose.node_disjoint_split`), each set's baseline is fitted on its own, and set A's
+    (:func:`rce_gtsam.model.row_sets.node_disjoint_split`), each set's baseline is fitted on its own, and set A's
     residuals are paired with directions from set B's excitation and vice versa. Each set's directions then
     come from 4-6 of 18 segments (median), which costs power: the delay's lag scan so cross-fitted found
     13/15/16/17 of 20 at 0.5/1/2/3x. Dynamics keeps it because its own-z version is not calibrated on
@@ -357,7 +357,7 @@ def shared_time_course_test(fit, halves, n_surrogates: int = N_SURROGATES, seed:
     every segment).
 
     ``fit``: the baseline on all rows (``ModelFit``); ``halves``: the two node-disjoint row sets
-    (:func:`rce_gtsam.diagnose.node_disjoint_split`). Under the rank-1 model their residuals are tracking noise
+    (:func:`rce_gtsam.model.row_sets.node_disjoint_split`). Under the rank-1 model their residuals are tracking noise
     of different nodes, independent, once the excitation's own noise is projected out of each
     (:func:`whitened_set_residuals`). Statistic: the largest singular value of the cross-product X_A X_B' (E_A x
     E_B; a shared w_t with patterns mu_A, mu_B makes it mu_A mu_B' sum w^2). Null: X_B held fixed, X_A replaced

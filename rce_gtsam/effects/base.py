@@ -109,6 +109,13 @@ class Effect:
         """
         return state
 
+    def alternative_starts(self, state: dict) -> list[dict]:
+        """Further starting states for a fit that ended at ``state`` (default: none): where a local search can end
+        in an optimum that fits the noise, starts that lead to the other optima. The model is then fitted from
+        each and the fit that predicts one node-disjoint row set best from the other's excitation is kept
+        (:func:`rce_gtsam.model.starts.solve_from_starts`)."""
+        return []
+
     # -- contribution hooks -----------------------------------------------------------------------
     def apply(self, X: np.ndarray, state: dict, view: "FitView") -> np.ndarray:
         """Operator effects: per-edge linear map of X (E, T) (rows = edges)."""

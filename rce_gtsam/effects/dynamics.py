@@ -26,6 +26,9 @@ from .base import Effect, Parameter, scalar
 
 OMEGA_MIN, OMEGA_MAX = 0.05, 2 * np.pi  # rad/frame: a period of ~125 frames .. 1 frame (quasi-static)
 ZETA_MIN, ZETA_MAX = 0.03, 2.0
+#: damping ratios the fit is restarted from (:meth:`Dynamics.alternative_starts`): half a decade apart, from
+#: lightly damped to critically damped
+ZETA_STARTS = (0.1, 0.3, 1.0)
 
 
 def _foh_coeffs(omega: np.ndarray, zeta: float) -> tuple[np.ndarray, np.ndarray]:
@@ -172,6 +175,16 @@ class Dynamics(Effect):
         res = least_squares(lambda q: view.residual_vector(i, self._state(q)), x0, bounds=(lo, hi),
                             diff_step=1e-4, max_nfev=3)
         return self._state(res.x)
+
+    def alternative_starts(self, state):
+        """The fitted natural frequencies with each damping ratio of :data:`ZETA_STARTS` that differs from the
+        fitted one by more than a factor 1.5. From its grid start the fit can walk to a sharp resonance (zeta at
+        its lower bound) that fits the tip rows' noise through z (:mod:`rce_gtsam.model.starts`); a damped
+        start leads to the other optimum, and cross-prediction between row sets chooses."""
+        zeta = scalar(state["params"]["zeta"])
+        p = state["params"]
+        logs = (np.log(scalar(p["omega_root"])), np.log(scalar(p["omega_tip"])))
+        return [self._state((*logs, z)) for z in ZETA_STARTS if abs(np.log(z / zeta)) > np.log(1.5)]
 
     def score_directions(self, kappa, z, s):
         """Far below resonance the oscillator is 1 - (2 zeta / w_e) d/dt + ((4 zeta^2 - 1) / w_e^2) d2/dt2 + ...;

@@ -18,6 +18,10 @@ Modules (imports only point down this list; nothing here imports :mod:`rce_gtsam
   :func:`sse_after_z`, :func:`profiled_sse`, :func:`operator_z_solve`;
 * :mod:`~rce_gtsam.model.fit` — :class:`ModelFit`, :class:`ParamValue`;
 * :mod:`~rce_gtsam.model.view` — :class:`FitView` (what an effect sees during a fit), :class:`PartialView`;
+* :mod:`~rce_gtsam.model.starts` — :func:`~rce_gtsam.model.starts.solve_from_starts`: a fit from every start an
+  effect proposes, the one that predicts one node-disjoint row set best from the other's excitation kept;
+* :mod:`~rce_gtsam.model.row_sets` — :func:`~rce_gtsam.model.row_sets.node_disjoint_split`: two row sets that
+  share no tracked node (independent tracking noise);
 * :mod:`~rce_gtsam.model.report` — :func:`render_fit_report`;
 * :mod:`~rce_gtsam.model.inputs` — :func:`validate_inputs`.
 
