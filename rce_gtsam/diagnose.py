@@ -390,7 +390,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         full, starts = solve_from_starts(model, Y, W, s, halves, start=(base.kappa.copy(), base.z.copy(), {}),
                                          max_iter=FULL_ITER)
         fulls.append((eff, model, full, starts))
-    memory = max([0.0] + [e.memory_frames(st) for _, _, f, _ in fulls for e, st in zip(f.model.effects, f.states)])
+    memory = max([0.0] + [e.memory_frames(st) for _, _, f, _ in fulls
+                          for e, st in zip(f.model.effects, f.states)])
     gap = max(int(block_length), int(math.ceil(memory)))
     b_pred = np.full((E, T), np.nan)
     b_sse, b_cnt, b_sse_t, b_cnt_t = heldout_errors(base_model, base, Y, W, s, blocks, halves, gap, per_frame=True,
@@ -775,7 +776,7 @@ def _support_a_richer_form(results: list, Y, W, s, halves, seed: int, b_rmse: fl
     for i, c in enumerate(results):
         if (c.supported or c.heldout_rmse >= best.heldout_rmse or _kind(c) is None or _kind(c) != _kind(best)
                 or not complexity(best) < complexity(c)
-                or not earns_its_place(c.heldout_rmse, b_rmse, math.inf, c.extra.get("heldout_gain_share", 0.0),
+                or not earns_its_place(c.heldout_rmse, b_rmse, c.delta_aic, c.extra.get("heldout_gain_share", 0.0),
                                        resolution, calibrated=True)):
             continue
         test = encompassing_test(best.fit, c.fit, Y, W, s, halves, seed=seed, max_iter=FULL_ITER)

@@ -17,7 +17,9 @@ sentence, its ``physics`` and :meth:`Effect.parameters`, implement :meth:`Effect
 operator on z, ``output`` for a pointwise map of kappa*x, ``additive`` for a term added to the prediction).
 For the diagnosis, give it :meth:`Effect.evidence` (its residual signature with a null band) and
 :meth:`Effect.explain`; then ``rce_gtsam.effects.register(MyEffect)`` makes it a candidate everywhere (the
-diagnosis, ``analyze(effects=...)``, the CLI). The model composes effects by chaining operators, applying
+diagnosis, ``analyze(effects=...)``, the CLI). Where a local search from :meth:`Effect.init` can end in an
+optimum that fits the noise, :meth:`Effect.alternative_starts` proposes other starts; the fit that predicts one
+row set best from the other's excitation is kept (:mod:`rce_gtsam.model.starts`). The model composes effects by chaining operators, applying
 the (single) output map and summing additive terms. ``tests/test_effect_conformance.py`` checks every
 registered effect against this protocol.
 
