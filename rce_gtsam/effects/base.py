@@ -19,8 +19,8 @@ For the diagnosis, give it :meth:`Effect.evidence` (its residual signature with 
 :meth:`Effect.explain`; then ``rce_gtsam.effects.register(MyEffect)`` makes it a candidate everywhere (the
 diagnosis, ``analyze(effects=...)``, the CLI). Where a local search from :meth:`Effect.init` can end in an
 optimum that fits the noise, :meth:`Effect.alternative_starts` proposes other starts; the fit that predicts one
-row set best from the other's excitation is kept (:mod:`rce_gtsam.model.starts`). The model composes effects by chaining operators, applying
-the (single) output map and summing additive terms. ``tests/test_effect_conformance.py`` checks every
+row set best from the other's excitation is kept (:mod:`rce_gtsam.model.starts`). The model composes effects by
+chaining operators, applying the (single) output map and summing additive terms. ``tests/test_effect_conformance.py`` checks every
 registered effect against this protocol.
 
 What an effect may use while it fits is public: the :class:`~rce_gtsam.model.view.FitView` it is handed
