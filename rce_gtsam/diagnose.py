@@ -227,8 +227,7 @@ def heldout_errors(model: ResponseModel, full: ModelFit, Y, W, s, blocks, halves
     cnt = np.zeros(len(blocks))
     sse_t = np.zeros(T)
     cnt_t = np.zeros(T)
-    z_var_full = float(np.mean(full.z ** 2))
-    full_ridge = (full.wsse / max(full.n_obs, 1)) / z_var_full if z_var_full > 0 else 0.0
+    full_ridge = full.heldout_z_precision()
     for k, (a, b) in enumerate(blocks):
         lo, hi = max(0, a - gap), min(T, b + gap)
         Ytr = Y.copy()
@@ -251,8 +250,7 @@ def heldout_errors(model: ResponseModel, full: ModelFit, Y, W, s, blocks, halves
         # matters for frames few A observations determine (e.g. seen through a long lag only).
         trained = np.ones(T, bool)
         trained[lo:hi] = False
-        z_var = float(np.mean(tr.z[trained] ** 2)) if trained.any() else 0.0
-        z_ridge = (tr.wsse / max(tr.n_obs, 1)) / z_var if z_var > 0 else 0.0
+        z_ridge = tr.heldout_z_precision(trained)
         for A, B in (halves, halves[::-1]):
             if len(A) == 0 or len(B) == 0:
                 continue

@@ -181,8 +181,8 @@ class Dynamics(Effect):
         fitted one by more than a factor 1.5. From its grid start the fit can walk to a sharp resonance (zeta at
         its lower bound) that fits the tip rows' noise through z (:mod:`rce_gtsam.model.starts`); a damped
         start leads to the other optimum, and cross-prediction between row sets chooses."""
-        zeta = scalar(state["params"]["zeta"])
         p = state["params"]
+        zeta = scalar(p["zeta"])
         logs = (np.log(scalar(p["omega_root"])), np.log(scalar(p["omega_tip"])))
         return [self._state((*logs, z)) for z in ZETA_STARTS if abs(np.log(z / zeta)) > np.log(1.5)]
 

@@ -66,6 +66,15 @@ class ModelFit:
                        np.ones(self.Y.shape[1], bool), self.kappa, self.z,
                        list(self.states if states is None else states))
 
+    def heldout_z_precision(self, frames=None) -> float:
+        """The precision of a zero-mean Gaussian prior on z for estimating it on new frames, in weighted-SSE units:
+        (this fit's mean weighted squared residual) / (mean z^2 over ``frames``, a (T,) bool mask; default all),
+        0 when that z is all zero. With it the z step is a posterior mean: frames few observations determine
+        (seen through a long lag, or by few rows) stay near zero instead of following noise."""
+        z = self.z if frames is None else self.z[np.asarray(frames, bool)]
+        z_var = float(np.mean(z ** 2)) if z.size else 0.0
+        return (self.wsse / max(self.n_obs, 1)) / z_var if z_var > 0 else 0.0
+
     def warm_start(self) -> tuple:
         """(kappa, z, {effect name: state}) copies: the ``start`` of a refit from this fit
         (:meth:`rce_gtsam.model.ResponseModel.solve`)."""

@@ -30,11 +30,10 @@ CROSS_ITER = 10  # solver sweeps of each frozen estimate of z from one row set
 def cross_prediction_error(fit, halves) -> float:
     """Sum of squared errors (deg^2) of predicting each row set of ``halves`` from the excitation (and any other
     per-frame latent) estimated on the other set alone, every static parameter (kappa, per-edge and shared)
-    frozen at ``fit``'s. z gets the zero-mean prior of the held-out estimates (noise variance / z variance,
-    from ``fit``)."""
+    frozen at ``fit``'s. z gets the zero-mean prior of the held-out estimates
+    (:meth:`~rce_gtsam.model.ModelFit.heldout_z_precision`)."""
     model, Y, W, s = fit.model, fit.Y, fit.weights, fit.root_distance
-    z2 = float(np.mean(fit.z ** 2))
-    ridge = (fit.wsse / max(fit.n_obs, 1)) / z2 if z2 > 0 else 0.0
+    ridge = fit.heldout_z_precision()
     err = 0.0
     for A, B in (halves, halves[::-1]):
         if len(A) == 0 or len(B) == 0:
