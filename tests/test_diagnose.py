@@ -172,6 +172,23 @@ def test_oracle_is_a_ceiling_that_does_not_fire_without_an_effect():
     assert o["knows_z"]["improvement_pct"] > 0  # knowing z beats estimating it, effect or not
 
 
+def test_the_oracle_scores_along_the_effects_signature_not_the_whole_truth():
+    """The oracle's full-data test direction is what of the noise-free truth no rank-1 model explains: nothing for
+    a rank-1 response on any reference pose (per-row constants), the effect's own part otherwise. Scoring along
+    the whole truth fired on 12-14 of 40 effect-free pipeline recordings (the projection with the noisy fit's
+    kappa and z leaves the truth's rank-1 part and the rows' constants in the direction)."""
+    from rce_gtsam.diagnose import true_signature
+    rng = np.random.default_rng(0)
+    k, z, c = rng.uniform(0.5, 2, 8), rng.standard_normal(300) + 0.7, rng.normal(0, 3, 8)
+    assert np.abs(true_signature(np.outer(k, z) + c[:, None])).max() < 1e-9
+    _, s, _, _, y = synth("dynamics", seed=0, E=12, noise=0.0)
+    sig = true_signature(y)
+    assert np.abs(sig.mean(axis=1)).max() < 1e-9
+    centred = y - y.mean(axis=1, keepdims=True)
+    assert 0.05 < np.linalg.norm(sig) / np.linalg.norm(centred) < 0.5  # the effect's part, not the sway
+    assert np.linalg.matrix_rank(centred - sig, tol=1e-8 * np.linalg.norm(y)) == 1
+
+
 def test_no_effect_named_below_the_resolution_on_noise_free_data():
     """Noise-free effect-free data: whatever tiny structure is left (here a second mode worth 3e-4 of the
     variance) is significant at any size, but below the resolution nothing is named; a real effect is."""
