@@ -102,6 +102,13 @@ def score_p(p) -> str:
     return "" if p is None else f" p={p:.4f}"
 
 
+def form_p(c) -> str:
+    """' enc p(simpler)=...' for a case line: the encompassing tests of candidate ``c`` against simpler ones (does its
+    model predict what theirs leave; the diagnosis' rule for a richer form of the same finding), or nothing."""
+    ps = {**c.extra.get("form_test_p", {}), **c.extra.get("encompassing_p", {})}
+    return "".join(f" enc p({k})={v:.4f}" for k, v in ps.items())
+
+
 def cached_case(cache, effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False):
     """:func:`case`, its pipeline output kept in (and read back from) the folder ``cache`` when one is given
     (one .npz per effect, strength, seed, length and noise setting; the pipeline seconds of a cached case
@@ -248,7 +255,7 @@ def main() -> int:
                       f"{score_p(o.get('score_p'))}; " + ", ".join(
                     f"{c.effect} {c.improvement_pct:+.1f}% t={c.evidence:.1f}{'*' if c.supported else ''} "
                     f"ft={c.extra.get('full_data_t', float('nan')):.1f}{score_p(c.extra.get('score_p'))} "
-                    f"dAIC={c.delta_aic:.1f}"
+                    f"dAIC={c.delta_aic:.1f}{form_p(c)}"
                     for c in d.candidates)
                     + f" (diagnose {ts[-1]:.1f} s, pipeline {tp:.1f} s)", flush=True)
             med = lambda v: float(np.median(v)) if v else float("nan")  # noqa: E731
