@@ -20,6 +20,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..model.steps import core_step
+from ..model.tangent import remove_rank1_tangent
 from .base import Effect, Parameter, scalar
 
 
@@ -192,6 +193,27 @@ class Nonlinear(Effect):
             if not np.array_equal(gains, view.kappa):
                 new["core_start"] = (gains, view.z.copy())
         return new
+
+    def score_directions(self, kappa, z, s):
+        """To first order in c the map moves kappa_e z_t by -c/3 kappa_e^3 ((z + z0)^3 - z0^3) = -c/3 kappa_e^3 (z^3 +
+        3 z0 z^2 + 3 z0^2 z); the last term is a change of kappa_e, so two directions: kappa_e^3 z^3 (the odd,
+        symmetric saturation) and kappa_e^3 z^2 (its offset from the reference pose). Units deg^3 and deg^2 per
+        unit z."""
+        k3 = np.asarray(kappa, float)[:, None] ** 3
+        z = np.asarray(z, float)[None, :]
+        return np.stack([k3 * z ** 3, k3 * z ** 2])
+
+    def test_directions(self, kappa, z, s):
+        """:meth:`score_directions` with what a rank-1 model built from this ``z`` could absorb removed first:
+        each row's mean, then the least-squares part a_e z_t + kappa_e b_t (unit weights). A cube of z is mostly z
+        itself, and the score test removes that part with the tested rows' own fit, whose excitation carries
+        their noise: what it left of the large rank-1 part correlated with the residuals, and effect-free pipeline
+        recordings (default preset, 900 frames, 40 seeds) gave p <= 0.005 on 11 of 40; removed here first, with
+        the other row set's excitation, 0 of 40. Saturation at the simulator's default strength (10 seeds):
+        p <= 0.005 on 2 of 10, the oracle along the true signature on 3 of 10. Quadratic over the two."""
+        G = self.score_directions(kappa, z, s)
+        G = G - G.mean(axis=2, keepdims=True)
+        return remove_rank1_tangent(G, np.asarray(kappa, float), np.asarray(z, float), np.ones(G.shape[1:])), "quadratic"
 
     def describe(self, state):
         c = scalar(state["params"]["c"])
