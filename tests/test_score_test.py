@@ -98,8 +98,8 @@ def test_score_test_is_calibrated_on_coloured_noise_and_finds_the_effect(name):
 
 
 def test_diagnose_runs_the_score_test_where_an_effect_has_one_and_splits_alpha():
-    """The diagnosis: delay, dynamics and the second excitation carry score_p; the others do not. Their fold t threshold is the
-    Bonferroni quantile at alpha / (2 C) and their score threshold alpha / (2 C) (C candidates); significant =
+    """The diagnosis: delay, dynamics, the saturation and the second excitation carry score_p; the others do not.
+    Their fold t threshold is the Bonferroni quantile at alpha / (2 C) and their score threshold alpha / (2 C) (C candidates); significant =
     either test, supported = significant and the held-out error falls. The delay in these matrices is found."""
     from scipy import stats
 

@@ -213,7 +213,8 @@ class Nonlinear(Effect):
         p <= 0.005 on 2 of 10, the oracle along the true signature on 3 of 10. Quadratic over the two."""
         G = self.score_directions(kappa, z, s)
         G = G - G.mean(axis=2, keepdims=True)
-        return remove_rank1_tangent(G, np.asarray(kappa, float), np.asarray(z, float), np.ones(G.shape[1:])), "quadratic"
+        unit = np.ones(G.shape[1:])
+        return remove_rank1_tangent(G, np.asarray(kappa, float), np.asarray(z, float), unit), "quadratic"
 
     def describe(self, state):
         c = scalar(state["params"]["c"])
