@@ -47,8 +47,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..model.tangent import remove_rank1_tangent
 from ..model.view import FitView
-from .score_test import N_SURROGATES, on_scale_of, remove_rank1_tangent, scores_with_null
+from .score_test import N_SURROGATES, on_scale_of, scores_with_null
 
 
 @dataclass(frozen=True)

@@ -74,7 +74,7 @@ import numpy as np
 from scipy import stats
 
 from ..compliance import draw_phases, residual_spectrum, surrogate_slice
-from ..model.tangent import remove_rank1_tangent  # noqa: F401 (re-exported: the tests' projection)
+from ..model.tangent import remove_rank1_tangent
 from .statistics import noise_correlation
 
 N_SURROGATES = 2000  # phase surrogates of the null (p-value resolution 1/2001)

@@ -22,6 +22,8 @@ Modules (imports only point down this list; nothing here imports :mod:`rce_gtsam
   effect proposes, the one that predicts one node-disjoint row set best from the other's excitation kept;
 * :mod:`~rce_gtsam.model.row_sets` — :func:`~rce_gtsam.model.row_sets.node_disjoint_split`: two row sets that
   share no tracked node (independent tracking noise);
+* :mod:`~rce_gtsam.model.tangent` — :func:`~rce_gtsam.model.tangent.remove_rank1_tangent`: the part of a direction
+  that no change of kappa or z can absorb (the diagnosis' score tests; effects preparing their test directions);
 * :mod:`~rce_gtsam.model.report` — :func:`render_fit_report`;
 * :mod:`~rce_gtsam.model.inputs` — :func:`validate_inputs`.
 
