@@ -35,7 +35,7 @@ import numpy as np
 from .compliance import (BootstrapCI, block_bootstrap_indices, excitation_dof, interval_about,
                          phase_randomised_residuals, posterior_widening, small_sample_factor)
 from .model import ResponseModel, validate_inputs
-from .model.row_sets import edge_nodes_from_labels, node_disjoint_split, shared_node_matrix
+from .model.row_sets import node_disjoint_split, shared_node_matrix
 from .model.starts import solve_from_starts
 from .presets import ComplianceConfig
 
@@ -110,18 +110,18 @@ def build_model(names, config: ComplianceConfig):
 
 
 def fit_extended(Y, names, config: ComplianceConfig, weights=None, root_distance=None,
-                 edge_labels=None) -> ExtendedFit:
+                 edge_nodes=None) -> ExtendedFit:
     """Fit rank-1 + the effects ``names`` to ``Y`` (E, T) degrees (NaN = missing), from the rank-1 fit.
 
     Where an effect proposes several starts (:meth:`~rce_gtsam.effects.Effect.alternative_starts`) the fit that
     predicts one node-disjoint row set best from the other's excitation is kept, as in the diagnosis
-    (:func:`rce_gtsam.model.starts.solve_from_starts`); ``edge_labels`` (``"joint->child"`` per row) say which rows
-    share a tracked node (default: the rows form a chain in root-distance order)."""
+    (:func:`rce_gtsam.model.starts.solve_from_starts`); ``edge_nodes`` (per row, the tracked node ids its bend angle
+    is computed from, as :func:`rce_gtsam.diagnose.diagnose` takes them) say which rows share a tracked node
+    (default: the rows form a chain in root-distance order)."""
     model = build_model(names, config)
     base = model.without_effects().fit(Y, weights=weights, root_distance=root_distance)
     Yv, W, s = validate_inputs(Y, weights, root_distance)
-    nodes = edge_nodes_from_labels(edge_labels) if edge_labels is not None else None
-    halves = node_disjoint_split(s, shared_node_matrix(s, nodes), 0)
+    halves = node_disjoint_split(s, shared_node_matrix(s, edge_nodes), 0)
     if halves is None:
         full = model.fit(Y, weights=weights, root_distance=root_distance, init=base)
     else:

@@ -300,8 +300,10 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     # and its threads busy-waiting on a shared machine made them 25x slower (50,000 frames)
     with single_threaded_blas():
         if effects:
+            # the node sets the diagnosis splits its rows by (rce_gtsam.diagnosis_io), so the extended fit keeps
+            # the start the diagnosis' candidate keeps
             fit = fit_extended(response.Y, effects, preset.compliance, weights, response.root_distance,
-                               edge_labels=[f"{j}->{c}" for j, c in response.edges])
+                               edge_nodes=[bending.bends[k].nodes for k in response.bend_rows])
         elif response.Y.shape[0] >= 2 and np.isfinite(response.Y).any(axis=1).all():
             # the rank-1 fit is the response model without effects (the diagnosis baseline is the same fit)
             fit = ResponseModel(config=preset.compliance).fit(response.Y, weights, response.root_distance,

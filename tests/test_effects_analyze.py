@@ -76,6 +76,23 @@ def test_extended_model_starts_from_the_analysis_fit_and_its_cis_contain_the_est
     assert "multiplicities" in ext.effects_report()["bootstrap"]["scheme"]
 
 
+def test_extended_fit_splits_the_rows_by_the_tracked_nodes_the_diagnosis_uses(offset_sim, monkeypatch):
+    """The extended fit keeps the start that predicts one node-disjoint row set from the other best, as the
+    diagnosis does: both take each row's tracked nodes from the bending (not parsed from "joint->child" labels,
+    which stand a placeholder in for the root)."""
+    import rce_gtsam.pipeline as pipeline
+    seen = {}
+    real = pipeline.fit_extended
+
+    def spy(*a, **kw):
+        seen.update(kw)
+        return real(*a, **kw)
+
+    monkeypatch.setattr(pipeline, "fit_extended", spy)
+    res = rce_gtsam.analyze(offset_sim / "tracks.csv", offset_sim / "graph.json", n_boot=0, effects=("offset",))
+    assert seen["edge_nodes"] == [res.bending.bends[k].nodes for k in res.response.bend_rows]
+
+
 def test_extended_fit_keeps_the_rank1_interface(chain):
     tracks, graph, _, _ = chain
     res = rce_gtsam.analyze(tracks, graph, n_boot=12, effects=("delay",))
