@@ -94,7 +94,7 @@ def case(effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=Fa
     row = {b.edge: i for i, b in enumerate(sim.graph.bends)}
     y = sim.response_true[[row[tuple(e)] for e in r.edges]]
     W = r.weights if res.preset.compliance.weighted else None
-    return r.Y, W, r.root_distance, k, y, tp, [f"{j}->{c}" for j, c in r.edges]
+    return r.Y, W, r.root_distance, k, y, tp, r.edge_labels
 
 
 def score_p(p) -> str:

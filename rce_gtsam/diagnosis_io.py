@@ -72,7 +72,7 @@ def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = N
     return diagnose(resp.Y, weights=resp.weights if cfg.weighted else None, root_distance=resp.root_distance,
                     effects=list(names) if names is not None else None, seed=int(seed),
                     block_length=cfg.block_length, config=cfg,
-                    edge_labels=[f"{j}->{c}" for j, c in resp.edges], frames=resp.frames,
+                    edge_labels=resp.edge_labels, frames=resp.frames,
                     edge_nodes=[result.bending.bends[k].nodes for k in resp.bend_rows],
                     noise_floor=noise_floor_of(result), **kw)
 

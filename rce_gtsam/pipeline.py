@@ -63,6 +63,12 @@ class Response:
         return w, float(w[pos].mean()) if pos.any() else 1.0
 
     @property
+    def edge_labels(self) -> list[str]:
+        """Each row's ``"joint->child"`` label (what reports, ``diagnosis.json`` and
+        :func:`~rce_gtsam.model.row_sets.edge_nodes_from_labels` read)."""
+        return [f"{j}->{c}" for j, c in self.edges]
+
+    @property
     def weights(self) -> np.ndarray | None:
         """(E, T) inverse-variance weights (1/deg^2) normalised to mean 1 over finite entries, or None."""
         if self.variance is None:

@@ -164,4 +164,4 @@ def budget_of(result, z_crit: float = 2.0) -> VarianceBudget:
     fit = ResponseModel(config=cfg).fit(r.Y, weights=r.weights if cfg.weighted else None,
                                         root_distance=r.root_distance)
     return variance_budget(r.Y, fit.residuals, fit.n_params, noise_floor_of(result),
-                           labels=[f"{j}->{c}" for j, c in r.edges], z_crit=z_crit, base_kappa=fit.kappa)
+                           labels=r.edge_labels, z_crit=z_crit, base_kappa=fit.kappa)
