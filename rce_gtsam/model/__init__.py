@@ -15,7 +15,7 @@ Modules (imports only point down this list; nothing here imports :mod:`rce_gtsam
 * :mod:`~rce_gtsam.model.response_model` — :class:`ResponseModel`: the model, ``fit`` and the public
   solver ``solve`` (warm starts, frozen parameters, ridge on z, frame multiplicities);
 * :mod:`~rce_gtsam.model.steps` — the solver steps effects call: :func:`kappa_step`, :func:`z_step`,
-  :func:`sse_after_z`, :func:`profiled_sse`, :func:`profiled_residuals`, :func:`operator_z_solve`;
+  :func:`sse_after_z`, :func:`profiled_sse`, :func:`operator_z_solve`;
 * :mod:`~rce_gtsam.model.fit` — :class:`ModelFit`, :class:`ParamValue`;
 * :mod:`~rce_gtsam.model.view` — :class:`FitView` (what an effect sees during a fit), :class:`PartialView`;
 * :mod:`~rce_gtsam.model.starts` — :func:`~rce_gtsam.model.starts.solve_from_starts`: a fit from every start an
@@ -35,10 +35,9 @@ from .fit import ModelFit, ParamValue
 from .inputs import validate_inputs
 from .report import render_fit_report
 from .response_model import ResponseModel
-from .steps import (Z_RIDGE, core_step, kappa_step, operator_z_solve, profiled_residuals, profiled_sse,
-                    sse_after_z, z_step)
+from .steps import Z_RIDGE, core_step, kappa_step, operator_z_solve, profiled_sse, sse_after_z, z_step
 from .view import FitView, PartialView
 
 __all__ = ["ResponseModel", "ModelFit", "ParamValue", "FitView", "PartialView", "validate_inputs",
            "render_fit_report", "kappa_step", "z_step", "core_step", "sse_after_z", "profiled_sse",
-           "profiled_residuals", "operator_z_solve", "Z_RIDGE"]
+           "operator_z_solve", "Z_RIDGE"]

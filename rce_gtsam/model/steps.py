@@ -2,9 +2,8 @@
 
 One block-coordinate sweep of :meth:`rce_gtsam.model.ResponseModel.solve` is :func:`kappa_step`,
 :func:`z_step`, then each effect's ``update``. Effects use :func:`sse_after_z` (error of a candidate state
-after an exact z step: grid starts), :func:`profiled_sse` (the same with the effect's slot replaced:
-profiling z out of a shared parameter) and :func:`profiled_residuals` (its residual vector, for a
-least-squares update of several), and :meth:`~rce_gtsam.model.view.FitView.index_of` to find their
+after an exact z step: grid starts) and :func:`profiled_sse` (the same with the effect's slot replaced:
+profiling z out of a shared parameter), and :meth:`~rce_gtsam.model.view.FitView.index_of` to find their
 own slot. The kappa step is the rank-1 solver's (:mod:`rce_gtsam.compliance`): the same shrinkage of
 log kappa (``count`` or ``precision``, from the model's :class:`~rce_gtsam.presets.ComplianceConfig`) and the
 same geometric-mean normalisation, applied to a Gauss-Newton step through the effects. Units: degrees,
@@ -130,15 +129,6 @@ def profiled_sse(view: FitView, index: int, state: dict) -> float:
     v = view.copy_with(view.model, view.with_state(index, state))
     z_step(v)
     return v.wsse()
-
-
-def profiled_residuals(view: FitView, index: int, state: dict) -> np.ndarray:
-    """sqrt(W) * residual (degrees, flattened over observed entries) with effect ``index`` in ``state`` after
-    an exact z step: :func:`profiled_sse` as a vector, for a least-squares ``update`` of several shared
-    parameters coupled to z (its sum of squares is :func:`profiled_sse`)."""
-    v = view.copy_with(view.model, view.with_state(index, state))
-    z_step(v)
-    return v.residual_vector(index, state)
 
 
 # Relative Tikhonov ridge of the iterative z solve (fraction of a typical frame's information). Operators
