@@ -990,9 +990,10 @@ def explain(diag: Diagnosis) -> str:
                      "from the extended fit.")
     if par.get("preferred_simpler") == c.effect and c.effect in enc:
         lo = diag.candidate(par["lowest_heldout"])
-        lines.append(f"Parsimony: {lo.effect} has the lowest held-out RMSE ({lo.heldout_rmse:.3f} deg) but predicts "
-                     f"nothing that {c.effect} leaves in the residuals (encompassing test p = {enc[c.effect]:.3g} > "
-                     f"{thr:.3g}); the simpler effect is the verdict.")
+        lines.append(f"Parsimony: {lo.effect} has the lowest held-out RMSE ({lo.heldout_rmse:.3f} deg), but what it "
+                     f"predicts in the residuals {c.effect} leaves is not significant (encompassing test p = "
+                     f"{enc[c.effect]:.3g} > {thr:.3g}): the data do not ask for its extra parameters, so the simpler "
+                     f"effect is the verdict ({lo.effect} is not excluded).")
     elif par.get("lowest_heldout") == c.effect and enc and not form_of:
         lines.append("Against the simpler " + ", ".join(
             f"{k}: the residuals it leaves hold what {c.effect} predicts (encompassing test p = {v:.3g} <= {thr:.3g})"
