@@ -17,13 +17,13 @@ plants: residual of the rank-1 fit / its signal = 1.76 on plant 1, 1.17 on plant
 klog = kappa log-RMSE against the truth, baseline -> verdict model (baseline when the verdict is None);
 s = median diagnose seconds (pipeline excluded; it is timed separately).
 
-Oracle (:func:`rce_gtsam.diagnose.oracle_test`): for every case the same held-out test for the hidden effect's own
+Oracle (:func:`rce_gtsam.diagnosis.oracle.oracle_test`): for every case the same held-out test for the hidden effect's own
 candidate with its true shared parameters (fitted to the noise-free truth, then kept fixed; per-edge parameters,
 kappa and the held-out excitation estimated from the noisy data as for every candidate): "oracle" counts the
 cases where it passes the verdict's threshold, the ceiling the verdict reaches toward with this test. For delay,
 dynamics and a second excitation, which the verdict also tests on all frames at once
 (:mod:`rce_gtsam.diagnosis.score_test`), the oracle's full-data score test runs along the true signature
-(:func:`rce_gtsam.diagnose.true_signature`, the noise-free truth less its best rank-1 approximation: of each row set
+(:func:`rce_gtsam.diagnosis.oracle.true_signature`, the noise-free truth less its best rank-1 approximation: of each row set
 for the cross-fitted tests, of all rows for the delay's refitted one), with the same split thresholds: fold t or
 score p, each at half the level. (Until this was the signature, the truth itself was the direction, and the
 oracle fired on effect-free data: 12-14 of 40 recordings at p <= 0.005 along a hypothetical effect's response.) "knows z" counts the same for the noise-free truth itself as the prediction (it knows the
@@ -189,7 +189,10 @@ def main() -> int:
     a = ap.parse_args()
     from scipy import stats
 
-    from rce_gtsam.diagnose import choose_verdict, diagnose, maxt_verdict, oracle_test, paired_t
+    from rce_gtsam.diagnose import diagnose
+    from rce_gtsam.diagnosis.heldout import paired_t
+    from rce_gtsam.diagnosis.oracle import oracle_test
+    from rce_gtsam.diagnosis.verdict import choose_verdict, maxt_verdict
     from rce_gtsam.presets import get_preset
     mults = [float(m) for m in a.strength_mult.split(",")]
     print(f"input: {'matrices (simulator equations + noise)' if a.matrices else 'full pipeline (simulate -> analyze default preset)'}; "

@@ -4,7 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from rce_gtsam.diagnose import diagnose, edge_halves, fold_blocks
+from rce_gtsam.diagnose import diagnose, edge_halves
+from rce_gtsam.diagnosis.heldout import fold_blocks
 
 from _effect_data import synth
 
@@ -83,7 +84,7 @@ def test_effective_sample_of_ar1_residuals():
 
 def test_parsimony_prefers_the_simpler_effect_unless_the_complex_one_is_significantly_better():
     from types import SimpleNamespace as C
-    from rce_gtsam.diagnose import choose_verdict
+    from rce_gtsam.diagnosis.verdict import choose_verdict
     rng = np.random.default_rng(1)
     base = 1 + 0.05 * rng.standard_normal(8)
     dyn = C(effect="dynamics", supported=True, heldout_rmse=0.99, fold_mse=base * 0.98, extra={"k_eff": 40.0})
@@ -103,7 +104,7 @@ def test_parsimony_counts_a_free_time_course_as_more_than_any_static_parameters(
     effective parameter count is the lower one (measured: 52.8 vs 61.9, and the second mode was named on a
     noise-free simulated creep). When the creep is significantly worse the second mode stays."""
     from types import SimpleNamespace as C
-    from rce_gtsam.diagnose import choose_verdict, complexity
+    from rce_gtsam.diagnosis.verdict import choose_verdict, complexity
     rng = np.random.default_rng(2)
     base = 1 + 0.05 * rng.standard_normal(16)
     sm = C(effect="second_mode", supported=True, heldout_rmse=0.59, fold_mse=base * 0.35,
@@ -123,7 +124,7 @@ def test_same_kind_parsimony_weighs_an_unsupported_simpler_operator():
     the verdict is dynamics; with same_kind=True, delay. An unsupported simpler effect of another kind is
     never taken."""
     from types import SimpleNamespace as C
-    from rce_gtsam.diagnose import choose_verdict
+    from rce_gtsam.diagnosis.verdict import choose_verdict
     from rce_gtsam.effects import make
     fit = lambda name: C(model=C(effects=(make(name),)))  # noqa: E731
     rng = np.random.default_rng(1)
@@ -159,7 +160,7 @@ def test_oracle_is_a_ceiling_that_does_not_fire_without_an_effect():
     """The oracle (the hidden effect's candidate with its true shared parameters, run through the same folds)
     fires on a strong offset and stays silent on effect-free data, where the old "knows z" prediction of the
     noise-free truth fires anyway (it skips estimating the excitation, so it is no ceiling)."""
-    from rce_gtsam.diagnose import oracle_test
+    from rce_gtsam.diagnosis.oracle import oracle_test
     nodes = [{i} for i in range(16)]
     Y, s, _, _, y = synth("offset", seed=0, E=16)
     d = diagnose(Y, root_distance=s, effects=FAST, edge_nodes=nodes)
@@ -177,7 +178,7 @@ def test_the_oracle_scores_along_the_effects_signature_not_the_whole_truth():
     a rank-1 response on any reference pose (per-row constants), the effect's own part otherwise. Scoring along
     the whole truth fired on 12-14 of 40 effect-free pipeline recordings (the projection with the noisy fit's
     kappa and z leaves the truth's rank-1 part and the rows' constants in the direction)."""
-    from rce_gtsam.diagnose import true_signature
+    from rce_gtsam.diagnosis.oracle import true_signature
     rng = np.random.default_rng(0)
     k, z, c = rng.uniform(0.5, 2, 8), rng.standard_normal(300) + 0.7, rng.normal(0, 3, 8)
     assert np.abs(true_signature(np.outer(k, z) + c[:, None])).max() < 1e-9
@@ -231,7 +232,7 @@ def test_a_significant_candidate_without_held_out_support_is_named_in_the_explan
     c = d.candidates[-1]
     assert not c.supported
     c.extra.update(significant=True, score_p=0.001, score_threshold_p=0.005)
-    from rce_gtsam.diagnose import explain
+    from rce_gtsam.diagnosis.explain import explain
     text = explain(d)
     assert f"Significant but not named: {c.effect} (full-data score test p = 0.001; held-out RMSE " in text
     assert c.heldout_rmse >= d.baseline_heldout_rmse and f"{-c.improvement_pct:+.1f}%)" in text
@@ -249,7 +250,7 @@ def test_a_significant_score_test_waives_the_aic_hurdle_but_not_the_held_out_err
     AND the gain reaches the resolution. The AIC guards the 16-number fold t; a second excitation's free w pays
     ~2 AIC per frame for what the held-out error already charges (pipeline, 1x: p = 0.0005, held-out -1.1 %,
     no verdict before)."""
-    from rce_gtsam.diagnose import earns_its_place
+    from rce_gtsam.diagnosis.verdict import earns_its_place
     assert not earns_its_place(0.99, 1.0, +30.0, 0.01, 0.001)
     assert earns_its_place(0.99, 1.0, +30.0, 0.01, 0.001, calibrated=True)
     assert not earns_its_place(1.01, 1.0, -30.0, 0.01, 0.001, calibrated=True)   # held-out error must fall

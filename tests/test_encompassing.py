@@ -8,7 +8,8 @@ import pytest
 from _effect_data import synth
 
 from rce_gtsam import effects
-from rce_gtsam.diagnose import choose_verdict, diagnose, node_disjoint_split, shared_node_matrix
+from rce_gtsam.diagnose import diagnose, node_disjoint_split, shared_node_matrix
+from rce_gtsam.diagnosis.verdict import choose_verdict
 from rce_gtsam.diagnosis.encompassing import can_test, encompassing_test, project_out
 from rce_gtsam.model import ResponseModel
 

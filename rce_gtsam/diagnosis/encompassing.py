@@ -36,7 +36,7 @@ confusions 0/0/0/0/0 and 0/4/0/0/0 (the delay is now supported on more dynamics 
 must then find the resonance: dynamics 1x seed 3, held-out gain 3.4 % against the delay's 0.4 %, was not
 separated). Also asking the fold t (richer named when either test says so) named 6 of 37 delay recordings
 dynamics to fix that one: not adopted. The diagnosis uses it only between two
-candidates that are both supported (see :func:`choose_verdict <rce_gtsam.diagnose.choose_verdict>`).
+candidates that are both supported (see :func:`choose_verdict <rce_gtsam.diagnosis.verdict.choose_verdict>`).
 
 Units: degrees (residuals, predictions), frames (time); p and z are unitless.
 """

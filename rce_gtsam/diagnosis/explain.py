@@ -1,0 +1,215 @@
+"""The diagnosis in words: the verdict's explanation with the numbers behind it (:func:`explain`), the sentence
+for significant candidates that were not named, and the text report (:func:`render_diagnosis_report`). A leaf
+module: it reads a :class:`~rce_gtsam.diagnose.Diagnosis` and computes nothing.
+
+Units: degrees (RMSE), deg^2 (variances), frames.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from ..model import render_fit_report
+from .score_test import score_is_significant
+from .verdict import complexity
+
+if TYPE_CHECKING:
+    from ..diagnose import Diagnosis
+
+
+def significant_but_not_named(diag: Diagnosis) -> str:
+    """A sentence for a diagnosis without a verdict whose candidates include significant ones (fold t or full-
+    data score test) that were not supported, each with what it lacked (a held-out error that falls, an AIC that
+    falls, or the resolution): the residuals hold structure of their kind that none of the fitted forms earns
+    its place with. Empty when there are none."""
+    sig = [c for c in diag.candidates if c.extra.get("significant") and not c.supported]
+    if not sig:
+        return ""
+
+    def why(c) -> str:
+        sp = c.extra.get("score_p")
+        calibrated = score_is_significant(sp, c.extra.get("score_threshold_p", 0.0))
+        test = f"full-data score test p = {sp:.2g}" if calibrated else f"evidence t = {c.evidence:.2f}"
+        if c.heldout_rmse >= diag.baseline_heldout_rmse:
+            lacks = f"held-out RMSE {-c.improvement_pct:+.1f}%"
+        elif c.delta_aic >= 0 and not calibrated:
+            lacks = f"held-out RMSE {-c.improvement_pct:+.1f}% but AIC {c.delta_aic:+.1f} on the effective sample"
+        else:
+            lacks = (f"held-out RMSE {-c.improvement_pct:+.1f}%, below the resolution of "
+                     f"{100 * diag.settings.get('resolution', 0.0):.2g}% of the variance")
+        return f"{c.effect} ({test}; {lacks})"
+
+    return (" Significant but not named: " + ", ".join(why(c) for c in sig) + ". The residuals hold structure "
+            "of that kind, but the extended model does not earn its place, so that form of the effect is not what "
+            "the data show.")
+
+
+def explain(diag: Diagnosis) -> str:
+    """Plain-language explanation of the verdict with the numbers behind it."""
+    base = diag.baseline_heldout_rmse
+    if diag.verdict is None:
+        best = diag.candidates[0] if diag.candidates else None
+        closest = ""
+        if best is not None:
+            sp = best.extra.get("score_p")
+            closest = (f" The closest candidate, {best.effect}, changes held-out RMSE to {best.heldout_rmse:.3f} deg "
+                       f"({-best.improvement_pct:+.1f}%), evidence t = {best.evidence:.2f} against the threshold "
+                       f"{best.extra.get('threshold_t', diag.settings['evidence_threshold_t']):.2f}"
+                       + ("" if sp is None else f", full-data score test p = {sp:.2g}") + ".")
+        closest += significant_but_not_named(diag)
+        b = diag.budget
+        if b is None:
+            return (f"No candidate effect improves the held-out error beyond its sampling noise (rank-1 held-out RMSE "
+                    f"{base:.3f} deg).{closest} Without a noise floor (tracks) this cannot say whether the remaining "
+                    "misfit is measurement noise or an effect outside the library.")
+        share = lambda v: 100.0 * b.share(v)  # noqa: E731
+        head = (f"The rank-1 model explains {share(b.rank1):.0f}% of the bending variance ({b.total:.3g} deg^2); the "
+                f"model-free noise floor is {share(b.noise_floor):.0f}%, which leaves {share(b.unexplained):+.0f}% "
+                f"unexplained (+/- {share(b.unexplained_se):.0f}%).")
+        worst = sorted(b.per_segment, key=lambda r: -(r["unexplained"] or 0.0))[:3]
+        where = ", ".join(f"{r['segment']} ({r['unexplained']:.2g} deg^2)" for r in worst if (r["unexplained"] or 0) > 0)
+        if b.status == "noise":
+            upper = share(b.unexplained + 2 * b.unexplained_se)
+            return (head + f" That is consistent with zero: what the rank-1 model leaves is at the tracking-noise level,"
+                    f" and the model is adequate for these data — but with this record the unexplained share could still"
+                    f" be as large as {max(upper, 0):.0f}% (2 SE); a longer recording narrows that." + closest)
+        if b.status == "misses":
+            return (head + " That is significantly more than noise, and no candidate effect in the library explains it:"
+                    f" the model misses real structure, most in segments {where or 'none singled out'}."
+                    + closest + " Look at the residual analysis (cross-correlation with z, frequency response,"
+                    " cross-spectrum singular values) for what kind of structure it is.")
+        bound = ", ".join(b.floor_is_bound[:6]) + (" ..." if len(b.floor_is_bound) > 6 else "")
+        return (head + f" Inconclusive: on {len(b.floor_is_bound)} segments ({bound}) the segments stretch with the "
+                f"branch's motion by more than tracking noise could (out-of-plane swing, or a tracker sliding along the "
+                f"stem), so there the noise floor is only bounded: the unexplained part lies between "
+                f"{share(b.unexplained_range[0]):+.0f}% and {share(b.unexplained_range[1]):+.0f}% of the variance."
+                + closest + " Out-of-plane motion is outside this 2-D model; a second camera view would settle it.")
+    c = diag.candidate(diag.verdict)
+    sp = c.extra.get("score_p")
+    score = ("" if sp is None else f"; full-data score test p = {sp:.2g} against {c.extra['score_threshold_p']:.2g}")
+    lines = [f"Missing effect: {c.effect}. Adding it lowers the held-out RMSE from {base:.3f} to "
+             f"{c.heldout_rmse:.3f} deg ({c.improvement_pct:.1f}% lower; evidence t = {c.evidence:.1f} over "
+             f"{diag.settings['n_folds']} folds, threshold {c.extra.get('threshold_t', float('nan')):.2f}{score}; "
+             f"delta AIC {c.delta_aic:.0f} on the effective sample of "
+             f"{diag.settings.get('n_eff', float('nan')):.0f} observations)."]
+    par = diag.settings.get("parsimony") or {}
+    enc = par.get("encompassing_p") or {}
+    thr = diag.settings.get("encompassing_threshold_p", float("nan"))
+    form_of = c.extra.get("supported_as_form_of")
+    if form_of:
+        o = diag.candidate(form_of)
+        osp = o.extra.get("score_p")
+        lines.append(f"Its own tests fall short; it is named as the richer form of the lag that {form_of} finds "
+                     f"({form_of}: held-out RMSE {o.improvement_pct:.1f}% lower, evidence t = {o.evidence:.1f}"
+                     + ("" if osp is None else f", full-data score test p = {osp:.2g}")
+                     + f"): {c.effect} predicts what {form_of} leaves in the residuals (encompassing test p = "
+                     f"{c.extra['form_test_p'][form_of]:.3g} <= {thr:.3g}).")
+    eff = next((e for e in c.fit.model.effects if e.name == c.effect), None)
+    if eff is not None:
+        lines.append(eff.explain(c.fit.effect_summary().get(c.effect, {}), c.statistics))
+        lines.append(f"What it means: {eff.physics} Fit the model with {type(eff).__name__}() and read kappa "
+                     "from the extended fit.")
+    if par.get("preferred_simpler") == c.effect and c.effect in enc:
+        lo = diag.candidate(par["lowest_heldout"])
+        lines.append(f"Parsimony: {lo.effect} has the lowest held-out RMSE ({lo.heldout_rmse:.3f} deg), but what it "
+                     f"predicts in the residuals {c.effect} leaves is not significant (encompassing test p = "
+                     f"{enc[c.effect]:.3g} > {thr:.3g}): the data do not ask for its extra parameters, so the simpler "
+                     f"effect is the verdict ({lo.effect} is not excluded).")
+    elif par.get("lowest_heldout") == c.effect and enc and not form_of:
+        lines.append("Against the simpler " + ", ".join(
+            f"{k}: the residuals it leaves hold what {c.effect} predicts (encompassing test p = {v:.3g} <= {thr:.3g})"
+            for k, v in enc.items()) + ".")
+    elif par.get("preferred_simpler") == c.effect:
+        lo = diag.candidate(par["lowest_heldout"])
+        lines.append(f"Parsimony: {lo.effect} has the lowest held-out RMSE ({lo.heldout_rmse:.3f} deg) but is not "
+                     f"significantly better than {c.effect} (paired t = {par['t_vs_lowest'].get(c.effect, float('nan')):.2f}"
+                     f" < {diag.settings['evidence_threshold_t']:.2f}) and "
+                     + ("fits a free time course of its own, which can imitate the simpler effect's"
+                        if complexity(lo)[0] > complexity(c)[0] else
+                        f"needs more parameters ({lo.extra.get('k_eff', float('nan')):.0f} vs "
+                        f"{c.extra.get('k_eff', float('nan')):.0f} effective)")
+                     + "; the simpler effect is the verdict.")
+    others = [o.effect for o in diag.candidates if o.supported and o.effect != c.effect]
+    if others:
+        lines.append("Also supported (partly mimicking the same misfit, or further effects): " + ", ".join(others)
+                     + "; refit with the verdict effect added and diagnose again to separate them.")
+    return " ".join(lines)
+
+
+def _support_label(c) -> str:
+    """The report's "supported" cell: yes / no, or the lag it is the richer form of (:func:`~rce_gtsam.diagnosis.verdict.support_a_richer_form`)."""
+    form_of = c.extra.get("supported_as_form_of")
+    return f"yes, as the richer form of {form_of}" if form_of else ("yes" if c.supported else "no")
+
+
+def render_diagnosis_report(diag: Diagnosis) -> str:
+    """Readable text report of a diagnosis."""
+    b = diag.baseline
+    st = diag.settings
+    out = ["[[Diagnosis]]",
+           f"    baseline: rank-1 (kappa_e z_t), {b.Y.shape[0]} edges x {b.Y.shape[1]} frames, "
+           f"{b.n_obs} observations; response {st['response']}; weighted {st['weighted']}",
+           f"    held-out scheme: {st['n_folds']} contiguous test blocks, buffer {st['buffer_frames']} frames each side, "
+           f"z estimated on half the edges and scored on the other half; evidence threshold t > "
+           f"{st['evidence_threshold_t']:.2f} (alpha {st['alpha']} / {len(diag.candidates)} candidates) and AIC lower",
+           f"    z on held-out frames estimated from {len(st['edge_halves'][0])} edges, scored on "
+           f"{len(st['edge_halves'][1])} (and swapped); the two sets share no tracked node: "
+           f"{'yes' if st.get('node_disjoint_halves') else 'no (too few edges)'}",
+           f"    residual lag-1 autocorrelation {st.get('residual_lag1_autocorrelation', float('nan')):.2f}: "
+           f"effective sample {st.get('n_eff', float('nan')):.0f} of {st.get('n_obs', float('nan')):.0f} observations "
+           f"({st.get('frames_eff', float('nan')):.0f} effective frames); AIC/BIC use it",
+           "[[Where the baseline fails]]",
+           f"    overall residual RMS {diag.residual_summary['overall_rms_deg']:.3f} deg; fit RMSE {b.rmse:.3f}, "
+           f"held-out RMSE {diag.baseline_heldout_rmse:.3f} deg"]
+    for w in diag.worst_edges:
+        out.append(f"    worst edge {w['edge']:<10} residual RMS {w['residual_rms_deg']:.3f} deg "
+                   f"({w['ratio_to_overall']:.2f}x overall)")
+    for w in diag.worst_frames:
+        out.append(f"    worst frames {w['first_frame']}-{w['last_frame']}: residual RMS {w['residual_rms_deg']:.3f} deg "
+                   f"({w['ratio_to_overall']:.2f}x overall)")
+    if diag.budget is not None:
+        bd = diag.budget
+        pc = lambda v: 100.0 * bd.share(v)  # noqa: E731
+        out.append("[[Variance budget]]  (deg^2 over scored segment-frames; share of total)")
+        out.append(f"    total {bd.total:.4g}   rank-1 {bd.rank1:.4g} ({pc(bd.rank1):.0f}%)   "
+                   + "".join(f"{k} {v:.3g} ({pc(v):.0f}%)   " for k, v in bd.effects.items())
+                   + f"noise floor {bd.noise_floor:.4g} ({pc(bd.noise_floor):.0f}%)   unexplained {bd.unexplained:.3g} "
+                   f"+/- {bd.unexplained_se:.2g} ({pc(bd.unexplained):+.0f}%): {bd.status}")
+        nf = diag.noise_floor
+        out.append(f"    noise floor from segment stretch (inextensibility) x across/along ratio {nf.across_over_along:.2f}; "
+                   f"{int(nf.valid.sum())}/{len(nf.valid)} segments consistent, others use the white-noise lower bound")
+    out.append("[[Candidates]]  (held-out RMSE before -> after, deg)")
+    out.append(f"    {'effect':<12} {'held-out RMSE':>22} {'change':>8} {'evidence t':>11} {'score p':>9} {'dAIC':>10} "
+               f"{'dBIC':>10}  supported")
+    for c in diag.candidates:
+        sp = c.extra.get("score_p")
+        out.append(f"    {c.effect:<12} {diag.baseline_heldout_rmse:9.4f} -> {c.heldout_rmse:9.4f} "
+                   f"{-c.improvement_pct:+7.1f}% {c.evidence:11.2f} {'-' if sp is None else f'{sp:.4f}':>9} "
+                   f"{c.delta_aic:10.1f} {c.delta_bic:10.1f}  {_support_label(c)}")
+    if any(c.extra.get("score_p") is not None for c in diag.candidates):
+        how = {"own": "its directions from the fit's own excitation, null from refitted surrogates",
+               "other_rows": "its directions from the other node-disjoint segments' excitation",
+               "between_rows": "do two node-disjoint sets of segments' residuals move together"}
+        methods = "; ".join(f"{c.effect}: {how.get(c.extra.get('score_excitation'), 'phase-randomised null')}"
+                            for c in diag.candidates if c.extra.get("score_p") is not None)
+        out.append(f"    score p: full-data score test where an effect has one ({methods}); "
+                   f"such an effect is significant when t > {st['evidence_threshold_t_split']:.2f} or p <= "
+                   f"{st['score_threshold_p']:.3g} (each test at half its alpha), and supported only if the "
+                   f"held-out RMSE also falls")
+    enc = (st.get("parsimony") or {}).get("encompassing_p") or {}
+    if enc:
+        lo = st["parsimony"]["lowest_heldout"]
+        out.append(f"    encompassing test (does {lo} predict what a simpler supported candidate leaves?): "
+                   + ", ".join(f"vs {k} p = {v:.4f}" for k, v in enc.items())
+                   + f"; the simpler one is named unless p <= {st['encompassing_threshold_p']:.3g}")
+    out.append("[[Verdict]]")
+    none_text = {"adequate": "none (the rank-1 model is adequate: the residual is at the noise floor)",
+                 "misses": "none of the candidates, but the rank-1 model misses more than noise",
+                 "inconclusive": "none of the candidates; whether the rest is noise is inconclusive",
+                 "untested": "none (no candidate beats the rank-1 model on held-out frames)"}
+    out.append(f"    {diag.verdict or none_text.get(diag.status, 'none')}")
+    out.append("    " + diag.explanation)
+    if diag.verdict is not None:
+        out.append("")
+        out.append(render_fit_report(diag.candidate(diag.verdict).fit, diag.edge_labels, max_rows=12))
+    return "\n".join(out)
