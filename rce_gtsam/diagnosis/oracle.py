@@ -47,8 +47,9 @@ def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str
     Returns {t: the fold-paired t the verdict uses, threshold_t, supported (significant and a
     lower held-out error), score_p (None without a score test), full_data_t (:func:`~rce_gtsam.diagnosis.heldout.loss_difference_test`), full_data_dof, improvement_pct (held-out
     RMSE, baseline -> oracle), fold_mse (per fold, pooled as the candidates' are: pair it with a rival
-    candidate's to ask whether even the true form beats that rival), params (the true shared parameters used), knows_z: {t, supported,
-    improvement_pct}}."""
+    candidate's to ask whether even the true form beats that rival), params (the true shared parameters used), fit
+    (the oracle's fit on all frames, a :class:`~rce_gtsam.model.ModelFit`: to run the verdict's pair test with
+    it), knows_z: {t, supported, improvement_pct}}."""
     st = diag.settings
     base = diag.baseline
     y = truth + np.nanmean(Y - truth, axis=1, keepdims=True)
@@ -95,7 +96,7 @@ def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str
     else:
         out = _scored_test(diag, Y, pred, threshold_t=st["evidence_threshold_t_split"],
                            score_p=score.p, score_threshold_p=st["score_threshold_p"])
-    return {**out, "params": clean.effect_summary().get(effect, {}), "knows_z": knows_z}
+    return {**out, "params": clean.effect_summary().get(effect, {}), "fit": full, "knows_z": knows_z}
 
 
 def true_signature(truth: np.ndarray) -> np.ndarray:
