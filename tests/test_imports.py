@@ -97,3 +97,17 @@ def test_effects_import_first_in_a_fresh_interpreter():
     code = "import rce_gtsam.effects.delay, rce_gtsam.model, rce_gtsam.diagnose, rce_gtsam.pipeline"
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr[-2000:]
+
+
+def test_the_diagnosis_machinery_names_no_effect():
+    """A new effect is one file and a registry line: no module of rce_gtsam/diagnosis/ special-cases an effect by
+    its name (a string literal equal to a registered effect's name)."""
+    from rce_gtsam import effects
+
+    names = set(effects.names())
+    hits = []
+    for path in sorted((PACKAGE / "diagnosis").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Constant) and node.value in names:
+                hits.append(f"{path.name}:{node.lineno} {node.value!r}")
+    assert not hits, hits
