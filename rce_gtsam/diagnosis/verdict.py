@@ -91,7 +91,8 @@ def support_a_richer_form(results: list, Y, W, s, halves, seed: int, b_rmse: flo
     best = sup[0]
     out = list(results)
     for i, c in enumerate(results):
-        if (c.supported or c.heldout_rmse >= best.heldout_rmse or effect_kind(c) is None or effect_kind(c) != effect_kind(best)
+        if (c.supported or c.heldout_rmse >= best.heldout_rmse or effect_kind(c) is None
+                or effect_kind(c) != effect_kind(best)
                 or not complexity(best) < complexity(c)
                 or not earns_its_place(c.heldout_rmse, b_rmse, c.delta_aic, c.extra.get("heldout_gain_share", 0.0),
                                        resolution, calibrated=True)):
