@@ -21,7 +21,7 @@ from scipy.optimize import least_squares
 import math
 
 from ..diagnosis.statistics import per_edge_regression, slope_vs
-from ..model.steps import sse_after_z, z_step
+from ..model.steps import sse_after_z
 from .base import Effect, Parameter, scalar
 
 OMEGA_MIN, OMEGA_MAX = 0.05, 2 * np.pi  # rad/frame: a period of ~125 frames .. 1 frame (quasi-static)
@@ -29,8 +29,6 @@ ZETA_MIN, ZETA_MAX = 0.03, 2.0
 #: damping ratios the fit is restarted from (:meth:`Dynamics.alternative_starts`): half a decade apart, from
 #: lightly damped to critically damped
 ZETA_STARTS = (0.1, 0.3, 1.0)
-#: rounds of (z-fixed parameter steps, z re-solved) per update (see :meth:`Dynamics.update`)
-INNER_ROUNDS = 4
 
 
 def _foh_coeffs(omega: np.ndarray, zeta: float) -> tuple[np.ndarray, np.ndarray]:
@@ -177,21 +175,10 @@ class Dynamics(Effect):
         # a few steps with z held fixed, deliberately: with z profiled out (re-solved for every trial state)
         # the fit does reach a lower in-sample error than the true parameters', but by walking to a sharp
         # resonance (zeta at its bound 0.03, a 1-3-frame root period) whose inverse lets the free z fit noise:
-        # simulated dynamics at 0.75x default, seeds 0-2, held-out RMSE 3-12 % *worse* than the rank-1 model's.
-        # The z-fixed steps and z alternate INNER_ROUNDS times per update instead (z re-solved on a copy of the
-        # view in between): they move the frequencies little per round, and one round per sweep left the
-        # diagnosis' 25-sweep fit short of the point the alternation converges to (0.75x seeds 60, 66, 17:
-        # weighted SSE 0.8, 0.4 and 0.5 % above it; the verdict named the delay on all three)
-        x = x0
-        v = view.copy_with(view.model, view.states)
-        for r in range(INNER_ROUNDS):
-            if r:
-                z_step(v)
-            res = least_squares(lambda q: v.residual_vector(i, self._state(q)), x, bounds=(lo, hi),
-                                diff_step=1e-4, max_nfev=3)
-            x = np.clip(res.x, np.array(lo) + 1e-6, np.array(hi) - 1e-6)
-            v.states[i] = self._state(x)
-        return self._state(x)
+        # simulated dynamics at 0.75x default, seeds 0-2, held-out RMSE 3-12 % *worse* than the rank-1 model's
+        res = least_squares(lambda q: view.residual_vector(i, self._state(q)), x0, bounds=(lo, hi),
+                            diff_step=1e-4, max_nfev=3)
+        return self._state(res.x)
 
     def alternative_starts(self, state):
         """The fitted natural frequencies with each damping ratio of :data:`ZETA_STARTS` that differs from the
