@@ -171,7 +171,8 @@ def assess_quality(result) -> dict[tuple[int, int], SegmentQuality]:
         n_eff = max(n * min(reduction, 1.0) * (1 - rho1) / (1 + rho1), 1.0)
         # both variances are estimates: their ratio is F(n_eff, noise_dof) distributed under "no signal". The
         # chi-square threshold (the floor taken as known) let static branches through: 120 frames, 4 nodes,
-        # no smoothing, a floor estimated 26 % low from 119 differences -> ratio 1.36 against 1.32, "ok"
+        # no smoothing, a floor 26 % below the (pure-noise) bend variance, from 119 differences -> ratio 1.36
+        # against 1.32, "ok"
         threshold = float(fdtri(n_eff, max(noise_dof, 1.0), 1.0 - ALPHA))
         reasons = ["off_structure"] if off & set(bend.nodes) else []
         node_vis = float(min(visible[r] for r in rows))

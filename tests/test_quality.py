@@ -54,8 +54,9 @@ def test_static_tracks_give_no_ok_kappa_and_exit_3(tmp_path, capsys, noise):
 def test_static_branches_without_smoothing_give_no_ok_kappa_however_their_noise_floor_falls(tmp_path):
     """The no_signal test is an F test: the noise floor is estimated from the same frames, so a floor that comes
     out low by chance must not pass noise as signal. Static 4-node branches, 120 frames, 0.2 px noise, no
-    smoothing; seed 33724 (found by tests/test_quality_properties.py) had its floor 26 % low, bend variance /
-    floor 1.36 against the chi-square threshold 1.32, and was marked ok. Measured over 600 static segments
+    smoothing; seed 33724 (found by tests/test_quality_properties.py) had its floor 26 % below the bend's
+    variance (all of it noise there), bend variance / floor 1.36 against the chi-square threshold 1.32, and was
+    marked ok. Measured over 600 static segments
     (5 nodes, 60-120 frames, with and without smoothing): 16 ok with the chi-square threshold, 0 with the F test."""
     import sys
     sys.path.insert(0, str(Path(__file__).parent))
