@@ -59,6 +59,11 @@ class BendingResult:
         """The downstream edge (joint, child) of every bend."""
         return [b.edge for b in self.bends]
 
+    def nodes_of(self, rows) -> list[tuple[int, int, int]]:
+        """The tracked nodes each of the bends ``rows`` (indices into :attr:`bends`, e.g. a response's
+        ``bend_rows``) is computed from: rows that share one share its position error."""
+        return [self.bends[k].nodes for k in rows]
+
 
 def bend_angles(pg: np.ndarray, pj: np.ndarray, pc: np.ndarray, signed: bool) -> np.ndarray:
     """Angle in degrees at ``pj`` for arrays of points (..., 2); NaN for degenerate segments."""

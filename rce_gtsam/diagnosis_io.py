@@ -73,7 +73,7 @@ def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = N
                     effects=list(names) if names is not None else None, seed=int(seed),
                     block_length=cfg.block_length, config=cfg,
                     edge_labels=resp.edge_labels, frames=resp.frames,
-                    edge_nodes=[result.bending.bends[k].nodes for k in resp.bend_rows],
+                    edge_nodes=result.bending.nodes_of(resp.bend_rows),
                     noise_floor=noise_floor_of(result), **kw)
 
 

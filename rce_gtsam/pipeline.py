@@ -309,7 +309,7 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
             # the node sets the diagnosis splits its rows by (rce_gtsam.diagnosis_io), so the extended fit keeps
             # the start the diagnosis' candidate keeps
             fit = fit_extended(response.Y, effects, preset.compliance, weights, response.root_distance,
-                               edge_nodes=[bending.bends[k].nodes for k in response.bend_rows])
+                               edge_nodes=bending.nodes_of(response.bend_rows))
         elif response.Y.shape[0] >= 2 and np.isfinite(response.Y).any(axis=1).all():
             # the rank-1 fit is the response model without effects (the diagnosis baseline is the same fit)
             fit = ResponseModel(config=preset.compliance).fit(response.Y, weights, response.root_distance,
