@@ -80,7 +80,7 @@ from scipy import stats
 from . import effects as effects_mod
 from .diagnosis.budget import VarianceBudget, variance_budget
 from .diagnosis.explain import explain, render_diagnosis_report
-from .diagnosis.heldout import fold_blocks, frame_loss, heldout_errors, loss_difference_test, paired_t
+from .diagnosis.heldout import fold_blocks, frame_loss, heldout_errors, paired_t
 from .diagnosis.maxt import sign_flip_max_t
 from .diagnosis.noise_floor import NoiseFloor
 from .diagnosis.score_test import effect_score_test, half_fits, is_significant, score_is_significant
@@ -92,6 +92,7 @@ from .diagnosis.verdict import (choose_verdict, earns_its_place, support_a_riche
 from .model import ModelFit, ResponseModel, validate_inputs
 from .model.row_sets import (edge_halves, edge_nodes_from_labels, node_disjoint_split,  # noqa: F401 (re-exported)
                              shared_node_matrix)
+from .model.series import loss_difference_test
 from .model.starts import solve_from_starts
 from .presets import DEFAULT, ComplianceConfig
 

@@ -5,7 +5,8 @@ the other, and the statistics over folds (paired t) and over frames (Diebold-Mar
 * :func:`heldout_errors` — a model's held-out squared errors per fold (and per frame), its fit refitted without
   the block and its buffers, z on the block estimated from one row set, the other scored;
 * :func:`paired_t` — the fold-paired t of log MSE ratios (the verdict's evidence);
-* :func:`frame_loss`, :func:`integrated_time`, :func:`loss_difference_test` — the full-series test.
+* :func:`frame_loss` — the held-out error per frame, the series the full-series test
+  (:func:`rce_gtsam.model.series.loss_difference_test`) compares.
 
 Units: degrees (errors in deg^2), frames.
 """
@@ -18,7 +19,6 @@ import numpy as np
 
 from ..model import ModelFit, ResponseModel
 from .settings import BLOCK_LENGTH
-from .statistics import autocorrelation
 
 
 def fold_blocks(T: int, n_folds: int, block_length: int = BLOCK_LENGTH) -> list[tuple[int, int]]:
@@ -102,45 +102,6 @@ def frame_loss(sse_t: np.ndarray, cnt_t: np.ndarray) -> np.ndarray:
     """(T,) held-out mean squared error per frame (deg^2), NaN at frames nothing was scored on."""
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(cnt_t > 0, sse_t / np.maximum(cnt_t, 1), np.nan)
-
-
-def integrated_time(d: np.ndarray) -> float:
-    """Integrated autocorrelation time (frames) of a series: 1 + 2 sum of its autocorrelations, summed in
-    pairs while positive (Geyer's initial positive sequence); >= 1."""
-    n = len(d)
-    if n < 8 or not np.any(d - d.mean()):
-        return 1.0
-    ac = autocorrelation(d, n - 1)
-    tau = 1.0
-    for k in range(1, n - 1, 2):
-        pair = ac[k] + ac[k + 1]
-        if pair <= 0:
-            break
-        tau += 2 * pair
-    return float(min(max(tau, 1.0), n / 4))
-
-
-def loss_difference_test(loss_ref: np.ndarray, loss: np.ndarray, min_batch: int = BLOCK_LENGTH) -> dict:
-    """Diebold-Mariano test on the full held-out series: is ``loss`` lower than ``loss_ref`` on average?
-
-    d_t = loss_ref_t - loss_t over frames scored by both (NaN elsewhere). Its mean's standard error comes
-    from batch means over consecutive scored frames, with batches ``max(min_batch, 2 x integrated
-    autocorrelation time of d)`` long, so that batch means are nearly independent; t has n_batches - 1
-    degrees of freedom. Every scored frame counts (thousands of values instead of 8 fold means), and the
-    long memory of tracking drift widens the batches rather than faking evidence. Returns {t, dof,
-    mean_diff, batch_frames, n_batches}."""
-    ok = np.isfinite(loss_ref) & np.isfinite(loss)
-    d = (loss_ref - loss)[ok]
-    if d.size < 4:
-        return {"t": float("nan"), "dof": 0, "mean_diff": float("nan"), "batch_frames": 0, "n_batches": 0}
-    L = int(max(min_batch, math.ceil(2 * integrated_time(d))))
-    nb = d.size // L
-    if nb < 2:
-        return {"t": float("nan"), "dof": 0, "mean_diff": float(d.mean()), "batch_frames": L, "n_batches": nb}
-    means = d[: nb * L].reshape(nb, L).mean(axis=1)
-    sd = float(np.std(means, ddof=1))
-    t = (float(np.mean(means)) / (sd / math.sqrt(nb))) if sd > 0 else (math.inf if means.mean() > 0 else 0.0)
-    return {"t": t, "dof": nb - 1, "mean_diff": float(d.mean()), "batch_frames": L, "n_batches": nb}
 
 
 def paired_t(mse_ref: np.ndarray, mse: np.ndarray) -> float:

@@ -2,7 +2,9 @@
 
 :class:`ResidualContext` is what an effect sees of the rank-1 baseline: its residuals, kappa, z and the
 segments' root distances, plus the AR(1) variance inflation of serially correlated residuals. The helpers
-are small NaN-aware regressions with standard errors. Units: degrees, frames.
+are small NaN-aware regressions with standard errors. The series statistics (autocorrelation, the test of two
+loss series) live in :mod:`rce_gtsam.model.series`, where the engine's choice between starts uses them too.
+Units: degrees, frames.
 """
 
 from __future__ import annotations
@@ -11,16 +13,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-
-
-def autocorrelation(x: np.ndarray, nlags: int) -> np.ndarray:
-    """(nlags + 1,) sample autocorrelation of the series x (mean removed) at lags 0..nlags, by FFT (zeros for a
-    constant series)."""
-    x = x - x.mean()
-    n = len(x)
-    f = np.fft.rfft(x, 2 * n)
-    ac = np.fft.irfft(f * np.conj(f))[: nlags + 1]
-    return ac / ac[0] if ac[0] > 0 else np.zeros(nlags + 1)
 
 
 def ar1_inflation(R: np.ndarray) -> float:

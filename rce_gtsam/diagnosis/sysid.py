@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import signal
 
-from .statistics import autocorrelation
+from ..model.series import autocorrelation
 
 
 @dataclass(frozen=True, eq=False)
