@@ -89,11 +89,17 @@ def solve_from_starts(model, Y, W, s, halves, start=None, max_iter: int | None =
     fits = [fit] + [model.solve(Y, W, s, start=(np.array(k0, float), np.array(z0, float), states),
                                 max_iter=max_iter) for states in alternatives]
     losses = [cross_prediction_loss(f, halves) for f in fits]
-    errors = [float(np.sum(loss)) for loss in losses]
-    best = int(np.argmin(errors))
+    tied, chosen = choose_start(losses, [f.wsse for f in fits])
+    return fits[chosen], {"errors": [float(np.sum(loss)) for loss in losses], "tied": tied, "chosen": chosen}
+
+
+def choose_start(losses: list, wsse: list) -> tuple[list[int], int]:
+    """(the starts still in the running, the chosen one) from each start's per-frame cross-prediction loss
+    (T,) and its in-sample weighted SSE: every start whose loss is not significantly above the smallest
+    total's (:func:`predicts_worse`) is in the running, and of those the lowest ``wsse`` is chosen."""
+    best = int(np.argmin([np.sum(loss) for loss in losses]))
     tied = [i for i, loss in enumerate(losses) if i == best or not predicts_worse(loss, losses[best])]
-    chosen = min(tied, key=lambda i: fits[i].wsse)
-    return fits[chosen], {"errors": errors, "tied": tied, "chosen": chosen}
+    return tied, min(tied, key=lambda i: wsse[i])
 
 
 def predicts_worse(loss: np.ndarray, loss_best: np.ndarray) -> bool:
