@@ -24,9 +24,9 @@ from pathlib import Path
 
 import rce_gtsam
 from rce_gtsam.presets import PAPER
-from rce_gtsam.presmooth import moving_average
-from rce_gtsam.smooth import smooth_tracks
-from rce_gtsam.smooth_reference import paper_system, solve_direct
+from rce_gtsam.smoothing.presmooth import moving_average
+from rce_gtsam.smoothing.smoother import smooth_tracks
+from rce_gtsam.smoothing.reference import paper_system, solve_direct
 
 REPO = Path(__file__).resolve().parents[1]
 

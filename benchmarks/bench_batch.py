@@ -4,7 +4,7 @@ Usage: python benchmarks/bench_batch.py [--recordings 8] [--frames 600] [--nodes
                                         [--effects offset,second_mode,nonlinear] [--figures] [--workers 1,2]
                                         [--repeats 2]
 
-Makes N simulated track recordings (rce_gtsam.simulate, seeds 0..N-1) and a manifest, then times, in
+Makes N simulated track recordings (rce_gtsam.sim.simulate, seeds 0..N-1) and a manifest, then times, in
 this process and run:
 
 * one by one: the same per-recording work (analyze -> diagnose -> write the folder, the function each
@@ -39,7 +39,7 @@ import pandas as pd
 
 
 def make_inputs(root: Path, n: int, frames: int, nodes: int) -> Path:
-    from rce_gtsam.simulate import SimulationConfig, simulate
+    from rce_gtsam.sim.simulate import SimulationConfig, simulate
     rows = []
     for i in range(n):
         rid = f"r{i:02d}"

@@ -71,7 +71,7 @@ def log_se(ci) -> np.ndarray:
 def surrogate_null(full, n_boot: int, n: int, seed: int = 0) -> dict:
     """The thirds check on ``n`` model-exact surrogates of the analysed recording ``full`` (an AnalysisResult
     with intervals; see the module docstring), and on its own data at the same (Y-level) computation."""
-    from rce_gtsam.compliance import bootstrap_kappa, phase_randomised_residuals
+    from rce_gtsam.model.compliance import bootstrap_kappa, phase_randomised_residuals
     from rce_gtsam.model import ResponseModel
     from rce_gtsam.model.time_split import block_z
 
@@ -128,7 +128,7 @@ def main() -> int:
                   f"their 95 % intervals cover the true kappa for {100 * n['coverage']:.1f} % of segments",
                   flush=True)
     if a.simulate:
-        from rce_gtsam.simulate import SimulationConfig, simulate
+        from rce_gtsam.sim.simulate import SimulationConfig, simulate
         allz = []
         for sd in range(a.simulate):
             sim = simulate(SimulationConfig(seed=sd, n_frames=900))

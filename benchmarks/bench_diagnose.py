@@ -1,4 +1,4 @@
-"""Detection benchmark of ``rce_gtsam.diagnose`` on the FULL pipeline: for each hidden effect x seeds (+ effect-
+"""Detection benchmark of ``rce_gtsam.diagnosis.diagnose`` on the FULL pipeline: for each hidden effect x seeds (+ effect-
 free seeds), is the verdict right, how much does the effect lower held-out RMSE, does kappa error fall?
 
 Per case: ``simulate(SimulationConfig(effects=(name,), seed=s, n_frames=900))`` -> ``analyze(tracks, graph,
@@ -32,7 +32,7 @@ excitation and kappa without estimating them, and fires on effect-free data too:
 Usage: python benchmarks/bench_diagnose.py [--seeds 10] [--frames 900] [--effects none,delay,...]
        [--strength-mult 0.5,1,1.5,2,3]  (hidden effect strengths, x the simulator's defaults)
        [--noise-free]  (noise-free tracks through the same pipeline)
-       [--held-out]  (each effect in its held-out form, rce_gtsam.simulate.EFFECT_FORMS, under HELD_OUT_NOISE:
+       [--held-out]  (each effect in its held-out form, rce_gtsam.sim.simulate.EFFECT_FORMS, under HELD_OUT_NOISE:
                       physics and noise the diagnosis was not written for, standing in for another simulator)
        [--matrices]  (fast: simulator equations + noise instead of the pipeline, for development)
        [--cache DIR]  (keep each case's pipeline output there: a re-run after a change to the diagnosis only
@@ -62,21 +62,21 @@ HELD_OUT_NOISE = dict(sigma_across_px=0.25, along_ratio=1.5, tip_factor=2.0, dri
 
 
 def held_out_form(effect: str) -> str:
-    """The effect's first held-out form in :data:`rce_gtsam.simulate.EFFECT_FORMS` (its second entry)."""
-    from rce_gtsam.simulate import EFFECT_FORMS
+    """The effect's first held-out form in :data:`rce_gtsam.sim.simulate.EFFECT_FORMS` (its second entry)."""
+    from rce_gtsam.sim.simulate import EFFECT_FORMS
     return list(EFFECT_FORMS[effect])[1]
 
 
 def case(effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False):
     """(Y, weights, root_distance, kappa_true, truth (E, T) or None, pipeline seconds, edge labels)."""
-    from rce_gtsam.simulate import EFFECT_DEFAULTS
+    from rce_gtsam.sim.simulate import EFFECT_DEFAULTS
     strength = None if effect is None or mult == 1.0 else EFFECT_DEFAULTS[effect] * mult
     if matrices:
         from _effect_data import synth
         Y, s, k, _, y = synth(effect, seed=seed, E=18, T=frames, strength=strength)
         return Y, None, s, k, y, 0.0, None
     from rce_gtsam.pipeline import analyze
-    from rce_gtsam.simulate import NoiseConfig, SimulationConfig, simulate
+    from rce_gtsam.sim.simulate import NoiseConfig, SimulationConfig, simulate
     kw = {} if strength is None else {"effect_strength": {effect: strength}}
     if noise_free:
         kw["noise"] = NoiseConfig(enabled=False)
@@ -198,10 +198,10 @@ def main() -> int:
     ap.add_argument("--matrices", action="store_true")
     ap.add_argument("--noise-free", action="store_true", help="noise-free tracks (the pipeline still runs)")
     ap.add_argument("--held-out", action="store_true",
-                    help="each effect in its held-out form (rce_gtsam.simulate.EFFECT_FORMS) under other tracker "
+                    help="each effect in its held-out form (rce_gtsam.sim.simulate.EFFECT_FORMS) under other tracker "
                          "noise (HELD_OUT_NOISE): data the diagnosis was not written for")
     ap.add_argument("--strength-mult", default="1",
-                    help="comma-separated multipliers of rce_gtsam.simulate.EFFECT_DEFAULTS (default 1), "
+                    help="comma-separated multipliers of rce_gtsam.sim.simulate.EFFECT_DEFAULTS (default 1), "
                          "e.g. 0.5,1,1.5,2,3 for a detection-vs-strength table")
     ap.add_argument("--effects", default="none,delay,dynamics,second_mode,offset,nonlinear")
     ap.add_argument("--folds", type=int, default=None,
@@ -209,7 +209,7 @@ def main() -> int:
     a = ap.parse_args()
     from scipy import stats
 
-    from rce_gtsam.diagnose import diagnose
+    from rce_gtsam.diagnosis.diagnose import diagnose
     from rce_gtsam.diagnosis.heldout import paired_t
     from rce_gtsam.diagnosis.oracle import oracle_test
     from rce_gtsam.diagnosis.verdict import choose_verdict, maxt_verdict
@@ -219,7 +219,7 @@ def main() -> int:
           f"{a.seeds} seeds from {a.first_seed}, {a.frames} frames, effect strength {a.strength_mult} x default; "
           f"{'HELD-OUT forms and noise; ' if a.held_out else ''}"
           "oracle = the hidden effect's candidate with its true shared parameters, through the same folds", flush=True)
-    # the core model's config: the default preset's, as `rce diagnose` runs it (rce_gtsam.diagnosis_io);
+    # the core model's config: the default preset's, as `rce diagnose` runs it (rce_gtsam.diagnosis.io);
     # the matrices mode keeps diagnose's own default
     config = None if a.matrices else get_preset("default").compliance
     rows, table = [], []

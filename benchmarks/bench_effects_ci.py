@@ -1,6 +1,6 @@
 """Coverage of kappa_true by the 95 % intervals of the rank-1 model and of the extended model (``--effects``).
 
-For every seed the simulator (``rce_gtsam.simulate``, 20 nodes, tracker-like noise with drift) makes a branch
+For every seed the simulator (``rce_gtsam.sim.simulate``, 20 nodes, tracker-like noise with drift) makes a branch
 with known kappa, once effect-free and once with a hidden ``offset`` (rest-pose offset and creep). Each is
 analysed with the default preset as ``rce analyze`` does, plain and with ``--effects offset``. Printed per
 model and data set: the share of edges whose interval covers kappa_true (both on the geometric-mean-1
@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 import rce_gtsam
-from rce_gtsam.simulate import SimulationConfig, simulate
+from rce_gtsam.sim.simulate import SimulationConfig, simulate
 
 
 def scores(result, truth: dict) -> dict:

@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/bench_long.py [--frames 1000,10000,50000] [--nodes 20] [--preset default]
 
-Each recording is simulated here (``rce_gtsam.simulate``, seed 0, tracker-like noise with gaps and jumps),
+Each recording is simulated here (``rce_gtsam.sim.simulate``, seed 0, tracker-like noise with gaps and jumps),
 written as tracks.csv + graph.json into a temporary folder, and analysed by the real CLI as a
 subprocess: ``rce analyze TRACKS GRAPH --out DIR --preset PRESET --bootstrap 250 --no-figures``. For each
 length it prints the wall time of that subprocess, its peak resident memory (``ru_maxrss`` of exactly
@@ -24,7 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from rce_gtsam.simulate import SimulationConfig, simulate
+from rce_gtsam.sim.simulate import SimulationConfig, simulate
 
 GOAL_TIME_RATIO = 30.0
 GOAL_RSS_GB = 1.5

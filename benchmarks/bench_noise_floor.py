@@ -24,7 +24,7 @@ def one(seed: int, frames: int) -> dict:
 
     from rce_gtsam.diagnosis.noise_floor import noise_floor_of
     from rce_gtsam.pipeline import analyze
-    from rce_gtsam.simulate import NoiseConfig, SimulationConfig, simulate
+    from rce_gtsam.sim.simulate import NoiseConfig, SimulationConfig, simulate
 
     sig = (0.5, 1.0, 2.0)[seed % 3]
     drift = (1.0, 2.0, 0.5, 1.0)[seed % 4]

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 import rce_gtsam
-from rce_gtsam.diagnosis_io import diagnose_result
+from rce_gtsam.diagnosis.io import diagnose_result
 
 
 def main() -> None:

@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/bench_presets.py [--seeds 20] [--frames 900] [--boot 100]
 
-For each seed: simulate an effect-free branch (rce_gtsam.simulate), analyse it with each variant, and
+For each seed: simulate an effect-free branch (rce_gtsam.sim.simulate), analyse it with each variant, and
 measure the kappa error against the truth as log-RMSE = sqrt(mean_e (log kappa_e - log kappa_true_e)^2)
 (both sides normalised to geometric mean 1), plus bootstrap 95% CI coverage of kappa_true. Variants
 start from the paper preset and switch on one default choice at a time, then the full default.
@@ -18,7 +18,7 @@ import numpy as np
 
 import rce_gtsam
 from rce_gtsam.presets import DEFAULT, PAPER
-from rce_gtsam.simulate import SimulationConfig, simulate
+from rce_gtsam.sim.simulate import SimulationConfig, simulate
 
 
 def variants():

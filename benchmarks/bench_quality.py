@@ -21,7 +21,7 @@ import numpy as np
 
 from rce_gtsam.pipeline import analyze
 from rce_gtsam.quality import assess_quality
-from rce_gtsam.simulate import NoiseConfig, SimulationConfig, simulate
+from rce_gtsam.sim.simulate import NoiseConfig, SimulationConfig, simulate
 
 
 def sim_share(seeds: int, frames: int, clean: bool) -> None:

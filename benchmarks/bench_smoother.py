@@ -32,10 +32,10 @@ import numpy as np
 
 import rce_gtsam
 from rce_gtsam.presets import DEFAULT, PAPER
-from rce_gtsam.presmooth import moving_average
+from rce_gtsam.smoothing.presmooth import moving_average
 from rce_gtsam.factors import frame_key
-from rce_gtsam.smooth import build_problem, smooth_tracks
-from rce_gtsam.smooth_reference import paper_system, solve_direct, solve_lsqr
+from rce_gtsam.smoothing.smoother import build_problem, smooth_tracks
+from rce_gtsam.smoothing.reference import paper_system, solve_direct, solve_lsqr
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -2,7 +2,7 @@
 
 Usage: python benchmarks/bench_snap.py [--seeds 4] [--nodes 12]
 
-For each seed and layout (chain, tree): simulate a branch, render its first frame (rce_gtsam.render), and
+For each seed and layout (chain, tree): simulate a branch, render its first frame (rce_gtsam.sim.render), and
 click beside every true node at 2 and 4 px on either side, perpendicular to its segment (a sloppy click
 beside the stem). Each click goes through RidgeSnapper (the server's snapping). Printed, for the raw clicks
 (the baseline, same clicks) and for the snapped ones: distance to the true node (px), distance to the true
@@ -17,8 +17,8 @@ import argparse
 import numpy as np
 
 from rce_gtsam.annotate_web.snap import RidgeSnapper
-from rce_gtsam.render import iter_frames
-from rce_gtsam.simulate import SimulationConfig, simulate
+from rce_gtsam.sim.render import iter_frames
+from rce_gtsam.sim.simulate import SimulationConfig, simulate
 
 
 def line_distance(p: np.ndarray, xy: np.ndarray, edges, row: dict) -> float:

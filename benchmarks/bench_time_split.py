@@ -16,7 +16,7 @@ import numpy as np
 
 from rce_gtsam.pipeline import analyze
 from rce_gtsam.presets import get_preset
-from rce_gtsam.simulate import SimulationConfig, simulate
+from rce_gtsam.sim.simulate import SimulationConfig, simulate
 
 
 def main() -> int:

@@ -45,8 +45,8 @@ from scipy.stats import spearmanr
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests"))
 
-from rce_gtsam.render import render_video  # noqa: E402
-from rce_gtsam.simulate import SimulationConfig, simulate  # noqa: E402
+from rce_gtsam.sim.render import render_video  # noqa: E402
+from rce_gtsam.sim.simulate import SimulationConfig, simulate  # noqa: E402
 from rce_gtsam.track import ArraySource, LKConfig, LKTracker, open_video  # noqa: E402
 
 

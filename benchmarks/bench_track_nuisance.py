@@ -32,9 +32,9 @@ import cv2
 import numpy as np
 from scipy.stats import spearmanr
 
-from rce_gtsam.nuisance import REALISM, RenderConfig, image_xy
-from rce_gtsam.render import render_video
-from rce_gtsam.simulate import SimulationConfig, simulate
+from rce_gtsam.sim.nuisance import REALISM, RenderConfig, image_xy
+from rce_gtsam.sim.render import render_video
+from rce_gtsam.sim.simulate import SimulationConfig, simulate
 from rce_gtsam.track import LKConfig, LKTracker, open_video
 
 _OUT = REALISM["outdoor"]

@@ -20,7 +20,7 @@ import sys
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parent))
 import numpy as np
 from scipy import signal
-import rce_gtsam.diagnose as D
+import rce_gtsam.diagnosis.diagnose as D
 from bench_diagnose import case
 
 orig_solve = D.ResponseModel.solve

@@ -10,7 +10,7 @@ factors), so GTSAM eliminates ~F variables of dimension 2N with dense blocks ins
 ones and ~4 N F factors. On plant 1 (20 nodes x 1104 frames) that is 4.4k factors instead of 87k and
 Levenberg-Marquardt is measured ~2x faster, the graph build ~2x faster (benchmarks/bench_analyze.py).
 Sorted key order is frame order, and a frame's 2N scalars are node-major (x, y), which is the layout
-the marginal computation (:mod:`rce_gtsam.marginals`) relies on.
+the marginal computation (:mod:`rce_gtsam.smoothing.marginals`) relies on.
 
 Linear factors live in C++ as ``LinearContainerFactor(JacobianFactor)`` linearised at zero (exact
 for a residual linear in the states); genuinely non-linear ones (rest length, robust loss) are one

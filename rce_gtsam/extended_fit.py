@@ -3,23 +3,23 @@
 :func:`fit_extended` fits :class:`~rce_gtsam.model.ResponseModel` (with the preset's whole
 :class:`~rce_gtsam.presets.ComplianceConfig`: the same shrinkage of log kappa as the rank-1 fit) plus the
 named effects (:mod:`rce_gtsam.effects`), starting from the rank-1 fit, and returns an :class:`ExtendedFit`,
-which offers the same interface as :class:`~rce_gtsam.compliance.Rank1Fit` (kappa magnitude, direction, z,
+which offers the same interface as :class:`~rce_gtsam.model.compliance.Rank1Fit` (kappa magnitude, direction, z,
 predict(), iterations, converged) so every table, figure and recording of an analysis works unchanged.
 
 :func:`bootstrap_extended` gives kappa's CIs with the preset's bootstrap, refitting the extended model per
 resample (warm-started from the full-data fit):
 
 * ``"phase"`` (default preset): the fitted extended model plus phase-randomised residuals
-  (:func:`rce_gtsam.compliance.phase_randomised_residuals`, the same surrogates as the rank-1 CIs); the
+  (:func:`rce_gtsam.model.compliance.phase_randomised_residuals`, the same surrogates as the rank-1 CIs); the
   log-kappa deviations are widened for the few independent noise samples (``small_sample_factor`` of
   ``excitation_dof``) and for shrunk edges, exactly as for the rank-1 model;
-* ``"block"`` (paper preset): the moving blocks of :func:`rce_gtsam.compliance.block_bootstrap_indices`
+* ``"block"`` (paper preset): the moving blocks of :func:`rce_gtsam.model.compliance.block_bootstrap_indices`
   (same seed, block length and count) applied as *frame multiplicities* (weight and sample size of frame t
   = how many times the resample drew it) instead of concatenated columns: the effects depend on the time
   axis (a delay or a resonance acts on neighbouring frames, an offset's creep on the time since the start),
   which concatenation would scramble at every block join.
 
-Either way the interval is placed about the point estimate (:func:`rce_gtsam.compliance.interval_about`:
+Either way the interval is placed about the point estimate (:func:`rce_gtsam.model.compliance.interval_about`:
 deviations from the resamples' median), so it contains it. The shared nonlinear parameters of the operator
 effects (delay's lag, dynamics' frequencies and damping: <= 3 numbers) are refitted only when
 ``refit_shared`` is True; by default they are kept at the full-data fit because their search costs seconds
@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .compliance import (BootstrapCI, block_bootstrap_indices, excitation_dof, interval_about,
+from .model.compliance import (BootstrapCI, block_bootstrap_indices, excitation_dof, interval_about,
                          phase_randomised_residuals, posterior_widening, small_sample_factor)
 from .model import ResponseModel, validate_inputs
 from .model.row_sets import node_disjoint_split, shared_node_matrix
@@ -42,7 +42,7 @@ from .presets import ComplianceConfig
 
 @dataclass(frozen=True, eq=False)
 class ExtendedFit:
-    """A fitted extended model seen through the :class:`~rce_gtsam.compliance.Rank1Fit` interface.
+    """A fitted extended model seen through the :class:`~rce_gtsam.model.compliance.Rank1Fit` interface.
 
     kappa: (E,) |kappa_e| (geometric mean 1); direction: (E,) sign of the gain; z: (T,) excitation in
     degrees (before the operator effects); model_fit: the :class:`~rce_gtsam.model.ModelFit`;
@@ -116,7 +116,7 @@ def fit_extended(Y, names, config: ComplianceConfig, weights=None, root_distance
     Where an effect proposes several starts (:meth:`~rce_gtsam.effects.Effect.alternative_starts`) the fit that
     predicts one node-disjoint row set best from the other's excitation is kept, as in the diagnosis
     (:func:`rce_gtsam.model.starts.solve_from_starts`); ``edge_nodes`` (per row, the tracked node ids its bend angle
-    is computed from, as :func:`rce_gtsam.diagnose.diagnose` takes them) say which rows share a tracked node
+    is computed from, as :func:`rce_gtsam.diagnosis.diagnose.diagnose` takes them) say which rows share a tracked node
     (default: the rows form a chain in root-distance order)."""
     model = build_model(names, config)
     base = model.without_effects().fit(Y, weights=weights, root_distance=root_distance)

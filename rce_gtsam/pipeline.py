@@ -14,16 +14,16 @@ from pathlib import Path
 
 import numpy as np
 
-from .bending import BendingResult, compute_bending
-from .compliance import BootstrapCI, Rank1Fit, bootstrap_kappa, fit_rank1, frame_precisions
+from .bending.angles import BendingResult, compute_bending
+from .model.compliance import BootstrapCI, Rank1Fit, bootstrap_kappa, fit_rank1, frame_precisions
 from .extended_fit import ExtendedBootstrapInfo, ExtendedFit, bootstrap_extended, fit_extended
-from .geometry import Geometry, compute_geometry, edge_lengths
+from .bending.geometry import Geometry, compute_geometry, edge_lengths
 from .graph import BranchGraph, load_graph
 from .model import ResponseModel
 from .model.time_split import TimeSplitCheck, time_split_check, widen
-from .marginals import single_threaded_blas
+from .smoothing.marginals import single_threaded_blas
 from .presets import Preset, get_preset
-from .smooth import SmoothedTracks, smooth_tracks
+from .smoothing.smoother import SmoothedTracks, smooth_tracks
 from .tracks import Tracks, load_tracks
 
 
@@ -81,7 +81,7 @@ class Response:
         """(T, E, E) per-frame precision: the inverse of the covariance of the entries observed at frame t
         (zero rows and columns elsewhere), scaled like :attr:`weights` (without correlations its diagonal
         would equal the weights), or None without covariances. See
-        :func:`~rce_gtsam.compliance.frame_precisions`.
+        :func:`~rce_gtsam.model.compliance.frame_precisions`.
         """
         if self.covariance is None or self.variance is None:
             return None
@@ -250,7 +250,7 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     (``{"graph": path, "tracks": path}``, recorded in report.json; paths passed directly are recorded).
     """
     step = progress or (lambda _name: None)
-    from .diagnosis_io import parse_effect_names
+    from .diagnosis.io import parse_effect_names
     effects = parse_effect_names(effects, source="effects") or ()
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
@@ -306,7 +306,7 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     # and its threads busy-waiting on a shared machine made them 25x slower (50,000 frames)
     with single_threaded_blas():
         if effects:
-            # the node sets the diagnosis splits its rows by (rce_gtsam.diagnosis_io), so the extended fit keeps
+            # the node sets the diagnosis splits its rows by (rce_gtsam.diagnosis.io), so the extended fit keeps
             # the start the diagnosis' candidate keeps
             fit = fit_extended(response.Y, effects, preset.compliance, weights, response.root_distance,
                                edge_nodes=bending.nodes_of(response.bend_rows))

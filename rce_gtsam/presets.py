@@ -50,7 +50,7 @@ class SmootherConfig:
         ``robust_k`` in whitened units (sigmas).
     marginals: compute marginal covariances (per node-frame and joint per frame).
     window_frames: recordings longer than this are solved in overlapping windows of about this many
-        frames (:mod:`rce_gtsam.windowing`), so memory stays bounded (GTSAM's graph and Bayes tree take
+        frames (:mod:`rce_gtsam.smoothing.windowing`), so memory stays bounded (GTSAM's graph and Bayes tree take
         ~0.25 MB per frame at 20 nodes, growing as N^2); 0 = always one window (the whole recording).
     window_margin: observed frames of every node solved on each side of a window's core and then
         discarded (burn-in; at most ``window_frames`` frames). The estimate at a frame forgets a
@@ -118,17 +118,17 @@ class ComplianceConfig:
     n_iter, tol: ALS iteration cap and stop tolerance on max |log kappa change|.
     weighted: weight each entry by 1 / (propagated angle variance) instead of equally.
     correlated: use the whole propagated covariance between the bends of a frame
-        (generalised least squares, :func:`~rce_gtsam.compliance.fit_rank1_gls_batch`): neighbouring
+        (generalised least squares, :func:`~rce_gtsam.model.compliance.fit_rank1_gls_batch`): neighbouring
         bends share a node, so one node's tracking error turns them in opposite directions and their
         angle errors are strongly negatively correlated. Replaces ``weighted``'s variances (its diagonal).
         Needs the signed response.
     bootstrap: how resampled data sets are made. ``"block"`` (paper): moving blocks of ``block_length``
         frames of the data. ``"phase"``: the fitted model kappa_hat z_hat plus phase-randomised residuals
         (multivariate Fourier surrogates: every residual row keeps its spectrum, every pair of rows its
-        cross-spectrum; see :func:`~rce_gtsam.compliance.phase_randomised_residuals`). Slow tracker
+        cross-spectrum; see :func:`~rce_gtsam.model.compliance.phase_randomised_residuals`). Slow tracker
         drift (correlated over seconds) enters kappa's error but is longer than any usable block. The
         intervals are then widened for the few independent samples the error rests on
-        (:func:`~rce_gtsam.compliance.small_sample_factor`). Needs the signed response. The effects
+        (:func:`~rce_gtsam.model.compliance.small_sample_factor`). Needs the signed response. The effects
         fit (``rce analyze --effects``) always resamples blocks.
     n_boot, block_length: bootstrap resamples and block length (frames); seed: RNG seed.
     time_split_blocks: K > 1 widens the intervals by how much kappa varies between K disjoint blocks of

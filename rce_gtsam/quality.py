@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bending import angle_gradient
+from .bending.angles import angle_gradient
 
 #: A node unseen in more than this share of the clip's frames is "lost" (tracking_lost; ``rce track`` warns).
 LOST_SHARE = 0.5
@@ -194,7 +194,7 @@ def assess_quality(result) -> dict[tuple[int, int], SegmentQuality]:
 
 
 def _turning(xy: np.ndarray, rows) -> np.ndarray:
-    from .bending import bend_angles
+    from .bending.angles import bend_angles
     return bend_angles(xy[rows[0]], xy[rows[1]], xy[rows[2]], True)
 
 

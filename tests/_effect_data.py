@@ -3,7 +3,7 @@
 import numpy as np
 from scipy import signal
 
-from rce_gtsam import simulate as sim
+from rce_gtsam.sim import simulate as sim
 
 
 def synth(effect=None, seed=0, E=12, T=600, noise=0.3, strength=None):

@@ -15,7 +15,7 @@ import pytest
 
 from rce_gtsam import batch
 from rce_gtsam.cli import main
-from rce_gtsam.simulate import SimulationConfig, simulate
+from rce_gtsam.sim.simulate import SimulationConfig, simulate
 
 OPTS = ["--effects", "offset", "--bootstrap", "20", "--seed", "3"]
 TRACK_IDS = ["p1", "p2", "p3", "p4", "p5"]

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rce_gtsam.bending import angle_gradient, bend_angles, compute_bending, mad_inliers
+from rce_gtsam.bending.angles import angle_gradient, bend_angles, compute_bending, mad_inliers
 from rce_gtsam.graph import BranchGraph
 from rce_gtsam.presets import BendingConfig
 

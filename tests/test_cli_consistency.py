@@ -44,12 +44,12 @@ def test_help_and_argument_errors_answer_in_half_a_second():
 
 def test_simulate_realism_choices_match_the_presets():
     from rce_gtsam.cli import build_parser
-    from rce_gtsam.nuisance import REALISM
+    from rce_gtsam.sim.nuisance import REALISM
     sub = next(a for a in build_parser()._actions if a.dest == "command").choices["simulate"]
     realism = next(a for a in sub._actions if a.dest == "realism")
     assert set(realism.choices) == set(REALISM)
     assert "nonlinear (default" in sub.format_help()  # the lazily built epilog
-    from rce_gtsam.simulate import EFFECT_FORMS
+    from rce_gtsam.sim.simulate import EFFECT_FORMS
     helptext = " ".join(sub.format_help().split())
     assert "Forms (--form NAME=FORM)" in helptext
     assert all(f"{k}: {next(iter(forms))} (" in helptext and all(f"{f} (" in helptext for f in forms)
@@ -57,7 +57,7 @@ def test_simulate_realism_choices_match_the_presets():
 
 
 def test_cli_wording_names_the_command():
-    from rce_gtsam.commands.wording import cli_wording
+    from rce_gtsam.cli.wording import cli_wording
     from rce_gtsam.effects import CANDIDATES
     for name, factory in CANDIDATES.items():  # the two phrasings the diagnosis' explanations use
         for text in (f"so... Fit the model with {factory.__name__}() (lag grows)", f"x. Fit with {factory.__name__}();"):

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rce_gtsam.compliance import (block_bootstrap_indices, bootstrap_kappa, fit_rank1, fit_rank1_batch)
+from rce_gtsam.model.compliance import (block_bootstrap_indices, bootstrap_kappa, fit_rank1, fit_rank1_batch)
 from rce_gtsam.presets import ComplianceConfig
 
 PAPER = ComplianceConfig()
@@ -125,7 +125,7 @@ def test_nanmedian_axis1_equals_numpy():
     """The bootstrap's starting excitation: the same numbers as np.nanmedian (NaN, inf, ties, empty columns)."""
     import warnings
 
-    from rce_gtsam.compliance import nanmedian_axis1
+    from rce_gtsam.model.compliance import nanmedian_axis1
     rng = np.random.default_rng(0)
     for trial in range(60):
         X = rng.standard_normal((int(rng.integers(1, 5)), int(rng.integers(1, 8)), int(rng.integers(1, 30))))

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from rce_gtsam.diagnose import diagnose, edge_halves
+from rce_gtsam.diagnosis.diagnose import diagnose, edge_halves
 from rce_gtsam.diagnosis.heldout import fold_blocks
 
 from _effect_data import synth
@@ -52,7 +52,7 @@ def test_operator_effects_detected_with_large_heldout_gain(effect):
 
 def test_node_disjoint_split_on_a_chain():
     """Held-out edge sets share no tracked node (bends up to two joints apart share one)."""
-    from rce_gtsam.diagnose import edge_nodes_from_labels, node_disjoint_split, shared_node_matrix
+    from rce_gtsam.diagnosis.diagnose import edge_nodes_from_labels, node_disjoint_split, shared_node_matrix
     labels = [f"{i}->{i + 1}" for i in range(1, 19)]  # chain 0-1-...-19: bends at joints 1..18
     nodes = edge_nodes_from_labels(labels)
     assert nodes[3] == frozenset({"3", "4", "5"})
@@ -71,7 +71,7 @@ def test_node_disjoint_split_on_a_chain():
 
 def test_effective_sample_of_ar1_residuals():
     from types import SimpleNamespace
-    from rce_gtsam.diagnose import effective_sample
+    from rce_gtsam.diagnosis.diagnose import effective_sample
     rng = np.random.default_rng(0)
     E, T, rho = 6, 4000, 0.8
     R = np.zeros((E, T))
@@ -145,7 +145,7 @@ def test_no_false_second_mode_on_effect_free_pipeline_data():
     carry anti-correlated noise, which a free second mode used to 'predict' across interleaved edge halves
     (3/10 false verdicts at 900 frames). With node-disjoint held-out sets no second mode is supported."""
     from rce_gtsam.pipeline import analyze
-    from rce_gtsam.simulate import SimulationConfig, simulate
+    from rce_gtsam.sim.simulate import SimulationConfig, simulate
     for seed in (0, 1):
         sim = simulate(SimulationConfig(effects=(), seed=seed, n_frames=600))
         r = analyze(sim.tracks, sim.graph, preset="default", n_boot=0).response
@@ -211,7 +211,7 @@ def test_the_worst_edges_and_frames_of_a_recording_with_a_lost_frame_warn_nothin
     import types
     import warnings
 
-    from rce_gtsam.diagnose import worst_edges_and_frames
+    from rce_gtsam.diagnosis.diagnose import worst_edges_and_frames
     R = np.random.default_rng(0).standard_normal((4, 60)) * np.array([[1.0], [3.0], [1.0], [1.0]])
     R[:, 10] = np.nan
     R[2] = np.nan

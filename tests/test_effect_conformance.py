@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from rce_gtsam import effects
-from rce_gtsam.diagnose import diagnose, residual_statistics
+from rce_gtsam.diagnosis.diagnose import diagnose, residual_statistics
 from rce_gtsam.diagnosis.statistics import ResidualContext
 from rce_gtsam.effects.base import Effect, Parameter
 from rce_gtsam.model import ResponseModel
@@ -40,7 +40,7 @@ def test_effect_describes_itself(name):
 
 @pytest.mark.parametrize("name", BUILTIN)
 def test_effect_fits_owns_evidence_and_explains(name):
-    from rce_gtsam.simulate import EFFECT_DEFAULTS
+    from rce_gtsam.sim.simulate import EFFECT_DEFAULTS
     Y, s, k, z, y = synth(name, seed=3, E=10, T=400, noise=0.05, strength=3 * EFFECT_DEFAULTS[name])
     base = ResponseModel().fit(Y, root_distance=s)
     ext = (ResponseModel() + effects.make(name)).fit(Y, root_distance=s)
@@ -61,7 +61,7 @@ def test_alternative_starts_are_valid_states_the_model_fits_from(name):
     bounds, and the model fits from it; solve_from_starts then keeps, of the starts whose cross-prediction error
     is not significantly above the smallest, the one with the lowest in-sample error (and an effect without
     alternatives gets exactly its plain fit)."""
-    from rce_gtsam.diagnose import node_disjoint_split, shared_node_matrix
+    from rce_gtsam.diagnosis.diagnose import node_disjoint_split, shared_node_matrix
     from rce_gtsam.model import validate_inputs
     from rce_gtsam.model.starts import cross_prediction_error, solve_from_starts
     Y, s, *_ = synth(name, seed=2, E=12, T=300, noise=0.3)
@@ -90,7 +90,7 @@ def test_alternative_starts_are_valid_states_the_model_fits_from(name):
 def test_an_effect_that_can_be_undone_undoes_its_own_operator(name):
     """Effect.align (optional; the encompassing test needs it of the simpler candidate): where it is not None,
     it moves the effect's own fitted operator's output back onto the excitation's clock."""
-    from rce_gtsam.simulate import EFFECT_DEFAULTS
+    from rce_gtsam.sim.simulate import EFFECT_DEFAULTS
     Y, s, k, z, y = synth(name, seed=3, E=10, T=400, noise=0.05, strength=3 * EFFECT_DEFAULTS[name])
     ext = (ResponseModel() + effects.make(name)).fit(Y, root_distance=s)
     eff, state = ext.model.effects[0], ext.states[0]
@@ -107,7 +107,7 @@ def test_an_effect_that_can_be_undone_undoes_its_own_operator(name):
 @pytest.mark.slow
 @pytest.mark.parametrize("name", BUILTIN)
 def test_diagnosis_names_each_effect_on_clean_data(name):
-    from rce_gtsam.simulate import EFFECT_DEFAULTS
+    from rce_gtsam.sim.simulate import EFFECT_DEFAULTS
     # 18 segments x 600 frames, 8 folds: shorter records with 4 folds leave too little training data around a
     # test block for per-edge terms (an offset's trend extrapolated over 100+ frames)
     Y, s, k, z, y = synth(name, seed=5, E=18, T=600, noise=0.03, strength=3 * EFFECT_DEFAULTS[name])
@@ -169,7 +169,7 @@ def test_a_new_effect_is_one_class_and_a_registry_line():
     try:
         assert "step_test" in effects.names()
         assert "step_test" in effects.CANDIDATES
-        from rce_gtsam.diagnosis_io import parse_effect_names
+        from rce_gtsam.diagnosis.io import parse_effect_names
         assert parse_effect_names("step_test") == ("step_test",)
         with pytest.raises(ValueError):
             effects.register(type("Other", (Step,), {}))  # same name, another class

@@ -3,7 +3,7 @@ import pytest
 
 from rce_gtsam import effects
 from rce_gtsam.model import FitView, ResponseModel
-from rce_gtsam.simulate import delayed, oscillator_response
+from rce_gtsam.sim.simulate import delayed, oscillator_response
 
 
 def _view(model, E=4, T=200):
@@ -136,7 +136,7 @@ def test_second_mode_is_found_against_correlated_node_noise():
     singular pair is that noise pattern. The noise-whitened fit must find the simulator's hidden second
     excitation instead (plain SVD + ALS: correlation with the true w 0.22 on this seed)."""
     from rce_gtsam.pipeline import analyze
-    from rce_gtsam.simulate import SimulationConfig, simulate
+    from rce_gtsam.sim.simulate import SimulationConfig, simulate
 
     sim = simulate(SimulationConfig(effects=("second_mode",), seed=0, n_frames=900))
     r = analyze(sim.tracks, sim.graph, preset="default", n_boot=0).response
@@ -156,7 +156,7 @@ def test_nonlinear_fit_recovers_the_saturation_of_a_simulated_branch(seed):
     joint of seed 6, saturated at the reference pose, kept a small linear gain (4 % of its true kappa; RMSE
     0.0074 deg, c 5 % low) and the diagnosis named a second mode instead of the saturation."""
     from rce_gtsam.pipeline import analyze
-    from rce_gtsam.simulate import NoiseConfig, SimulationConfig, simulate
+    from rce_gtsam.sim.simulate import NoiseConfig, SimulationConfig, simulate
 
     sim = simulate(SimulationConfig(effects=("nonlinear",), seed=seed, n_frames=900, noise=NoiseConfig(enabled=False)))
     res = analyze(sim.tracks, sim.graph, preset="default", n_boot=0)

@@ -8,7 +8,7 @@ import pytest
 from _effect_data import synth
 
 from rce_gtsam import effects
-from rce_gtsam.diagnose import diagnose, node_disjoint_split, shared_node_matrix
+from rce_gtsam.diagnosis.diagnose import diagnose, node_disjoint_split, shared_node_matrix
 from rce_gtsam.diagnosis.verdict import choose_verdict
 from rce_gtsam.diagnosis.encompassing import can_test, encompassing_test, project_out
 from rce_gtsam.model import ResponseModel
@@ -118,7 +118,7 @@ def test_weak_inertia_is_named_as_the_richer_form_of_the_lag_the_delay_test_find
     Before either change the verdict was delay."""
     from rce_gtsam.pipeline import analyze
     from rce_gtsam.presets import get_preset
-    from rce_gtsam.simulate import EFFECT_DEFAULTS, SimulationConfig, simulate
+    from rce_gtsam.sim.simulate import EFFECT_DEFAULTS, SimulationConfig, simulate
     sim = simulate(SimulationConfig(effects=("dynamics",), seed=21, n_frames=900,
                                     effect_strength={"dynamics": 0.75 * EFFECT_DEFAULTS["dynamics"]}))
     r = analyze(sim.tracks, sim.graph, preset="default", n_boot=0).response

@@ -101,7 +101,7 @@ def test_figures_split_between_two_processes(analysis, tmp_path):
     a failure is raised in the caller (and the child is reaped, not left behind)."""
     from pathlib import Path
 
-    from rce_gtsam.commands.figure_worker import draw_analysis_figures, split_by_cost
+    from rce_gtsam.cli.figure_worker import draw_analysis_figures, split_by_cost
     from rce_gtsam.viz.figures import FIGURE_FILES
     from rce_gtsam.viz.overlays import OVERLAY_FILES
     _, result = analysis

@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rce_gtsam.bending import compute_bending
-from rce_gtsam.compliance import bootstrap_kappa, fit_rank1, frame_precisions
+from rce_gtsam.bending.angles import compute_bending
+from rce_gtsam.model.compliance import bootstrap_kappa, fit_rank1, frame_precisions
 from rce_gtsam.graph import BranchGraph
 from rce_gtsam.presets import BendingConfig, ComplianceConfig
 
@@ -137,7 +137,7 @@ def test_bend_covariance_matches_monte_carlo_and_its_diagonal_is_the_variance():
 def test_analyze_with_the_correlated_fit_end_to_end():
     from rce_gtsam.pipeline import analyze
     from rce_gtsam.presets import DEFAULT
-    from rce_gtsam.simulate import SimulationConfig, simulate
+    from rce_gtsam.sim.simulate import SimulationConfig, simulate
 
     sim = simulate(SimulationConfig(seed=2, n_frames=240))
     preset = DEFAULT.with_(compliance={"correlated": True, "n_boot": 30})

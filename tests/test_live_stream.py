@@ -72,7 +72,7 @@ def sink(tmp_path):
 
 @pytest.fixture(scope="module")
 def small_video(tmp_path_factory):
-    from rce_gtsam.simulate import SimulationConfig, simulate
+    from rce_gtsam.sim.simulate import SimulationConfig, simulate
     d = tmp_path_factory.mktemp("live") / "sim"
     simulate(SimulationConfig(n_nodes=8, n_frames=150, seed=2)).write(d, video=True)
     return d

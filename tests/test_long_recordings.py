@@ -9,16 +9,16 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from rce_gtsam import compliance
-from rce_gtsam.compliance import (BOOTSTRAP_CHUNK_ELEMENTS, block_bootstrap_indices, bootstrap_chunk, bootstrap_kappa,
+from rce_gtsam.model import compliance
+from rce_gtsam.model.compliance import (BOOTSTRAP_CHUNK_ELEMENTS, block_bootstrap_indices, bootstrap_chunk, bootstrap_kappa,
                                   fit_rank1, iter_block_bootstrap_indices)
 from rce_gtsam.errors import InputError
 from rce_gtsam.graph import BranchGraph
 from rce_gtsam.presets import get_preset
-from rce_gtsam.simulate import SimulationConfig, simulate
-from rce_gtsam.smooth import smooth_tracks
+from rce_gtsam.sim.simulate import SimulationConfig, simulate
+from rce_gtsam.smoothing.smoother import smooth_tracks
 from rce_gtsam.tracks import Tracks
-from rce_gtsam.windowing import plan_windows
+from rce_gtsam.smoothing.windowing import plan_windows
 
 
 @pytest.fixture(scope="module")

@@ -11,10 +11,10 @@ import pytest
 import scipy.sparse as sp
 
 from rce_gtsam.graph import BranchGraph
-from rce_gtsam.marginals import SingularInformationError, banded_selected_inverse, frame_bandwidth
+from rce_gtsam.smoothing.marginals import SingularInformationError, banded_selected_inverse, frame_bandwidth
 from rce_gtsam.presets import SmootherConfig
 from rce_gtsam.factors import frame_key, node_columns
-from rce_gtsam.smooth import build_problem, smooth_tracks
+from rce_gtsam.smoothing.smoother import build_problem, smooth_tracks
 from rce_gtsam.tracks import Tracks
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from rce_gtsam import effects
-from rce_gtsam.compliance import fit_rank1
+from rce_gtsam.model.compliance import fit_rank1
 from rce_gtsam.errors import InputError
 from rce_gtsam.model import ResponseModel
 from rce_gtsam.presets import ComplianceConfig, get_preset
@@ -33,7 +33,7 @@ def test_model_without_effects_is_the_rank1_fit(preset):
 def test_block_coordinate_loop_converges_to_the_rank1_fit(shrinkage):
     """The effects' loop (forced here by a warm start) takes the rank-1 solver's kappa step: with no effect
     it converges to the same kappa, under either shrinkage of log kappa."""
-    from rce_gtsam.compliance import initial_z
+    from rce_gtsam.model.compliance import initial_z
     from rce_gtsam.model import validate_inputs
 
     Y, s, k, z, _ = synth(None, seed=4)
@@ -97,7 +97,7 @@ def test_bad_input_is_an_input_error():
 
 
 def test_correlated_config_runs_the_generalised_least_squares_fit():
-    from rce_gtsam.compliance import frame_precisions
+    from rce_gtsam.model.compliance import frame_precisions
 
     Y, s, k, z, _ = synth(None, seed=5, T=200)
     E, T = Y.shape

@@ -10,7 +10,7 @@ from rce_gtsam.diagnosis.budget import variance_budget
 from rce_gtsam.diagnosis.noise_floor import (NoiseFloor, across_along_ratio, noise_floor_of,
                                              smoother_white_gain, stretch_bends)
 from rce_gtsam.pipeline import analyze
-from rce_gtsam.simulate import NoiseConfig, SimulationConfig, simulate
+from rce_gtsam.sim.simulate import NoiseConfig, SimulationConfig, simulate
 
 
 def _true_rows(sim, res):
@@ -121,7 +121,7 @@ def test_budget_flags_structure_beyond_noise():
 
 
 def test_diagnosis_json_carries_the_budget(tmp_path):
-    from rce_gtsam.diagnosis_io import diagnose_result, diagnosis_json
+    from rce_gtsam.diagnosis.io import diagnose_result, diagnosis_json
     sim = simulate(SimulationConfig(seed=0, n_frames=400))
     res = analyze(sim.tracks, sim.graph, preset="default", n_boot=0)
     d = diagnose_result(res, effects=("offset",), n_folds=4)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import rce_gtsam
-from rce_gtsam.diagnosis_io import diagnose_result
+from rce_gtsam.diagnosis.io import diagnose_result
 
 pytestmark = pytest.mark.slow  # ~20 s alone: five analyses and four (one-candidate) diagnoses of real plants
 

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rce_gtsam.presmooth import effective_window, moving_average, moving_average_1d
+from rce_gtsam.smoothing.presmooth import effective_window, moving_average, moving_average_1d
 from rce_gtsam.tracks import Tracks
 
 

@@ -1,12 +1,12 @@
-"""Tests of the video rendering of a simulation (rce_gtsam.render)."""
+"""Tests of the video rendering of a simulation (rce_gtsam.sim.render)."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
 
-from rce_gtsam.render import iter_frames, render_video
-from rce_gtsam.simulate import SimulationConfig, simulate
+from rce_gtsam.sim.render import iter_frames, render_video
+from rce_gtsam.sim.simulate import SimulationConfig, simulate
 
 
 def _sim(n_frames=40, seed=0):
@@ -71,8 +71,8 @@ def test_lucas_kanade_follows_the_rendered_nodes(tmp_path):
 def test_default_render_config_is_the_clean_render():
     """No nuisance by default: the frames are the plain composite of background and sprites (+ sensor noise),
     the same with an explicit RenderConfig() and with the ``clean`` preset."""
-    from rce_gtsam.nuisance import REALISM, RenderConfig
-    from rce_gtsam.render import _blit, build_scene
+    from rce_gtsam.sim.nuisance import REALISM, RenderConfig
+    from rce_gtsam.sim.render import _blit, build_scene
 
     sim = _sim(n_frames=10)
     a = list(iter_frames(sim, n_frames=4))
@@ -88,7 +88,7 @@ def test_default_render_config_is_the_clean_render():
 
 
 def test_nuisances_change_the_frames_as_intended():
-    from rce_gtsam.nuisance import RenderConfig, camera_shift, illumination, image_xy
+    from rce_gtsam.sim.nuisance import RenderConfig, camera_shift, illumination, image_xy
 
     sim = _sim(n_frames=60, seed=1)
     clean = [f.astype(float) for f in iter_frames(sim, sensor_noise=0)]
@@ -126,7 +126,7 @@ def test_simulate_write_with_shake_records_image_positions(tmp_path):
 
     import pandas as pd
 
-    from rce_gtsam.nuisance import RenderConfig, camera_shift
+    from rce_gtsam.sim.nuisance import RenderConfig, camera_shift
 
     sim = _sim(n_frames=20)
     cfg = RenderConfig(shake_px=1.0, crf=28)

@@ -23,7 +23,7 @@ pytestmark = pytest.mark.slow  # ~40-60 s: render 400 frames, track 20 nodes, an
 def run_outputs(tmp_path_factory):
     pytest.importorskip("av")
     from rce_gtsam.cli import main
-    from rce_gtsam.simulate import SimulationConfig, simulate
+    from rce_gtsam.sim.simulate import SimulationConfig, simulate
 
     tmp = tmp_path_factory.mktemp("e2e")
     sim = simulate(SimulationConfig(n_frames=400, seed=1))

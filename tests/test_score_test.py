@@ -8,7 +8,7 @@ import pytest
 from _effect_data import synth
 
 from rce_gtsam import effects
-from rce_gtsam.diagnose import node_disjoint_split, shared_node_matrix
+from rce_gtsam.diagnosis.diagnose import node_disjoint_split, shared_node_matrix
 from rce_gtsam.diagnosis.score_test import (cross_fitted_score_test, effect_directions, half_fits,
                                             remove_rank1_tangent)
 from rce_gtsam.model import ResponseModel
@@ -103,7 +103,7 @@ def test_diagnose_runs_the_score_test_where_an_effect_has_one_and_splits_alpha()
     either test, supported = significant and the held-out error falls. The delay in these matrices is found."""
     from scipy import stats
 
-    from rce_gtsam.diagnose import diagnose
+    from rce_gtsam.diagnosis.diagnose import diagnose
     Y, s, *_ = synth("delay", seed=4, E=12, T=600, noise=0.15)
     d = diagnose(Y, root_distance=s, n_folds=8)
     C = len(d.candidates)
@@ -228,7 +228,7 @@ def test_the_refitted_test_is_calibrated_and_finds_a_small_delay_the_cross_fitte
     what the cross-fitted test, whose directions come from the other row set's z, misses: measured on seeds
     0-5, refitted p = 1/401 on all six, cross-fitted 0.022-0.75 (seed 2: 0.75)."""
     from rce_gtsam.diagnosis.score_test import refitted_score_test
-    from rce_gtsam.simulate import EFFECT_DEFAULTS
+    from rce_gtsam.sim.simulate import EFFECT_DEFAULTS
 
     delay, model = effects.make("delay"), ResponseModel()
 

@@ -1,4 +1,4 @@
-"""Tests of the ground-truth simulator (rce_gtsam.simulate)."""
+"""Tests of the ground-truth simulator (rce_gtsam.sim.simulate)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 
 from rce_gtsam.errors import InputError
 from rce_gtsam.graph import load_graph
-from rce_gtsam.simulate import (EFFECTS, NoiseConfig, SimulationConfig, angle_noise_deg, delayed,
+from rce_gtsam.sim.simulate import (EFFECTS, NoiseConfig, SimulationConfig, angle_noise_deg, delayed,
                                 oscillator_response, rank1_misfit, simulate, turning_angles_deg)
 from rce_gtsam.tracks import load_tracks
 
@@ -82,7 +82,7 @@ def test_noise_is_anisotropic_gappy_and_realistic():
     # distal half misses more than the proximal half
     half = obs.shape[0] // 2
     assert (~obs[half:]).mean() > (~obs[:half]).mean()
-    from rce_gtsam.simulate import _tangents
+    from rce_gtsam.sim.simulate import _tangents
     t = _tangents(sim.graph, sim.true_xy)
     d = sim.tracks.xy - sim.true_xy
     along = np.nanmedian(np.abs((d * t).sum(-1)))
@@ -195,10 +195,10 @@ def test_cli_rejects_bad_effect_names(tmp_path, capsys):
 
 
 def test_committed_samples_are_current():
-    """data/sample*/ are what write_sample() makes now (regenerate: python -m rce_gtsam.simulate data)."""
+    """data/sample*/ are what write_sample() makes now (regenerate: python -m rce_gtsam.sim.simulate data)."""
     from pathlib import Path
 
-    from rce_gtsam.simulate import SAMPLES
+    from rce_gtsam.sim.simulate import SAMPLES
     root = Path(__file__).resolve().parents[1] / "data"
     for name, effects in SAMPLES.items():
         folder = root / name
@@ -215,7 +215,7 @@ def test_held_out_forms_are_other_physics_at_a_like_strength():
     """Each effect's held-out form (EFFECT_FORMS, for checking the diagnosis on data it was not written for)
     changes the response, leaves a rank-1 misfit of the same order as the default form's, and naming an effect's
     first form changes nothing. A form that is not listed is refused naming the option."""
-    from rce_gtsam.simulate import EFFECT_FORMS, rank1_misfit
+    from rce_gtsam.sim.simulate import EFFECT_FORMS, rank1_misfit
     for effect, forms in EFFECT_FORMS.items():
         default, held_out = list(forms)[:2]
         cfg = dict(effects=(effect,), seed=1, n_frames=300)
@@ -230,7 +230,7 @@ def test_held_out_forms_are_other_physics_at_a_like_strength():
         assert 0.5 < (m1 / r1) / (m0 / r0) < 2.0, (effect, m0 / r0, m1 / r1)
     with pytest.raises(InputError, match=r"effect_form\['delay'\]"):
         simulate(SimulationConfig(effects=("delay",), effect_form={"delay": "cubic"}))
-    from rce_gtsam.simulate import EFFECT_DEFAULTS, bend_response
+    from rce_gtsam.sim.simulate import EFFECT_DEFAULTS, bend_response
     with pytest.raises(ValueError, match="form 'cubic' of delay"):
         bend_response(np.ones(3), np.linspace(0, 1, 3), np.zeros(50), ("delay",), EFFECT_DEFAULTS, 30.0,
                       np.random.default_rng(0), {"delay": "cubic"})

@@ -12,9 +12,9 @@ import rce_gtsam
 from rce_gtsam.errors import InputError
 from rce_gtsam.graph import BranchGraph
 from rce_gtsam.presets import PAPER, DEFAULT, SmootherConfig
-from rce_gtsam.presmooth import moving_average
-from rce_gtsam.smooth import SmoothedTracks, initial_positions, node_tangents, smooth_tracks
-from rce_gtsam.smooth_reference import paper_system, reference_smooth, solve_direct, solve_lsqr
+from rce_gtsam.smoothing.presmooth import moving_average
+from rce_gtsam.smoothing.smoother import SmoothedTracks, initial_positions, node_tangents, smooth_tracks
+from rce_gtsam.smoothing.reference import paper_system, reference_smooth, solve_direct, solve_lsqr
 from rce_gtsam.tracks import Tracks
 
 
@@ -120,8 +120,8 @@ def test_plant2_paper_gtsam_equals_direct_solve(shared_data):
 def test_optimality_check_separates_solution_from_start(tree):
     import gtsam
 
-    from rce_gtsam.marginals import whitened_jacobian
-    from rce_gtsam.smooth import LINEAR_OPTIMALITY_TOL, build_problem, normal_equation_residual, optimize
+    from rce_gtsam.smoothing.marginals import whitened_jacobian
+    from rce_gtsam.smoothing.smoother import LINEAR_OPTIMALITY_TOL, build_problem, normal_equation_residual, optimize
 
     tracks, graph = tree
     problem = build_problem(moving_average(tracks, 5), graph, PAPER.smoother)

@@ -109,8 +109,8 @@ def test_tracker_accuracy_on_a_rendered_clip(tmp_path):
     of visible points 0.0505 px, 90th percentile 0.173 px, 93.25 % of point-frames visible -- the 7f3b223 tracker
     (before the compiled kernels) on this clip: median 0.0506 px, 93.25 %. A kernel off by a pixel or a wrong
     weighting moves the median to tenths of a pixel."""
-    simulate = pytest.importorskip("rce_gtsam.simulate")
-    render = pytest.importorskip("rce_gtsam.render")
+    simulate = pytest.importorskip("rce_gtsam.sim.simulate")
+    render = pytest.importorskip("rce_gtsam.sim.render")
     from rce_gtsam.track import open_video
 
     sim = simulate.simulate(simulate.SimulationConfig(n_nodes=20, n_frames=60, seed=0))

@@ -97,8 +97,8 @@ def test_bad_inputs(scene):
 
 def test_default_tracker_on_simulator_render(tmp_path):
     """The simulator's rendered video (thin textured stem, fluttering leaves, H.264): default config."""
-    simulate = pytest.importorskip("rce_gtsam.simulate")
-    render = pytest.importorskip("rce_gtsam.render")
+    simulate = pytest.importorskip("rce_gtsam.sim.simulate")
+    render = pytest.importorskip("rce_gtsam.sim.render")
     from rce_gtsam.track import open_video
 
     sim = simulate.simulate(simulate.SimulationConfig(n_nodes=12, n_frames=150, seed=1))
@@ -185,8 +185,8 @@ def test_lost_node_is_not_reacquired_while_its_parent_is_lost():
 def _track_simulator_render(tmp_path, config):
     """Render ``simulate(config)`` to H.264 and track it with the default tracker from the true first-frame
     positions: (simulation, video path, TrackResult, (N, F) error in px against the true positions)."""
-    simulate = pytest.importorskip("rce_gtsam.simulate")
-    render = pytest.importorskip("rce_gtsam.render")
+    simulate = pytest.importorskip("rce_gtsam.sim.simulate")
+    render = pytest.importorskip("rce_gtsam.sim.render")
 
     sim = simulate.simulate(config)
     video = render.render_video(sim, tmp_path / "v.mp4")
@@ -214,7 +214,7 @@ def test_tip_is_not_visible_beside_the_stem_on_simulator_seed0(tmp_path, monkeyp
     Since tips are matched with their branch band (``_TIP_MIN_BAND_PX``) the tip is no longer re-acquired
     beside the stem on this clip at all (max error 0.78 px, visible 0.976, tip visible 0.71, no refinement
     rejection), so the check itself is exercised with the full-patch tip template it was made for."""
-    from rce_gtsam.simulate import SimulationConfig
+    from rce_gtsam.sim.simulate import SimulationConfig
 
     sim, video, res, err = _track_simulator_render(tmp_path, SimulationConfig(n_nodes=12, n_frames=150, seed=0))
     assert err[res.visible].max() < 3.0
@@ -238,7 +238,7 @@ def test_tip_is_matched_with_its_branch_band_on_simulator_seed2(tmp_path):
     16 pixels): max error of the visible tip 0.86 px. On the 600-frame clip of this seed the visible tip's max
     error went 14.1 -> 0.74 px (71 -> 0 frames > 2 px, visible 0.55 -> 0.30); Spearman of kappa unchanged
     there (0.903), and on seed 3 0.674 -> 0.765."""
-    from rce_gtsam.simulate import SimulationConfig
+    from rce_gtsam.sim.simulate import SimulationConfig
 
     sim, _, res, err = _track_simulator_render(tmp_path, SimulationConfig(n_frames=40, seed=2))
     tip = 19
@@ -252,8 +252,8 @@ def test_refinement_thread_gives_bit_identical_tracks(tmp_path):
     exactly what the sequential passes read: same positions, visibility, sigma and counts to the bit, whatever
     the threads' timing (simulator seed 3, 20 nodes, 30 frames of the H.264 render; tracked twice threaded).
     A node re-matched before its child's first-pass match or its parent's re-match would differ here."""
-    simulate = pytest.importorskip("rce_gtsam.simulate")
-    render = pytest.importorskip("rce_gtsam.render")
+    simulate = pytest.importorskip("rce_gtsam.sim.simulate")
+    render = pytest.importorskip("rce_gtsam.sim.render")
     from rce_gtsam.track import open_video
 
     sim = simulate.simulate(simulate.SimulationConfig(n_nodes=20, n_frames=30, seed=3))

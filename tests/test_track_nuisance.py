@@ -1,4 +1,4 @@
-"""The default tracker under camera nuisances (rce_gtsam.nuisance): it must stay accurate when the light
+"""The default tracker under camera nuisances (rce_gtsam.sim.nuisance): it must stay accurate when the light
 drifts (it measures against frame-0 templates with normalised correlation and a gain/bias-compensated LK) and
 when the camera shakes (errors against the image positions, true + camera shift).
 
@@ -11,9 +11,9 @@ import cv2
 import numpy as np
 import pytest
 
-from rce_gtsam.nuisance import RenderConfig, camera_shift, illumination, image_xy
-from rce_gtsam.render import iter_frames
-from rce_gtsam.simulate import SimulationConfig, simulate
+from rce_gtsam.sim.nuisance import RenderConfig, camera_shift, illumination, image_xy
+from rce_gtsam.sim.render import iter_frames
+from rce_gtsam.sim.simulate import SimulationConfig, simulate
 from rce_gtsam.track import ArraySource, LKTracker
 
 

@@ -8,7 +8,7 @@ import numpy as np
 def small_analysis(seed: int = 1, n_nodes: int = 7, n_frames: int = 150, n_boot: int = 50):
     """(Simulation, AnalysisResult) of a short simulated chain; about 0.2 s."""
     import rce_gtsam
-    from rce_gtsam.simulate import SimulationConfig, simulate
+    from rce_gtsam.sim.simulate import SimulationConfig, simulate
     sim = simulate(SimulationConfig(n_nodes=n_nodes, n_frames=n_frames, seed=seed))
     return sim, rce_gtsam.analyze(sim.tracks, sim.graph, n_boot=n_boot)
 

@@ -39,7 +39,7 @@ class BatchOptions:
     model: Path | None = None
 
     def __post_init__(self):
-        from ..diagnosis_io import parse_effect_names
+        from ..diagnosis.io import parse_effect_names
 
         if self.preset not in PRESETS:
             raise InputError("--preset", f"unknown preset {self.preset!r}; choose one of {sorted(PRESETS)}")

@@ -1,7 +1,7 @@
 """One recording of a batch, as a Dask task: track (video rows) -> analyze -> diagnose -> ``OUT/<id>/``.
 
 The stages are the library functions ``rce run`` / ``rce analyze`` + ``rce diagnose`` call
-(:func:`rce_gtsam.pipeline.analyze`, :func:`rce_gtsam.diagnosis_io.diagnose_result`, the tracker of
+(:func:`rce_gtsam.pipeline.analyze`, :func:`rce_gtsam.diagnosis.io.diagnose_result`, the tracker of
 :func:`rce_gtsam.track.make_tracker`, the figure writers of ``rce analyze``), so a recording's files are
 those the single-recording commands write with the same inputs and options.
 
@@ -91,7 +91,7 @@ def process_recording(recording: Recording, out_root: str | Path, options: Batch
 
 def write_record(folder: Path, recording: Recording, outcome: Outcome, files) -> None:
     """Write ``batch_record.json`` (atomically) for ``outcome``."""
-    from ..diagnosis_io import write_json_atomic
+    from ..diagnosis.io import write_json_atomic
     write_json_atomic({**outcome.as_dict(), "kind": recording.kind, "row": recording.row,
                        "inputs": {k: str(v) for k, v in recording.input_files.items()},
                        "files": sorted(str(f) for f in files)}, Path(folder) / RECORD_NAME)
@@ -100,9 +100,9 @@ def write_record(folder: Path, recording: Recording, outcome: Outcome, files) ->
 def run_pipeline(recording: Recording, options: BatchOptions, folder: Path) -> list[str]:
     """Track (video rows), analyze and diagnose one recording; write its folder like ``rce run`` does.
     Returns the written file names (relative to ``folder``)."""
-    from ..commands.analyze import extra_writers
-    from ..commands.wording import cli_wording_json
-    from ..diagnosis_io import diagnose_result, diagnosis_for_viz, diagnosis_json
+    from ..cli.analyze import extra_writers
+    from ..cli.wording import cli_wording_json
+    from ..diagnosis.io import diagnose_result, diagnosis_for_viz, diagnosis_json
     from ..pipeline import analyze
 
     preset = options.preset_for(recording)

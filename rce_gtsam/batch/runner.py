@@ -261,7 +261,7 @@ def _unchanged_summary(out: Path, key: str):
 
 def _write_summary(m: Manifest, out: Path, outcomes: dict, options: BatchOptions, recording: bool,
                    batch: dict) -> tuple[dict[str, Path], pd.DataFrame]:
-    from ..diagnosis_io import write_json_atomic
+    from ..diagnosis.io import write_json_atomic
     from ..tracks import write_table_atomic
     from .figures import write_batch_figures
     from .summary import read_recordings, summary_document, summary_table
@@ -272,7 +272,7 @@ def _write_summary(m: Manifest, out: Path, outcomes: dict, options: BatchOptions
     write_table_atomic(table, out / SUMMARY_CSV)
     # the figures are drawn in a forked process while this one writes the recording's plants (both take
     # about as long); the recording logs the figures last, once they are drawn
-    from ..commands.figure_worker import FigureWorker
+    from ..cli.figure_worker import FigureWorker
     with FigureWorker() as drawer:
         drawer.submit(write_batch_figures, recs, out / FIGURES_DIR)
         drawn: dict = {}

@@ -1,4 +1,4 @@
-"""The diagnosis' machinery; :func:`rce_gtsam.diagnose.diagnose` runs it, in this order:
+"""The diagnosis' machinery; :func:`rce_gtsam.diagnosis.diagnose.diagnose` runs it, in this order:
 
 * :mod:`.noise_floor` — the angle-noise floor from what does not depend on the model (segment stretch);
 * :mod:`.heldout` — folds, each model's held-out error (z from one node-disjoint row set, the other scored),

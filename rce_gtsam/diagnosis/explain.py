@@ -1,6 +1,6 @@
 """The diagnosis in words: the verdict's explanation with the numbers behind it (:func:`explain`), the sentence
 for significant candidates that were not named, and the text report (:func:`render_diagnosis_report`). A leaf
-module: it reads a :class:`~rce_gtsam.diagnose.Diagnosis` and computes nothing.
+module: it reads a :class:`~rce_gtsam.diagnosis.diagnose.Diagnosis` and computes nothing.
 
 Units: degrees (RMSE), deg^2 (variances), frames.
 """
@@ -14,7 +14,7 @@ from .score_test import score_is_significant
 from .verdict import complexity
 
 if TYPE_CHECKING:
-    from ..diagnose import Diagnosis
+    from .diagnose import Diagnosis
 
 
 def significant_but_not_named(diag: Diagnosis) -> str:

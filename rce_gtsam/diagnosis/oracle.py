@@ -19,7 +19,7 @@ from .settings import CV_ITER, FULL_ITER
 from ..model.series import loss_difference_test
 
 if TYPE_CHECKING:
-    from ..diagnose import Diagnosis
+    from .diagnose import Diagnosis
 
 
 def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str | None) -> dict:

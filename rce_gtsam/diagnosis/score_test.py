@@ -1,6 +1,6 @@
 """A calibrated full-data test of an effect: a score test with a phase-randomised null.
 
-The held-out fold test (:func:`rce_gtsam.diagnose.diagnose`) compares 16 fold-level error ratios; its power is
+The held-out fold test (:func:`rce_gtsam.diagnosis.diagnose.diagnose`) compares 16 fold-level error ratios; its power is
 set by their number, whatever the length of the recording. This test uses every frame at once.
 
 * **Statistic.** An effect moves the rank-1 prediction kappa_e z_t in known directions G_j (E, T)
@@ -36,7 +36,7 @@ set by their number, whatever the length of the recording. This test uses every 
     the other set's noisier z sees less of it (2/40 below 0.01). A shift is not what a symmetric smoother
     does, and the delay's own-z test stays calibrated.
 * **Null of the cross-fitted version.** The residuals of both sets are replaced by multivariate Fourier
-  surrogates (:func:`rce_gtsam.compliance.phase_randomised_residuals`: every segment's spectrum and every
+  surrogates (:func:`rce_gtsam.model.compliance.phase_randomised_residuals`: every segment's spectrum and every
   cross-spectrum kept, only *when* the noise happens is new), with the directions held fixed. For a
   stationary Gaussian residual, S is then exactly a draw from the surrogates' distribution, whatever the
   noise's colour; the p-value is the share of surrogates whose statistic reaches the observed one. Measured on
@@ -73,7 +73,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from ..compliance import draw_phases, residual_spectrum, surrogate_slice
+from ..model.compliance import draw_phases, residual_spectrum, surrogate_slice
 from ..model.tangent import remove_rank1_tangent
 from .statistics import noise_correlation
 
@@ -274,7 +274,7 @@ def fit_scores(fit, directions):
 
 
 def excitation_noise_spectrum(fit, fits, halves) -> np.ndarray:
-    """(1, K) Fourier spectrum (amplitudes, as :func:`rce_gtsam.compliance.residual_spectrum`) of the noise the
+    """(1, K) Fourier spectrum (amplitudes, as :func:`rce_gtsam.model.compliance.residual_spectrum`) of the noise the
     full fit's excitation z carries, estimated without the model under test: the difference of the two
     node-disjoint row sets' excitations (on z's scale) is their two noises only (the sets share no tracked
     node), and each set's noise variance goes as 1 / (its information sum W kappa^2), so the full z's is that

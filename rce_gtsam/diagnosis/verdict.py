@@ -23,7 +23,7 @@ from .heldout import paired_t
 from .settings import FULL_ITER
 
 if TYPE_CHECKING:
-    from ..diagnose import Diagnosis
+    from .diagnose import Diagnosis
 
 
 def earns_its_place(rmse: float, b_rmse: float, delta_aic: float, gain_share: float, resolution: float,

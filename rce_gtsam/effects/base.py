@@ -78,6 +78,9 @@ class Effect:
     #: "between_rows": no directions; the test asks whether two node-disjoint row sets' residuals share a time
     #: course (an effect with a latent series common to all segments, see SecondMode).
     score_excitation: ClassVar[str] = "other_rows"
+    #: Fewest bend rows (segments) a recording needs before the diagnosis tries this effect (SecondMode needs
+    #: two per node-disjoint half to tell a second shared course from the first).
+    min_rows: ClassVar[int] = 1
 
     # -- description ------------------------------------------------------------------------------
     def parameters(self, n_edges: int) -> tuple[Parameter, ...]:

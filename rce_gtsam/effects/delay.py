@@ -41,7 +41,7 @@ class Delay(Effect):
     """Lag growing linearly with root distance: tau_e = tau * s_e.
 
     max_lag: bound on |tau| in frames (default 60: 2 s at 30 fps). Only the bound's reach matters: the
-    lag is fitted, and :func:`rce_gtsam.diagnose.diagnose` widens its CV buffer to the fitted lag
+    lag is fitted, and :func:`rce_gtsam.diagnosis.diagnose.diagnose` widens its CV buffer to the fitted lag
     (:meth:`memory_frames`), so held-out frames stay independent of training whatever it is. The earlier
     bound of 25 frames (the bootstrap block length) cut off a 1.25-s tip lag: on simulated branches with
     that lag the verdict named delay in 4/10 seeds with it and 7/10 with 60 (held-out RMSE -17 % when

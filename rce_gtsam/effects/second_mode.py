@@ -29,6 +29,7 @@ class SecondMode(Effect):
     """Rank-2 response: a second latent excitation w_t with per-edge gains mu_e."""
 
     name = "second_mode"
+    min_rows = 4  # >= 2 rows per node-disjoint half to separate two shared courses
     kind = "additive"
     # no direction to score along (w is unknown), but w is common to all segments: the full-data test asks whether
     # two node-disjoint row sets' residuals move together (score_test.shared_time_course_test; effect-free

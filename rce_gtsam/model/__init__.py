@@ -30,7 +30,7 @@ Modules (imports only point down this list; nothing here imports :mod:`rce_gtsam
 * :mod:`~rce_gtsam.model.report` — :func:`render_fit_report`;
 * :mod:`~rce_gtsam.model.inputs` — :func:`validate_inputs`.
 
-The rank-1 core itself is :mod:`rce_gtsam.compliance` (ALS / GLS with shrinkage of log kappa, bootstraps).
+The rank-1 core itself is :mod:`rce_gtsam.model.compliance` (ALS / GLS with shrinkage of log kappa, bootstraps).
 Units: degrees (Y, z, predictions), frames.
 """
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..compliance import Rank1Fit
+from .compliance import Rank1Fit
 from .report import render_fit_report
 from .view import FitView
 
@@ -39,7 +39,7 @@ class ModelFit:
     states: fitted state of each effect; Y, weights: the data fitted (NaN = missing);
     root_distance: (E,); iterations, converged: loop diagnostics; n_obs: observed entries;
     shrinkage: (E,) the factor s of the last kappa step, log|kappa| = s log|kappa_hat| (1 = not shrunk);
-    core: the rank-1 solver's own result (:class:`~rce_gtsam.compliance.Rank1Fit`: frames used, shrinkage,
+    core: the rank-1 solver's own result (:class:`~rce_gtsam.model.compliance.Rank1Fit`: frames used, shrinkage,
     convergence) when the model has no effects and was fitted on all frames from scratch — the fit
     ``rce analyze`` reports; None otherwise.
     """

@@ -6,7 +6,7 @@ Model (units: degrees, frames)::
     y_e = g(kappa_e x_e) + a_e (output effect g; additive effects a)
 
 One engine. With no effect, :meth:`ResponseModel.fit` *is* the rank-1 fit ``rce analyze`` reports: it runs the
-rank-1 solver of :mod:`rce_gtsam.compliance` (:func:`~rce_gtsam.compliance.fit_rank1`) with the model's whole
+rank-1 solver of :mod:`rce_gtsam.model.compliance` (:func:`~rce_gtsam.model.compliance.fit_rank1`) with the model's whole
 :class:`~rce_gtsam.presets.ComplianceConfig` — response convention, shrinkage of log kappa (``count`` or
 ``precision``, with ``prior_strength`` / ``prior_sd_log``), ``n_iter``, ``tol``, and the generalised least
 squares of ``correlated`` when per-frame precisions are given — so the diagnosis baseline, the extended
@@ -23,7 +23,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..compliance import fit_rank1, initial_z
+from .compliance import fit_rank1, initial_z
 from ..presets import DEFAULT, ComplianceConfig
 from .fit import ModelFit
 from .inputs import validate_inputs
@@ -145,8 +145,8 @@ class ResponseModel:
         ``precision``: see :meth:`fit`.
 
         With no effect and none of these options it is the rank-1 solver itself
-        (:func:`rce_gtsam.compliance.fit_rank1`; ``max_iter`` replaces ``n_iter``) and the result carries its
-        :class:`~rce_gtsam.compliance.Rank1Fit` as ``core``.
+        (:func:`rce_gtsam.model.compliance.fit_rank1`; ``max_iter`` replaces ``n_iter``) and the result carries its
+        :class:`~rce_gtsam.model.compliance.Rank1Fit` as ``core``.
         """
         cfg = self.config if max_iter is None else replace(self.config, n_iter=int(max_iter))
         plain = start is None and not frozen and free is None and not z_ridge and frame_counts is None

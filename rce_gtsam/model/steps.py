@@ -4,7 +4,7 @@ One block-coordinate sweep of :meth:`rce_gtsam.model.ResponseModel.solve` is :fu
 :func:`z_step`, then each effect's ``update``. Effects use :func:`sse_after_z` (error of a candidate state
 after an exact z step: grid starts) and :func:`profiled_sse` (the same with the effect's slot replaced:
 profiling z out of a shared parameter), and :meth:`~rce_gtsam.model.view.FitView.index_of` to find their
-own slot. The kappa step is the rank-1 solver's (:mod:`rce_gtsam.compliance`): the same shrinkage of
+own slot. The kappa step is the rank-1 solver's (:mod:`rce_gtsam.model.compliance`): the same shrinkage of
 log kappa (``count`` or ``precision``, from the model's :class:`~rce_gtsam.presets.ComplianceConfig`) and the
 same geometric-mean normalisation, applied to a Gauss-Newton step through the effects. Units: degrees,
 frames.
@@ -15,14 +15,14 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse.linalg import LinearOperator, cg
 
-from ..compliance import EPS, log_normal_shrinkage, shrink_and_normalise
+from .compliance import EPS, log_normal_shrinkage, shrink_and_normalise
 from .view import FitView
 
 
 def kappa_step(view: FitView) -> None:
     """Gauss-Newton kappa step (exact least squares when g is linear), shrinkage, normalisation.
 
-    With no effects this is the rank-1 solver's kappa step (:func:`rce_gtsam.compliance.fit_rank1_batch`):
+    With no effects this is the rank-1 solver's kappa step (:func:`rce_gtsam.model.compliance.fit_rank1_batch`):
     kappa_hat_e = sum_t w z y / sum_t w z^2 over frames with |z| > EPS, then shrinkage by the model's
     config (``count``: s = n / (n + lambda); ``precision``: the log-normal prior with the residual variance
     and lag-1 autocorrelation of the edge's regression, :func:`precision_shrinkage`) and geometric-mean
@@ -61,7 +61,7 @@ def precision_shrinkage(r_hat, used, Wm, den, n, k_hat, tau: float) -> np.ndarra
     """(E,) tau^2 / (tau^2 + se^2(log kappa_hat)) from the residuals ``r_hat`` (E, T) of each edge's
     regression at kappa_hat: the weighted residual variance over the ``used`` entries (weights ``Wm``,
     n of them) divided by the information ``den``, inflated by the lag-1 autocorrelation of the residuals
-    (:func:`rce_gtsam.compliance.log_normal_shrinkage`; the same estimate the rank-1 solver makes)."""
+    (:func:`rce_gtsam.model.compliance.log_normal_shrinkage`; the same estimate the rank-1 solver makes)."""
     sigma2 = np.sum(Wm * r_hat * r_hat, axis=1) / np.maximum(n - 1, 1)
     rho = lag1_autocorrelation(r_hat, used)
     return log_normal_shrinkage(sigma2 / np.maximum(den, EPS), rho, k_hat, tau)

@@ -108,7 +108,7 @@ Constants and why they are what they are (none is tuned to a video):
 * ``refine_consistency`` and ``distinct_follow`` add no constant: they re-use ``min_ncc``, the
   forward-backward limit and ``distinct_sigmas``.
 
-Camera nuisances (``benchmarks/bench_track_nuisance.py``, seeds 0-2, 400 frames, ``rce_gtsam.nuisance``):
+Camera nuisances (``benchmarks/bench_track_nuisance.py``, seeds 0-2, 400 frames, ``rce_gtsam.sim.nuisance``):
 a drifting global gain/offset (even 3 % per frame), a 180-degree-shutter motion blur, a soft moving shadow
 and 1-3 px of camera shake leave the median error of visible points at 0.07-0.09 px (clean 0.07), because
 every measurement is a zero-mean normalised correlation and a gain/bias-compensated LK against frame 0.

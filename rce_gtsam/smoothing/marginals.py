@@ -32,7 +32,7 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 
-from .errors import RceError
+from ..errors import RceError
 
 
 #: Relative pivot threshold below which the information matrix counts as singular (see use).

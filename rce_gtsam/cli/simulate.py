@@ -3,7 +3,7 @@
 Writes a simulated recording with its ground truth: tracks.csv (noisy, tracker-like), true_tracks.csv
 (noise-free), graph.json, truth.json (kappa_true, z_true, response_true, effect parameters), annotations.json
 (first-frame node positions) and, with --video, video.mp4 (H.264). ``--realism`` names the camera nuisances
-of the video (``rce_gtsam.nuisance.REALISM``: clean = the crisp default render; outdoor = motion blur,
+of the video (``rce_gtsam.sim.nuisance.REALISM``: clean = the crisp default render; outdoor = motion blur,
 drifting light, a moving soft shadow, ~1 px camera shake, crf 28).
 """
 
@@ -21,7 +21,7 @@ from ..errors import InputError
 
 
 def _effect_list(values: list[str] | None) -> tuple[str, ...]:
-    from ..simulate import EFFECTS
+    from ..sim.simulate import EFFECTS
     out: list[str] = []
     for v in values or []:
         for name in (s.strip() for s in v.split(",")):
@@ -37,7 +37,7 @@ def _effect_list(values: list[str] | None) -> tuple[str, ...]:
 def _strengths(values: list[str] | None) -> dict[str, float] | None:
     if not values:
         return None
-    from ..simulate import EFFECTS
+    from ..sim.simulate import EFFECTS
     out = {}
     for v in values:
         name, sep, num = v.partition("=")
@@ -53,7 +53,7 @@ def _strengths(values: list[str] | None) -> dict[str, float] | None:
 def _forms(values: list[str] | None) -> dict[str, str] | None:
     if not values:
         return None
-    from ..simulate import EFFECT_FORMS
+    from ..sim.simulate import EFFECT_FORMS
     out = {}
     for v in values:
         name, sep, form = (x.strip() for x in v.partition("="))
@@ -65,7 +65,7 @@ def _forms(values: list[str] | None) -> dict[str, str] | None:
 
 
 def _effects_epilog() -> str:
-    from ..simulate import EFFECT_DEFAULTS, EFFECT_FORMS, EFFECT_MEANING, EFFECTS
+    from ..sim.simulate import EFFECT_DEFAULTS, EFFECT_FORMS, EFFECT_MEANING, EFFECTS
     return ("effects and the meaning of their strengths: " + "; ".join(
         f"{k} (default {EFFECT_DEFAULTS[k]:g}: {EFFECT_MEANING[k]})" for k in EFFECTS)
         + ". Forms (--form NAME=FORM): " + "; ".join(
@@ -110,8 +110,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..nuisance import REALISM
-    from ..simulate import NoiseConfig, SimulationConfig, default_form, simulate
+    from ..sim.nuisance import REALISM
+    from ..sim.simulate import NoiseConfig, SimulationConfig, default_form, simulate
 
     from ..validate import check_output_dir, check_seed
 

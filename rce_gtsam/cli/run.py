@@ -51,7 +51,7 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
     import shutil
     import tempfile
 
-    from ..diagnosis_io import diagnose_result, diagnosis_for_viz, diagnosis_json, parse_effect_names
+    from ..diagnosis.io import diagnose_result, diagnosis_for_viz, diagnosis_json, parse_effect_names
     from ..graph import load_graph
     from ..pipeline import ANALYSIS_STEPS, analyze
     from ..track import load_annotations, make_tracker, open_video

@@ -17,13 +17,13 @@ callback per frame and per linearisation: 5-7 s on plant 1 (Huber 8 LM iteration
 twice the per-node-frame C++ factors they replaced, which made the linear case twice as slow.
 
 With the paper's settings the problem is linear least squares (the same quadratic as the
-published LSQR solver, see :mod:`rce_gtsam.smooth_reference`); it is solved here with GTSAM's
+published LSQR solver, see :mod:`rce_gtsam.smoothing.reference`); it is solved here with GTSAM's
 Levenberg-Marquardt in one exact step (the non-linear options take several iterations).
 Marginal covariances come from the linearisation at the solution (robust weights included) through
-a block-banded selected inversion (:mod:`rce_gtsam.marginals`), not per-key ``gtsam.Marginals``.
+a block-banded selected inversion (:mod:`rce_gtsam.smoothing.marginals`), not per-key ``gtsam.Marginals``.
 
 Long recordings (more than ``SmootherConfig.window_frames`` frames) are solved in overlapping windows
-with a burn-in margin each side (:mod:`rce_gtsam.windowing`): time and memory grow linearly with the
+with a burn-in margin each side (:mod:`rce_gtsam.smoothing.windowing`): time and memory grow linearly with the
 number of frames, and the window cores match the whole-recording solve to ~1e-9 px.
 
 Variable keys are ``gtsam.symbol('x', t)`` (:func:`rce_gtsam.factors.frame_key`); node row ``i``
@@ -40,13 +40,13 @@ from typing import Sequence
 import gtsam
 import numpy as np
 
-from .errors import InputError
-from .factors import (MEASUREMENT_WEIGHT_FLOOR, AccelerationFactor, EdgeLengthFactor,
+from ..errors import InputError
+from ..factors import (MEASUREMENT_WEIGHT_FLOOR, AccelerationFactor, EdgeLengthFactor,
                       EdgeOffsetFactor, MeasurementFactor, VelocityFactor, frame_key, zero_values)
-from .graph import BranchGraph
-from .presets import SmootherConfig
+from ..graph import BranchGraph
+from ..presets import SmootherConfig
 from .presmooth import moving_average
-from .tracks import Tracks
+from ..tracks import Tracks
 from .memory import release_freed_memory
 from .windowing import plan_windows
 
@@ -60,7 +60,7 @@ class SmootherReport:
     iteration cap and without exhausting its damping range.
     seconds_optimize includes GTSAM's linearisation at the solution (shared with the marginals);
     seconds_marginals is the selected inversion.
-    A long recording is solved in ``n_windows`` overlapping windows (:mod:`rce_gtsam.windowing`): then
+    A long recording is solved in ``n_windows`` overlapping windows (:mod:`rce_gtsam.smoothing.windowing`): then
     iterations is the largest over windows, errors / variable and factor counts are sums over windows
     (a margin frame counts in every window that holds it) and converged means every window converged.
     """
@@ -384,7 +384,7 @@ def optimize(problem: FactorGraphProblem, linear: bool) -> tuple[gtsam.Values, d
 
 
 def smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) -> SmoothedTracks:
-    """Pre-smooth with :func:`~rce_gtsam.presmooth.moving_average` (``config.presmooth_window``), then
+    """Pre-smooth with :func:`~rce_gtsam.smoothing.presmooth.moving_average` (``config.presmooth_window``), then
     solve the factor graph with GTSAM LM and (if ``config.marginals``) compute marginal covariances.
 
     Raises :class:`~rce_gtsam.errors.InputError` if tracks and graph do not match, a node is never

@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     worker = None if args.no_figures else FigureWorker()
     figures = None
     try:
-        from ..diagnosis_io import parse_effect_names
+        from ..diagnosis.io import parse_effect_names
         from ..pipeline import ANALYSIS_STEPS, analyze
 
         from ..validate import check_analysis_inputs, check_command_options
@@ -179,7 +179,7 @@ class FiguresInBackground:
                            self.first_frame, self.processes)
 
     def diagnosis(self, view, result) -> None:
-        """Also draw the diagnosis figures (``view``: :func:`~rce_gtsam.diagnosis_io.diagnosis_for_viz`)."""
+        """Also draw the diagnosis figures (``view``: :func:`~rce_gtsam.diagnosis.io.diagnosis_for_viz`)."""
         from ..viz.figures import write_diagnosis_figures
         self.worker.submit(write_diagnosis_figures, view, self.dir, result)
 

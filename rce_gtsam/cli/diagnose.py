@@ -36,7 +36,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..diagnosis_io import diagnose_result, diagnosis_for_viz, diagnosis_json, parse_effect_names, \
+    from ..diagnosis.io import diagnose_result, diagnosis_for_viz, diagnosis_json, parse_effect_names, \
         write_json_atomic
     from ..errors import InputError
     from ..pipeline import analyze

@@ -38,11 +38,11 @@ import pandas as pd
 from scipy import signal
 from scipy.interpolate import make_interp_spline
 
-from .errors import InputError
-from .fileio import publish, temp_dir_beside
-from .graph import BranchGraph
-from .jsonutil import jsonable as _jsonable
-from .tracks import Tracks, write_table_atomic
+from ..errors import InputError
+from ..fileio import publish, temp_dir_beside
+from ..graph import BranchGraph
+from ..jsonutil import jsonable as _jsonable
+from ..tracks import Tracks, write_table_atomic
 
 #: Names of the physical effects the simulator can switch on (and the diagnosis looks for).
 EFFECTS: tuple[str, ...] = ("delay", "dynamics", "second_mode", "offset", "nonlinear")
@@ -601,7 +601,7 @@ class Simulation:
     def write(self, out_dir: str | Path, video: bool = False, render=None) -> dict[str, Path]:
         """Write tracks.csv, true_tracks.csv, graph.json, truth.json, annotations.json (+ video.mp4).
 
-        ``render``: camera nuisances of the video (:class:`~rce_gtsam.nuisance.RenderConfig`; None = the
+        ``render``: camera nuisances of the video (:class:`~rce_gtsam.sim.nuisance.RenderConfig`; None = the
         clean render). With camera shake, true_tracks.csv and tracks.csv hold positions in the image
         (``nuisance.image_xy``: true positions plus the per-frame camera shift, which is zero at frame 0, so
         annotations.json is unchanged); a non-default config is recorded in truth.json under ``"render"``
@@ -711,7 +711,7 @@ def angle_noise_deg(sim: Simulation) -> float:
 
 
 #: The committed sample recordings (folder name under data/ -> effects). Regenerate with
-#: ``python -m rce_gtsam.simulate`` (calls :func:`write_sample`).
+#: ``python -m rce_gtsam.sim.simulate`` (calls :func:`write_sample`).
 SAMPLES: dict[str, tuple[str, ...]] = {"sample": (), "sample_delay": ("delay",)}
 
 
@@ -726,7 +726,7 @@ def write_sample(data_dir: str | Path = "data", seed: int = 0, n_frames: int = 6
         simulate(cfg).write(folder)
         eff = ", ".join(effects) or "none"
         note = (f"# Simulated sample recording `{name}`\n\n"
-                f"Made by `rce_gtsam.simulate.write_sample()` (run `python -m rce_gtsam.simulate [DATA_DIR]`), i.e.\n"
+                f"Made by `rce_gtsam.sim.simulate.write_sample()` (run `python -m rce_gtsam.sim.simulate [DATA_DIR]`), i.e.\n"
                 f"`rce simulate --seed {seed} --frames {n_frames} --nodes {n_nodes}"
                 f"{' --effect ' + ','.join(effects) if effects else ''} --out {folder}`.\n\n"
                 f"- hidden effect: {eff}\n"

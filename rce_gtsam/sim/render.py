@@ -1,4 +1,4 @@
-"""Render a :class:`~rce_gtsam.simulate.Simulation` as a video a point tracker can follow.
+"""Render a :class:`~rce_gtsam.sim.simulate.Simulation` as a video a point tracker can follow.
 
 Scene (all seeded by the simulation's seed, so a rendering is reproducible):
 
@@ -9,7 +9,7 @@ Scene (all seeded by the simulation's seed, so a rendering is reproducible):
 * leaves: a few leaf sprites attached to distal segments; each moves with its segment and flutters about its
   petiole (angle +-10-25 degrees at 0.4-1.2 Hz), so some of them sweep over nodes now and then;
 * mild sensor noise (1 grey level RMS) per frame, then H.264 encoding;
-* optional camera nuisances (a :class:`~rce_gtsam.nuisance.RenderConfig`: motion blur, illumination drift,
+* optional camera nuisances (a :class:`~rce_gtsam.sim.nuisance.RenderConfig`: motion blur, illumination drift,
   a moving soft shadow, camera shake, stronger compression); the default config is the clean render above.
 
 Geometry uses the TRUE positions (``sim.true_xy``) and the OpenCV pixel convention: pixel (row i, column j)
@@ -29,7 +29,7 @@ from typing import Iterator
 import cv2
 import numpy as np
 
-from .errors import MissingDependencyError
+from ..errors import MissingDependencyError
 from .nuisance import RenderConfig, ShadowField, camera_shift, illumination
 
 BARK_BGR = np.array([45.0, 75.0, 115.0])   # brown
@@ -215,9 +215,9 @@ def iter_frames(sim, *, n_frames: int | None = None, sensor_noise: float | None 
                 config: RenderConfig | None = None) -> Iterator[np.ndarray]:
     """Yield the rendered frames as (H, W, 3) uint8 BGR arrays (OpenCV order), one at a time.
 
-    ``config``: camera nuisances (:class:`~rce_gtsam.nuisance.RenderConfig`; default = the clean render).
+    ``config``: camera nuisances (:class:`~rce_gtsam.sim.nuisance.RenderConfig`; default = the clean render).
     ``sensor_noise`` (grey levels RMS) overrides ``config.sensor_noise`` when given. With camera shake the
-    nodes appear at :func:`~rce_gtsam.nuisance.image_xy`, not at ``sim.true_xy``.
+    nodes appear at :func:`~rce_gtsam.sim.nuisance.image_xy`, not at ``sim.true_xy``.
     """
     cfg = config or RenderConfig()
     noise_rms = cfg.sensor_noise if sensor_noise is None else float(sensor_noise)
@@ -264,7 +264,7 @@ def render_video(sim, path: str | Path, *, crf: int | None = None, preset: str =
                  n_frames: int | None = None, config: RenderConfig | None = None) -> Path:
     """Write ``sim`` as an H.264 (libx264, yuv420p) mp4 at the simulation's fps; frames are streamed.
 
-    ``config``: camera nuisances (:class:`~rce_gtsam.nuisance.RenderConfig`; default = the clean render).
+    ``config``: camera nuisances (:class:`~rce_gtsam.sim.nuisance.RenderConfig`; default = the clean render).
     ``crf``: x264 constant rate factor (lower = better quality; 16 keeps the bark texture crisp); overrides
     ``config.crf`` when given.
     The file is written next to ``path`` under a temporary name and renamed when complete.
@@ -273,7 +273,7 @@ def render_video(sim, path: str | Path, *, crf: int | None = None, preset: str =
         import av
     except ImportError as exc:  # pragma: no cover - av is a dependency
         raise MissingDependencyError("rendering a video needs PyAV: pip install av") from exc
-    from .fileio import temp_file_beside
+    from ..fileio import temp_file_beside
     path = Path(path)
     width, height = sim.config.image_size
     tmp = temp_file_beside(path, suffix=".mp4")

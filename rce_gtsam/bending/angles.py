@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .graph import Bend, BranchGraph
-from .presets import BendingConfig
+from ..graph import Bend, BranchGraph
+from ..presets import BendingConfig
 
 _RAD2DEG = 180.0 / np.pi
 _TINY = 1e-12

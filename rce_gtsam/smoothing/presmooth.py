@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .tracks import Tracks
+from ..tracks import Tracks
 
 
 def effective_window(window: int) -> int:

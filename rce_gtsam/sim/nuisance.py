@@ -1,4 +1,4 @@
-"""Camera nuisances for :mod:`rce_gtsam.render`: what makes a real outdoor clip harder than a clean render.
+"""Camera nuisances for :mod:`rce_gtsam.sim.render`: what makes a real outdoor clip harder than a clean render.
 
 A :class:`RenderConfig` (frozen, data only) says how a simulation is filmed. Its defaults reproduce the
 clean render exactly (bit-identical frames and video); each nuisance is switched on by a non-zero field:
@@ -47,7 +47,7 @@ _TAG_SHAKE, _TAG_LIGHT, _TAG_SHADOW = 0x5A4E, 0x11647, 0x5AD0
 class RenderConfig:
     """How a simulation is filmed (see the module docstring). Defaults = the clean render.
 
-    crf: x264 constant rate factor of :func:`~rce_gtsam.render.render_video`.
+    crf: x264 constant rate factor of :func:`~rce_gtsam.sim.render.render_video`.
     sensor_noise: per-pixel Gaussian noise, grey levels RMS, independent per frame.
     exposure: shutter-open time as a fraction of the frame period (0 = instantaneous, no motion blur).
     blur_step_px: largest node displacement (pixels) between two sub-frames of the blur.

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special  # t and normal quantiles; scipy.stats would add ~0.8 s of import to every run
 
-from .presets import ComplianceConfig
+from ..presets import ComplianceConfig
 
 EPS = 1e-6  # numerical floor of the published fit (kappa, z and denominators)
 

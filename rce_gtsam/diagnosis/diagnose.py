@@ -74,27 +74,27 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .jsonutil import jsonable as _jsonable
+from ..jsonutil import jsonable as _jsonable
 from scipy import stats
 
-from . import effects as effects_mod
-from .diagnosis.budget import VarianceBudget, variance_budget
-from .diagnosis.explain import explain, render_diagnosis_report
-from .diagnosis.heldout import fold_blocks, frame_loss, heldout_errors, paired_t
-from .diagnosis.maxt import sign_flip_max_t
-from .diagnosis.noise_floor import NoiseFloor
-from .diagnosis.score_test import effect_score_test, half_fits, is_significant, score_is_significant
-from .diagnosis.settings import BLOCK_LENGTH, FULL_ITER, N_FOLDS, CV_ITER, RESOLUTION
-from .diagnosis.statistics import ResidualContext
-from .diagnosis.sysid import ResidualAnalysis, residual_analysis
-from .diagnosis.verdict import (choose_verdict, earns_its_place, support_a_richer_form,
+from .. import effects as effects_mod
+from .budget import VarianceBudget, variance_budget
+from .explain import explain, render_diagnosis_report
+from .heldout import fold_blocks, frame_loss, heldout_errors, paired_t
+from .maxt import sign_flip_max_t
+from .noise_floor import NoiseFloor
+from .score_test import effect_score_test, half_fits, is_significant, score_is_significant
+from .settings import BLOCK_LENGTH, FULL_ITER, N_FOLDS, CV_ITER, RESOLUTION
+from .statistics import ResidualContext
+from .sysid import ResidualAnalysis, residual_analysis
+from .verdict import (choose_verdict, earns_its_place, support_a_richer_form,
                                 test_the_lowest_against_simpler)
-from .model import ModelFit, ResponseModel, validate_inputs
-from .model.row_sets import (edge_halves, edge_nodes_from_labels, node_disjoint_split,  # noqa: F401 (re-exported)
+from ..model import ModelFit, ResponseModel, validate_inputs
+from ..model.row_sets import (edge_halves, edge_nodes_from_labels, node_disjoint_split,  # noqa: F401 (re-exported)
                              shared_node_matrix)
-from .model.series import loss_difference_test
-from .model.starts import solve_from_starts
-from .presets import DEFAULT, ComplianceConfig
+from ..model.series import loss_difference_test
+from ..model.starts import solve_from_starts
+from ..presets import DEFAULT, ComplianceConfig
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -474,6 +474,4 @@ def _resolve_effects(effects, n_edges):
     out = []
     for e in effects:
         out.append(effects_mod.make(e) if isinstance(e, str) else e)
-    if n_edges < 4:
-        out = [e for e in out if e.name != "second_mode"]  # needs >= 2 edges per half to separate two modes
-    return out
+    return [e for e in out if n_edges >= e.min_rows]

@@ -12,18 +12,18 @@ import argparse
 import importlib
 import sys
 
-from .errors import RceError
+from ..errors import RceError
 
 #: Modules that contribute sub-commands, in the order ``rce --help`` lists them.
 COMMAND_MODULES = (
-    "rce_gtsam.commands.analyze",
-    "rce_gtsam.commands.diagnose",
-    "rce_gtsam.commands.track",
-    "rce_gtsam.commands.annotate",
-    "rce_gtsam.commands.simulate",
-    "rce_gtsam.commands.run",
-    "rce_gtsam.commands.view",
-    "rce_gtsam.commands.batch",
+    "rce_gtsam.cli.analyze",
+    "rce_gtsam.cli.diagnose",
+    "rce_gtsam.cli.track",
+    "rce_gtsam.cli.annotate",
+    "rce_gtsam.cli.simulate",
+    "rce_gtsam.cli.run",
+    "rce_gtsam.cli.view",
+    "rce_gtsam.cli.batch",
 )
 
 

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .graph import BranchGraph
+from ..graph import BranchGraph
 
 ZONES = ("proximal", "mid", "distal")
 

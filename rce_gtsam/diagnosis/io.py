@@ -2,7 +2,7 @@
 
 * :func:`parse_effect_names` — ``"delay,offset"`` (CLI) or a sequence -> validated effect names;
   an unknown name is an :class:`~rce_gtsam.errors.InputError` listing the five valid ones.
-* :func:`diagnose_result` — :func:`rce_gtsam.diagnose.diagnose` on an
+* :func:`diagnose_result` — :func:`rce_gtsam.diagnosis.diagnose.diagnose` on an
   :class:`~rce_gtsam.pipeline.AnalysisResult`'s bend-response matrix, with the preset's settings.
 * :func:`diagnosis_json` — the JSON object ``rce diagnose`` / ``rce run`` write (``Diagnosis.as_dict()``
   plus the inputs).
@@ -20,12 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import InputError
+from ..errors import InputError
 
 
 def effect_names() -> tuple[str, ...]:
     """The candidate effect names, in the order the diagnosis tries them."""
-    from .effects import names
+    from ..effects import names
     return names()
 
 
@@ -56,15 +56,15 @@ def parse_effect_names(effects: str | Sequence[str] | None, source: str = "--eff
 def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = None):
     """Diagnose the rank-1 model of an analysis: which physical effect does it miss?
 
-    Runs :func:`rce_gtsam.diagnose.diagnose` on ``result.response`` (Y in degrees, inverse-variance
+    Runs :func:`rce_gtsam.diagnosis.diagnose.diagnose` on ``result.response`` (Y in degrees, inverse-variance
     weights when the preset's compliance fit is weighted, normalised root distance, edge labels
     ``"joint->child"``, video frame of each column) with the preset's block length and whole compliance config (so the
     baseline is the rank-1 fit ``rce analyze`` reports). ``effects``: candidate names (``"a,b"`` or a sequence; default all five); ``seed``: seed of
     the stratified edge split; ``n_folds``: cross-validation blocks (default: diagnose's N_FOLDS, 16).
-    Returns a :class:`~rce_gtsam.diagnose.Diagnosis`.
+    Returns a :class:`~rce_gtsam.diagnosis.diagnose.Diagnosis`.
     """
     from .diagnose import diagnose
-    from .diagnosis.noise_floor import noise_floor_of
+    from .noise_floor import noise_floor_of
 
     names = parse_effect_names(effects, source="effects")
     resp, cfg = result.response, result.preset.compliance
@@ -113,5 +113,5 @@ def diagnosis_for_viz(diagnosis, result=None) -> dict:
 
 def write_json_atomic(data: dict, path: str | Path) -> Path:
     """Write ``data`` as JSON to a temporary file in the same folder, then rename it onto ``path``."""
-    from .fileio import write_text_atomic
+    from ..fileio import write_text_atomic
     return write_text_atomic(json.dumps(data, indent=1) + "\n", path)

@@ -14,7 +14,7 @@ quadratic the GTSAM smoother then builds); the paper's tracks never do.
 Two solvers: :func:`solve_direct` (sparse Cholesky-free LU of the normal equations — exact up to
 rounding) and :func:`solve_lsqr` (``scipy.sparse.linalg.lsqr`` with the paper's atol = btol = 1e-6,
 iter_lim = 2000, x0 = 0 — what the published results used; its early stop is an approximation).
-Use these to validate :func:`rce_gtsam.smooth.smooth_tracks` and as the speed floor in benchmarks.
+Use these to validate :func:`rce_gtsam.smoothing.smoother.smooth_tracks` and as the speed floor in benchmarks.
 """
 
 from __future__ import annotations
@@ -26,12 +26,12 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .factors import MEASUREMENT_WEIGHT_FLOOR, EdgeOffsetFactor
-from .graph import BranchGraph
+from ..factors import MEASUREMENT_WEIGHT_FLOOR, EdgeOffsetFactor
+from ..graph import BranchGraph
 from .marginals import single_threaded_blas
-from .presets import SmootherConfig
+from ..presets import SmootherConfig
 from .presmooth import moving_average
-from .tracks import Tracks
+from ..tracks import Tracks
 
 
 @dataclass(frozen=True, eq=False)
