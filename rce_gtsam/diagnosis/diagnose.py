@@ -371,7 +371,6 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         extra["significant"] = significant
         if starts:
             extra["start_cross_prediction_sse"] = starts["errors"]
-            extra["start_tied"] = starts["tied"]
             extra["start_chosen"] = starts["chosen"]
         calibrated = score_is_significant(None if score is None else score.p, p_crit_score)
         supported = bool(significant and earns_its_place(rmse, b_rmse, daic, gain_share, resolution, calibrated))

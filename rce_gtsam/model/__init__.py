@@ -19,10 +19,9 @@ Modules (imports only point down this list; nothing here imports :mod:`rce_gtsam
 * :mod:`~rce_gtsam.model.fit` — :class:`ModelFit`, :class:`ParamValue`;
 * :mod:`~rce_gtsam.model.view` — :class:`FitView` (what an effect sees during a fit), :class:`PartialView`;
 * :mod:`~rce_gtsam.model.starts` — :func:`~rce_gtsam.model.starts.solve_from_starts`: a fit from every start an
-  effect proposes; of those that predict one node-disjoint row set from the other's excitation about as
-  well as the best (no significant difference), the lowest in-sample error kept;
-* :mod:`~rce_gtsam.model.series` — autocorrelation and the Diebold-Mariano test of two loss series (the starts'
-  choice and the diagnosis' full-data held-out test);
+  effect proposes, the one that best predicts each node-disjoint row set from the other's excitation kept;
+* :mod:`~rce_gtsam.model.series` — autocorrelation and the Diebold-Mariano test of two loss series (the
+  diagnosis' full-data held-out test);
 * :mod:`~rce_gtsam.model.row_sets` — :func:`~rce_gtsam.model.row_sets.node_disjoint_split`: two row sets that
   share no tracked node (independent tracking noise);
 * :mod:`~rce_gtsam.model.tangent` — :func:`~rce_gtsam.model.tangent.remove_rank1_tangent`: the part of a direction
