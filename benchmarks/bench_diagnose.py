@@ -177,6 +177,13 @@ def klog(kappa, k):
     return float(np.sqrt(np.mean(np.log(np.abs(kappa) / k) ** 2)))
 
 
+def finding_of(name):
+    """The finding a verdict for candidate ``name`` reports (a form of a library effect reports that effect)."""
+    from rce_gtsam import effects
+
+    return None if name is None else effects.finding(name)
+
+
 def full_data_verdict(d, alpha=0.05):
     """The verdict the full-data (Diebold-Mariano, batch means) test would give: the supported candidate with
     the lowest held-out RMSE, supported = its full-data t above the Bonferroni t quantile at its dof."""
@@ -238,13 +245,13 @@ def main() -> int:
                 ts.append(time.perf_counter() - t)
                 tps.append(tp)
                 ok += d.verdict == hidden
-                fv = full_data_verdict(d)
+                fv = finding_of(full_data_verdict(d))
                 okf += fv == hidden
                 conf += {d.verdict, hidden} == {"delay", "dynamics"}
-                v2 = choose_verdict(d.candidates, d.settings["evidence_threshold_t"], same_kind=True)[0]
+                v2 = finding_of(choose_verdict(d.candidates, d.settings["evidence_threshold_t"], same_kind=True)[0])
                 ok2 += v2 == hidden
                 conf2 += {v2, hidden} == {"delay", "dynamics"}
-                v3 = maxt_verdict(d)
+                v3 = finding_of(maxt_verdict(d))
                 ok3 += v3 == hidden
                 conf3 += {v3, hidden} == {"delay", "dynamics"}
                 o = oracle_test(d, Y, y, hidden)
@@ -273,15 +280,15 @@ def main() -> int:
                 dm_crit = stats.t.ppf(1 - 0.05 / max(len(d.candidates), 1), max(o.get("full_data_dof", 1), 1))
                 orcf += bool(o["full_data_t"] > dm_crit and o["improvement_pct"] > 0)
                 kb.append(klog(d.baseline.kappa, k))
-                ka.append(klog(d.candidate(d.verdict).fit.kappa, k) if d.verdict else kb[-1])
+                ka.append(klog(d.verdict_candidate.fit.kappa, k) if d.verdict else kb[-1])
                 if d.verdict is not None and d.verdict == hidden:
-                    imp_v.append(d.candidate(d.verdict).improvement_pct)
+                    imp_v.append(d.verdict_candidate.improvement_pct)
                 if hidden is not None:
                     imp_h.append(d.candidate(hidden).improvement_pct)
                     ceil.append(ceiling(Y, y))
                     tru.append(truth_gain(Y, y, d.baseline, d.candidate(hidden).fit))
                 nsr.append(noise_to_signal(Y, y))
-                print(f"  {eff} x{mult:g} seed {sd}: verdict {d.verdict} (same-kind parsimony: {v2}; max-T: {v3}{'' if not o3 else ', oracle max-T*'}; full-data test: {fv}), oracle t={o['t']:.1f}"
+                print(f"  {eff} x{mult:g} seed {sd}: verdict {d.verdict}{'' if d.verdict_effect in (None, d.verdict) else ' [' + d.verdict_effect + ']'} (same-kind parsimony: {v2}; max-T: {v3}{'' if not o3 else ', oracle max-T*'}; full-data test: {fv}), oracle t={o['t']:.1f}"
                       f"{'*' if o['supported'] else ''}{'' if enc_o is None else f' enc p(delay)={enc_o.p:.4f}'}"
                       f" (knows z t={o['knows_z']['t']:.1f}"
                       f"{'*' if o['knows_z']['supported'] else ''}) ft={o.get('full_data_t', float('nan')):.1f}"

@@ -6,6 +6,15 @@ from scipy import signal
 from rce_gtsam.sim import simulate as sim
 
 
+#: candidates that are another form of a simulated effect: (the simulator's effect, its form)
+SIMULATED_AS = {"resonances": ("dynamics", "scattered")}
+
+
+def default_strength(effect):
+    """The simulator's default strength of ``effect`` (of the effect it is a form of)."""
+    return sim.EFFECT_DEFAULTS[SIMULATED_AS.get(effect, (effect,))[0]]
+
+
 def synth(effect=None, seed=0, E=12, T=600, noise=0.3, strength=None):
     ss = np.random.SeedSequence(seed)
     r1, r2, r3, r4 = (np.random.default_rng(s) for s in ss.spawn(4))
@@ -15,9 +24,11 @@ def synth(effect=None, seed=0, E=12, T=600, noise=0.3, strength=None):
     kappa = np.exp(logk - logk.mean())
     z = sim.make_excitation(T, 30.0, r2, rms_deg=1.5)
     st = dict(sim.EFFECT_DEFAULTS)
+    simulated, form = SIMULATED_AS.get(effect, (effect, None))
     if strength is not None and effect is not None:
-        st[effect] = strength
-    y, _ = sim.bend_response(kappa, s, z, () if effect is None else (effect,), st, 30.0, r3)
+        st[simulated] = strength
+    y, _ = sim.bend_response(kappa, s, z, () if effect is None else (simulated,), st, 30.0, r3,
+                             forms=None if form is None else {simulated: form})
     b, a = signal.butter(2, 0.1)
     n = noise * (r4.standard_normal((E, T)) + 2 * signal.filtfilt(b, a, r4.standard_normal((E, T)), axis=1))
     Y = y + n

@@ -102,7 +102,7 @@ def summary_document(manifest: Manifest, recordings: list[RecordingSummary], bat
     docs = []
     for r in recordings:
         d = r.diagnosis or {}
-        verdict = d.get("verdict")
+        verdict = d.get("verdict_effect", d.get("verdict"))  # the candidate (a form of the finding named)
         cand = {c.get("effect"): c for c in d.get("candidates", [])}
         docs.append({
             "id": r.id, "status": r.status, "kind": r.kind, "preset": r.preset, "metadata": r.metadata,

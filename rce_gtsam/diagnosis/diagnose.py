@@ -147,6 +147,9 @@ class Diagnosis:
     residual_analysis: ResidualAnalysis | None = None  # system-identification views of the baseline residuals
     budget: VarianceBudget | None = None  # variance budget against the model-free noise floor
     noise_floor: NoiseFloor | None = None
+    #: the candidate the verdict comes from, where it is another form of the effect ``verdict`` names
+    #: (:attr:`~rce_gtsam.effects.Effect.finding`: "resonances" for the finding "dynamics"); else ``verdict``
+    verdict_effect: str | None = None
 
     @property
     def status(self) -> str:
@@ -159,6 +162,11 @@ class Diagnosis:
         if self.budget is None:
             return "untested"
         return {"noise": "adequate", "misses": "misses", "inconclusive": "inconclusive"}[self.budget.status]
+
+    @property
+    def verdict_candidate(self) -> CandidateResult | None:
+        """The candidate the verdict comes from (None without a verdict)."""
+        return None if self.verdict is None else self.candidate(self.verdict_effect or self.verdict)
 
     def candidate(self, name: str) -> CandidateResult:
         for c in self.candidates:
@@ -176,6 +184,7 @@ class Diagnosis:
                          "kappa": [_num(v) for v in b.kappa], "converged": bool(b.converged)},
             "candidates": [c.as_dict() for c in self.candidates],
             "verdict": self.verdict,
+            "verdict_effect": self.verdict_effect or self.verdict,
             "explanation": self.explanation,
             "worst_edges": _jsonable(self.worst_edges),
             "worst_frames": _jsonable(self.worst_frames),
@@ -386,7 +395,9 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     if node_disjoint:
         results = support_a_richer_form(results, Y, W, s, halves, seed, b_rmse, resolution, p_crit_score)
         test_the_lowest_against_simpler(results, Y, W, s, halves, seed)
-    verdict, parsimony = choose_verdict(results, t_crit, p_pair=p_crit_score)
+    verdict_effect, parsimony = choose_verdict(results, t_crit, p_pair=p_crit_score)
+    # the finding a verdict reports: another form of a library effect reports that effect (resonances: dynamics)
+    verdict = None if verdict_effect is None else next(e.finding or e.name for e in cands if e.name == verdict_effect)
     worst_e, worst_f, summary = worst_edges_and_frames(base, labels, block_length, frames)
     settings = {"n_folds": len(blocks), "fold_blocks": blocks, "buffer_frames": gap, "block_length": block_length,
                 "seed": seed, "alpha": alpha, "evidence_threshold_t": t_crit, "resolution": resolution,
@@ -400,13 +411,13 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     budget = None
     if noise_floor is not None:
         added = {}
-        if verdict is not None:
-            vf = next(c.fit for c in results if c.effect == verdict)
-            added[verdict] = (vf.residuals, vf.n_params)
+        if verdict_effect is not None:
+            vf = next(c.fit for c in results if c.effect == verdict_effect)
+            added[verdict_effect] = (vf.residuals, vf.n_params)
         budget = variance_budget(Y, base.residuals, base.n_params, noise_floor, added, labels,
                                  base_kappa=base.kappa)
     diag = Diagnosis(baseline=base, baseline_heldout_rmse=b_rmse, baseline_fold_mse=b_mse, candidates=results,
-                     verdict=verdict, explanation="", worst_edges=worst_e, worst_frames=worst_f,
+                     verdict=verdict, verdict_effect=verdict_effect, explanation="", worst_edges=worst_e, worst_frames=worst_f,
                      residual_summary=summary, settings=settings, edge_labels=labels, budget=budget,
                      baseline_frame_loss=b_loss, baseline_heldout_prediction=b_pred,
                      residual_analysis=residual_analysis(

@@ -84,10 +84,11 @@ def explain(diag: Diagnosis) -> str:
                 f"stem), so there the noise floor is only bounded: the unexplained part lies between "
                 f"{share(b.unexplained_range[0]):+.0f}% and {share(b.unexplained_range[1]):+.0f}% of the variance."
                 + closest + " Out-of-plane motion is outside this 2-D model; a second camera view would settle it.")
-    c = diag.candidate(diag.verdict)
+    c = diag.verdict_candidate
     sp = c.extra.get("score_p")
     score = ("" if sp is None else f"; full-data score test p = {sp:.2g} against {c.extra['score_threshold_p']:.2g}")
-    lines = [f"Missing effect: {c.effect}. Adding it lowers the held-out RMSE from {base:.3f} to "
+    named = c.effect if c.effect == diag.verdict else f"{diag.verdict} (in the form {c.effect})"
+    lines = [f"Missing effect: {named}. Adding it lowers the held-out RMSE from {base:.3f} to "
              f"{c.heldout_rmse:.3f} deg ({c.improvement_pct:.1f}% lower; evidence t = {c.evidence:.1f} over "
              f"{diag.settings['n_folds']} folds, threshold {c.extra.get('threshold_t', float('nan')):.2f}{score}; "
              f"delta AIC {c.delta_aic:.0f} on the effective sample of "
@@ -207,9 +208,11 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
                  "misses": "none of the candidates, but the rank-1 model misses more than noise",
                  "inconclusive": "none of the candidates; whether the rest is noise is inconclusive",
                  "untested": "none (no candidate beats the rank-1 model on held-out frames)"}
-    out.append(f"    {diag.verdict or none_text.get(diag.status, 'none')}")
+    form = (f" (in the form {diag.verdict_effect})"
+            if diag.verdict_effect not in (None, diag.verdict) else "")
+    out.append(f"    {diag.verdict or none_text.get(diag.status, 'none')}{form}")
     out.append("    " + diag.explanation)
     if diag.verdict is not None:
         out.append("")
-        out.append(render_fit_report(diag.candidate(diag.verdict).fit, diag.edge_labels, max_rows=12))
+        out.append(render_fit_report(diag.verdict_candidate.fit, diag.edge_labels, max_rows=12))
     return "\n".join(out)

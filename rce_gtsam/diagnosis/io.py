@@ -104,7 +104,7 @@ def diagnosis_for_viz(diagnosis, result=None) -> dict:
     else:
         data.pop("edges", None)
         data.pop("frames", None)
-    data["after_prediction"] = (np.asarray(diagnosis.candidate(diagnosis.verdict).fit.predict(), dtype=float)
+    data["after_prediction"] = (np.asarray(diagnosis.verdict_candidate.fit.predict(), dtype=float)
                                 if diagnosis.verdict is not None else None)
     data["report"] = diagnosis.report()
     data["residual_analysis_obj"] = getattr(diagnosis, "residual_analysis", None)

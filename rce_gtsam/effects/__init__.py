@@ -9,6 +9,7 @@ from .delay import Delay
 from .dynamics import Dynamics
 from .nonlinear import Nonlinear
 from .offset import Offset
+from .resonances import Resonances
 from .second_mode import SecondMode
 
 #: name -> factory of the default term, in the order the diagnosis tries them.
@@ -18,6 +19,7 @@ CANDIDATES = {
     "second_mode": SecondMode,
     "offset": Offset,
     "nonlinear": Nonlinear,
+    "resonances": Resonances,
 }
 
 #: the built-in effects' names (registered effects are added to :data:`CANDIDATES`; see :func:`names`)
@@ -41,6 +43,13 @@ def names() -> tuple[str, ...]:
     return tuple(CANDIDATES)
 
 
+def finding(name: str) -> str:
+    """What a verdict for the effect called ``name`` reports: its :attr:`~rce_gtsam.effects.Effect.finding` when
+    it is another form of a library effect, else ``name`` (unknown names are returned as they are)."""
+    cls = CANDIDATES.get(name)
+    return (cls.finding or name) if cls is not None else name
+
+
 def make(name: str) -> Effect:
     """A default instance of the effect called ``name``."""
     try:
@@ -49,5 +58,5 @@ def make(name: str) -> Effect:
         raise ValueError(f"unknown effect {name!r}; known: {', '.join(CANDIDATES)}") from None
 
 
-__all__ = ["Effect", "Parameter", "Delay", "Dynamics", "Nonlinear", "Offset", "SecondMode", "CANDIDATES",
-           "EFFECT_NAMES", "make", "names", "register"]
+__all__ = ["Effect", "Parameter", "Delay", "Dynamics", "Nonlinear", "Offset", "Resonances", "SecondMode", "CANDIDATES",
+           "EFFECT_NAMES", "finding", "make", "names", "register"]

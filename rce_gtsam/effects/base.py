@@ -78,6 +78,10 @@ class Effect:
     #: "between_rows": no directions; the test asks whether two node-disjoint row sets' residuals share a time
     #: course (an effect with a latent series common to all segments, see SecondMode).
     score_excitation: ClassVar[str] = "other_rows"
+    #: The finding a verdict for this effect reports, where the effect is another form of one already in the
+    #: library (:class:`~.resonances.Resonances`, each joint's own natural frequency, is a form of "dynamics"):
+    #: the diagnosis names the finding and records this form as its ``verdict_effect``. None: its own name.
+    finding: ClassVar[str | None] = None
     #: Fewest bend rows (segments) a recording needs before the diagnosis tries this effect (SecondMode needs
     #: two per node-disjoint half to tell a second shared course from the first).
     min_rows: ClassVar[int] = 1
