@@ -26,12 +26,18 @@ import math
 
 import numpy as np
 from scipy import special
-from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
 
 from ..diagnosis.statistics import per_edge_regression
 from .base import Parameter, scalar
 from .dynamics import OMEGA_MAX, OMEGA_MIN, ZETA_MAX, ZETA_MIN, ZETA_STARTS, Dynamics
+
+DIFF_STEP = 1e-4  # finite-difference step in log w (rad/frame) and zeta
+#: the per-joint grid start: natural periods (frames) from 2 to the longest the bounds allow, and damping ratios
+INIT_PERIODS = np.geomspace(2.0, 2 * np.pi / OMEGA_MIN, 12)
+INIT_ZETAS = (0.1, 0.3)
+LM_DAMPING = 1e-3  # Marquardt damping of the first try, relative to the normal matrix's diagonal
+LM_STEPS = 2  # steps per update (z fixed), each of up to LM_TRIES tries
+LM_TRIES = 4  # tries per step, the damping x10 after each that does not lower the error
 
 
 class Resonances(Dynamics):
@@ -41,9 +47,9 @@ class Resonances(Dynamics):
     finding = "dynamics"
     kind = "operator"
     equation = "y_e'' + 2 zeta w_e y_e' + w_e^2 y_e = w_e^2 kappa_e z   (w_e free per joint, rad/frame)"
-    fitting = ("started from the graded form's best grid point; (log w_e, zeta) by bounded least squares "
-               "(scipy.optimize.least_squares, a sparse Jacobian: each joint's residual depends on its own w_e) "
-               "with kappa and z fixed, alternating with the core")
+    fitting = ("started from each joint's best period on a grid; (log w_e, zeta) by bounded Levenberg-Marquardt "
+               "steps with kappa and z fixed (each joint's residual depends on its own w_e only), alternating with "
+               "the core")
     physics = ("the segments have inertia and resonate, each at a natural frequency of its own that does not "
                "follow its place on the branch (leaves, fruit or side shoots loading some joints): they lag, "
                "amplify near resonance and ring after gusts. Kappa is then the static (low-frequency) gain; "
@@ -68,31 +74,80 @@ class Resonances(Dynamics):
                 "latents": {}}
 
     def init(self, view) -> dict:
-        graded = Dynamics.init(self, view)
-        return self._joint_state(np.log(Dynamics.omegas(graded, view.s)), scalar(graded["params"]["zeta"]))
+        """Each joint's best natural period on a grid (:data:`INIT_PERIODS` frames, and quasi-static), for each
+        damping ratio of :data:`INIT_ZETAS`, with kappa and z held at the current core fit; the damping ratio whose
+        per-joint best fits lower in total is kept. Joint e's prediction depends on its own w_e only, so one
+        prediction per grid value scores every joint at once (a start from the graded form's best grid point
+        stayed quasi-static where the joints scatter: the Jacobian vanishes there)."""
+        i = len(view.states)
+        model = getattr(view, "full_model", view.model)
+        sub = model.with_effects(model.effects[: i + 1])
+        omegas = np.r_[OMEGA_MAX, 2 * np.pi / INIT_PERIODS]
+        obs = view.W > 0
+        best = None
+        for zeta in INIT_ZETAS:
+            sse = np.stack([np.sum(np.where(obs, view.W * (view.Y0 - view.copy_with(
+                sub, list(view.states)[:i] + [self._joint_state(np.full(view.E, np.log(w)), zeta)]).predict()) ** 2,
+                0.0), axis=1) for w in omegas])  # (grid, E)
+            pick = np.argmin(sse, axis=0)
+            total = float(sse[pick, np.arange(view.E)].sum())
+            if best is None or total < best[0]:
+                best = (total, np.log(omegas[pick]), zeta)
+        return self._joint_state(best[1], best[2])
 
     def update(self, state, view, frozen):
+        """:data:`LM_STEPS` Levenberg-Marquardt steps on (log w_e, zeta) with kappa and z fixed (a few steps per fit, as for the
+        graded form: :meth:`Dynamics.update` says why not more). Joint e's residuals depend on w_e and zeta only,
+        so the Jacobian takes two extra evaluations of the prediction, whatever the number of joints: all w_e
+        moved at once, then zeta; the normal equations are an arrow matrix, solved densely (E + 1 unknowns)."""
         if frozen:
             return state
         i = view.index_of(self)
         E = len(view.s)
-        p = state["params"]
         lo = np.r_[np.full(E, np.log(OMEGA_MIN)), ZETA_MIN]
         hi = np.r_[np.full(E, np.log(OMEGA_MAX)), ZETA_MAX]
-        x0 = np.clip(np.r_[np.log(np.asarray(p["omega"], float)), scalar(p["zeta"])], lo + 1e-6, hi - 1e-6)
-        # residual_vector is sqrt(W) (Y - prediction) over observed entries, row by row: joint e's entries depend
-        # on w_e and zeta only, so finite differences need two evaluations per Jacobian, not E + 1
-        counts = (view.W > 0).sum(axis=1)
-        pattern = lil_matrix((int(counts.sum()), E + 1), dtype=np.int8)
-        start = 0
-        for e in range(E):
-            pattern[start:start + counts[e], e] = 1
-            start += counts[e]
-        pattern[:, E] = 1
-        # a few steps with z fixed, as for the graded form (Dynamics.update says why not more)
-        res = least_squares(lambda q: view.residual_vector(i, self._joint_state(q[:E], q[E])), x0,
-                            bounds=(lo, hi), diff_step=1e-4, max_nfev=3, jac_sparsity=pattern)
-        return self._joint_state(res.x[:E], res.x[E])
+        p = state["params"]
+        x = np.clip(np.r_[np.log(np.asarray(p["omega"], float)), scalar(p["zeta"])], lo, hi)
+        obs = view.W > 0
+        sw = np.sqrt(np.where(obs, view.W, 0.0))
+
+        def residual(q):
+            pred = view.predict(view.with_state(i, self._joint_state(q[:E], q[E])))
+            return np.where(obs, (view.Y0 - pred) * sw, 0.0)
+
+        for _ in range(LM_STEPS):
+            x, moved = self._lm_step(x, residual, lo, hi, E)
+            if not moved:
+                break
+        return self._joint_state(x[:E], x[E])
+
+    @staticmethod
+    def _lm_step(x, residual, lo, hi, E):
+        """One damped Gauss-Newton step from x; (new x, whether it lowered the error)."""
+        r0 = residual(x)
+        f0 = float(np.sum(r0 * r0))
+        # forward differences, backward where a parameter sits at its upper bound
+        hw = np.where(x[:E] + DIFF_STEP <= hi[:E], DIFF_STEP, -DIFF_STEP)
+        hz = DIFF_STEP if x[E] + DIFF_STEP <= hi[E] else -DIFF_STEP
+        Jw = (residual(np.r_[x[:E] + hw, x[E]]) - r0) / hw[:, None]  # row e: d r_e / d log w_e
+        Jz = (residual(np.r_[x[:E], x[E] + hz]) - r0) / hz            # d r / d zeta
+        A = np.zeros((E + 1, E + 1))
+        A[np.arange(E), np.arange(E)] = np.sum(Jw * Jw, axis=1)
+        A[:E, E] = A[E, :E] = np.sum(Jw * Jz, axis=1)
+        A[E, E] = np.sum(Jz * Jz)
+        g = np.r_[np.sum(Jw * r0, axis=1), np.sum(Jz * r0)]
+        scale = np.maximum(np.diag(A), 1e-300)
+        lam = LM_DAMPING
+        for _ in range(LM_TRIES):
+            try:
+                step = np.linalg.solve(A + lam * np.diag(scale), -g)
+            except np.linalg.LinAlgError:
+                break
+            cand = np.clip(x + step, lo, hi)
+            if np.sum(residual(cand) ** 2) < f0:
+                return cand, True
+            lam *= 10.0
+        return x, False
 
     def alternative_starts(self, state):
         """The fitted frequencies with each damping ratio of :data:`~rce_gtsam.effects.dynamics.ZETA_STARTS` more
