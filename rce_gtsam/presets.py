@@ -20,8 +20,6 @@ MAX_WEIGHT = 1e8
 
 def _check(config, rules) -> None:
     """Validate a config on construction: ``rules`` maps field -> (test, requirement text)."""
-    import math
-
     for name, (test, need) in rules.items():
         v = getattr(config, name)
         if isinstance(v, float) and not math.isfinite(v) or not test(v):

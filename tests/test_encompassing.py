@@ -4,7 +4,6 @@ alignment, the projection, the test's calibration and power on simulator matrice
 import types
 
 import numpy as np
-import pytest
 from _effect_data import synth
 
 from rce_gtsam import effects

@@ -203,7 +203,7 @@ class FiguresInBackground:
 def format_summary(result) -> str:
     """A short human-readable summary of an analysis."""
     df = result.summary()
-    fit, sm = result.fit, result.smoothing.as_dict()
+    sm = result.smoothing.as_dict()
     lines = [
         f"preset {result.preset.name}: {result.tracks.n_nodes} nodes, {result.tracks.n_frames} frames, "
         f"{len(result.bending.bends)} bends",

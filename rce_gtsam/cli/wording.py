@@ -39,8 +39,8 @@ def add_candidates_argument(p: argparse.ArgumentParser, command: str) -> None:
     """``--candidates A,B``: the effects the diagnosis tests (``--effects`` is the deprecated old name here;
     in ``rce analyze`` ``--effects`` adds terms to the fitted model)."""
     p.add_argument("--candidates", default=None, metavar="A,B",
-                   help="effects the diagnosis tests, comma-separated (default: all five: delay,dynamics,"
-                        "second_mode,offset,nonlinear)")
+                   help="effects the diagnosis tests, comma-separated (default: all six: delay,dynamics,"
+                        "second_mode,offset,nonlinear,resonances)")
     p.add_argument("--effects", default=None, dest="effects_deprecated", help=argparse.SUPPRESS)
     p.set_defaults(_command_name=command)
 

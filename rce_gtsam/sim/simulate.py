@@ -34,7 +34,6 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-import pandas as pd
 from scipy import signal
 from scipy.interpolate import make_interp_spline
 
