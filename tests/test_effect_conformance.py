@@ -55,6 +55,18 @@ def test_effect_fits_owns_evidence_and_explains(name):
 
 
 @pytest.mark.parametrize("name", BUILTIN)
+def test_a_form_of_another_effect_reports_that_effect(name):
+    """Effect.finding: an effect that is another form of a library effect (resonances: dynamics with each joint's
+    own frequency) names a registered effect of its own kind; the verdict then reports that effect."""
+    eff = effects.make(name)
+    if eff.finding is None:
+        assert effects.finding(name) == name
+    else:
+        assert eff.finding != name and eff.finding in effects.CANDIDATES
+        assert effects.make(eff.finding).kind == eff.kind and effects.finding(name) == eff.finding
+
+
+@pytest.mark.parametrize("name", BUILTIN)
 def test_alternative_starts_are_valid_states_the_model_fits_from(name):
     """Effect.alternative_starts (optional): every proposed start has the state's shape, parameters inside their
     bounds, and the model fits from it; solve_from_starts then keeps the start with the smallest cross-prediction
@@ -108,6 +120,9 @@ def test_diagnosis_names_each_effect_on_clean_data(name):
     Y, s, k, z, y = synth(name, seed=5, E=18, T=600, noise=0.03, strength=3 * default_strength(name))
     d = diagnose(Y, root_distance=s, effects=[name, "offset" if name != "offset" else "nonlinear"])
     assert d.verdict == effects.finding(name) and d.verdict_effect == name, d.report()
+    assert d.as_dict()["verdict"] == d.verdict and d.as_dict()["verdict_effect"] == name
+    if d.verdict != name:  # a form of another effect: the report says which form
+        assert f"{d.verdict} (in the form {name})" in d.report()
 
 
 class Step(Effect):
