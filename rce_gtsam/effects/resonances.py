@@ -35,6 +35,8 @@ DIFF_STEP = 1e-4  # finite-difference step in log w (rad/frame) and zeta
 #: the per-joint grid start: natural periods (frames) from 2 to the longest the bounds allow, and damping ratios
 INIT_PERIODS = np.geomspace(2.0, 2 * np.pi / OMEGA_MIN, 12)
 INIT_ZETAS = (0.1, 0.3)
+#: a joint whose natural frequency is within this factor of the upper bound is reported as quasi-static
+QUASI_STATIC = 0.95
 LM_DAMPING = 1e-3  # Marquardt damping of the first try, relative to the normal matrix's diagonal
 LM_STEPS = 2  # steps per update (z fixed), each of up to LM_TRIES tries
 LM_TRIES = 4  # tries per step, the damping x10 after each that does not lower the error
@@ -161,15 +163,22 @@ class Resonances(Dynamics):
         return None  # E + 1 free parameters: no fixed signature; the held-out test judges this form
 
     def describe(self, state):
-        periods = 2 * np.pi / np.asarray(state["params"]["omega"], float)
+        """Natural periods (frames) of the joints that resonate, and how many joints are quasi-static (their
+        frequency at the upper bound, a period of one frame: no inertia the data can see)."""
+        om = np.asarray(state["params"]["omega"], float)
+        static = om >= QUASI_STATIC * OMEGA_MAX
+        periods = 2 * np.pi / om[~static] if (~static).any() else np.array([2 * np.pi / OMEGA_MAX])
         return {"period_shortest_frames": float(periods.min()), "period_median_frames": float(np.median(periods)),
-                "period_longest_frames": float(periods.max())}
+                "period_longest_frames": float(periods.max()), "quasi_static_joints": float(static.sum())}
 
     def evidence(self, ctx) -> dict:
         """Do the joints differ in inertia beyond what one law along the branch explains? Each joint's residual
         is regressed on kappa_e d2z/dt2 (its own acceleration coefficient, frames^2, with its standard error
         inflated for the residuals' serial correlation), and the coefficients' scatter about a straight line in
-        root distance is a chi-square on E - 2 degrees of freedom under "one law" (its p beside it)."""
+        root distance is a chi-square on E - 2 degrees of freedom under "one law" (its p beside it). Conservative:
+        the inflation for serial correlation (residual lag-1 autocorrelation ~0.96 in the pipeline) is large, and
+        on simulated scattered resonances that lowered the held-out RMSE by 15 % it gave p = 1; the held-out
+        test, not this statistic, judges the effect, and the explanation does not quote it."""
         R, k, z, s = ctx.R, ctx.kappa, ctx.z, ctx.s
         d2z = np.gradient(np.gradient(z))
         acc, se = per_edge_regression(R, k[:, None] * d2z[None, :])
@@ -187,10 +196,11 @@ class Resonances(Dynamics):
 
     def explain(self, summary: dict, statistics: dict) -> str:
         zeta = (summary.get("zeta") or {}).get("value") or float("nan")
-        return (f"Fitted natural periods from {summary.get('period_shortest_frames', float('nan')):.1f} to "
+        static = int(summary.get("quasi_static_joints", 0) or 0)
+        text = (("" if not static else f"{static} joint{'s' if static > 1 else ''} quasi-static (no inertia the data "
+                 "can see); ")
+                + f"fitted natural periods from {summary.get('period_shortest_frames', float('nan')):.1f} to "
                 f"{summary.get('period_longest_frames', float('nan')):.1f} frames (median "
-                f"{summary.get('period_median_frames', float('nan')):.1f}), damping ratio {zeta:.2f}; the joints' "
-                f"acceleration coefficients scatter about one law along the branch with chi-square "
-                f"{statistics.get('accel_scatter_chi2', float('nan')):.1f} on "
-                f"{statistics.get('accel_scatter_dof', float('nan')):.0f} degrees of freedom "
-                f"(p = {statistics.get('accel_scatter_p', float('nan')):.2g}).")
+                f"{summary.get('period_median_frames', float('nan')):.1f}), damping ratio {zeta:.2f} (each joint's "
+                "period with its standard error is in the fit below).")
+        return text[0].upper() + text[1:]
