@@ -110,18 +110,25 @@ def explain(diag: Diagnosis) -> str:
         lines.append(eff.explain(c.fit.effect_summary().get(c.effect, {}), c.statistics))
         lines.append(f"What it means: {eff.physics} Fit the model with {type(eff).__name__}() and read kappa "
                      "from the extended fit.")
+    lead = par.get("leading", par.get("lowest_heldout"))
+    if lead is not None and lead != par.get("lowest_heldout"):
+        low = diag.candidate(par["lowest_heldout"])
+        lines.append(f"{low.effect} has the lowest held-out RMSE ({low.heldout_rmse:.3f} deg) but is another form of "
+                     f"{lead} and not significantly better than it (paired t = "
+                     f"{-par['t_vs_lowest'].get(low.effect, float('nan')):.2f} <= "
+                     f"{diag.settings['evidence_threshold_t']:.2f}), so {lead} is the form weighed against the others.")
     if par.get("preferred_simpler") == c.effect and c.effect in enc:
-        lo = diag.candidate(par["lowest_heldout"])
+        lo = diag.candidate(lead)
         lines.append(f"Parsimony: {lo.effect} has the lowest held-out RMSE ({lo.heldout_rmse:.3f} deg), but what it "
                      f"predicts in the residuals {c.effect} leaves is not significant (encompassing test p = "
                      f"{enc[c.effect]:.3g} > {thr:.3g}): the data do not ask for its extra parameters, so the simpler "
                      f"effect is the verdict ({lo.effect} is not excluded).")
-    elif par.get("lowest_heldout") == c.effect and enc and not form_of:
+    elif lead == c.effect and enc and not form_of:
         lines.append("Against the simpler " + ", ".join(
             f"{k}: the residuals it leaves hold what {c.effect} predicts (encompassing test p = {v:.3g} <= {thr:.3g})"
             for k, v in enc.items()) + ".")
     elif par.get("preferred_simpler") == c.effect:
-        lo = diag.candidate(par["lowest_heldout"])
+        lo = diag.candidate(lead)
         lines.append(f"Parsimony: {lo.effect} has the lowest held-out RMSE ({lo.heldout_rmse:.3f} deg) but is not "
                      f"significantly better than {c.effect} (paired t = {par['t_vs_lowest'].get(c.effect, float('nan')):.2f}"
                      f" < {diag.settings['evidence_threshold_t']:.2f}) and "
@@ -152,7 +159,8 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
            f"{b.n_obs} observations; response {st['response']}; weighted {st['weighted']}",
            f"    held-out scheme: {st['n_folds']} contiguous test blocks, buffer {st['buffer_frames']} frames each side, "
            f"z estimated on half the edges and scored on the other half; evidence threshold t > "
-           f"{st['evidence_threshold_t']:.2f} (alpha {st['alpha']} / {len(diag.candidates)} candidates) and AIC lower",
+           f"{st['evidence_threshold_t']:.2f} (alpha {st['alpha']} / {st.get('n_findings', len(diag.candidates))} effects"
+           f"{'' if st.get('n_findings', len(diag.candidates)) == len(diag.candidates) else ', forms of one effect sharing its share'}) and AIC lower",
            f"    z on held-out frames estimated from {len(st['edge_halves'][0])} edges, scored on "
            f"{len(st['edge_halves'][1])} (and swapped); the two sets share no tracked node: "
            f"{'yes' if st.get('node_disjoint_halves') else 'no (too few edges)'}",
@@ -199,7 +207,7 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
                    f"held-out RMSE also falls")
     enc = (st.get("parsimony") or {}).get("encompassing_p") or {}
     if enc:
-        lo = st["parsimony"]["lowest_heldout"]
+        lo = st["parsimony"].get("leading", st["parsimony"]["lowest_heldout"])
         out.append(f"    encompassing test (does {lo} predict what a simpler supported candidate leaves?): "
                    + ", ".join(f"vs {k} p = {v:.4f}" for k, v in enc.items())
                    + f"; the simpler one is named unless p <= {st['encompassing_threshold_p']:.3g}")

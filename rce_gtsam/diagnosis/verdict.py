@@ -53,6 +53,31 @@ def effect_kind(c) -> str | None:
     return getattr(eff, "kind", None)
 
 
+def finding_of(c) -> str:
+    """What a verdict for candidate ``c`` reports: its effect's :attr:`~rce_gtsam.effects.Effect.finding` where the
+    effect is another form of a library effect, else its own name."""
+    model = getattr(getattr(c, "fit", None), "model", None)
+    eff = next((e for e in getattr(model, "effects", ()) if e.name == c.effect), None)
+    return getattr(eff, "finding", None) or c.effect
+
+
+def leading_candidate(supported: list, t_crit: float):
+    """The supported candidate the verdict starts from: the one with the lowest held-out RMSE, unless it is another
+    form of an effect that is also supported (:func:`finding_of`) and does not beat that effect's own form
+    significantly (fold-paired t at most ``t_crit``): then the plain form leads, and the tests that weigh it
+    against simpler rivals (the encompassing test between the lags) apply to it. Without this a per-joint
+    resonance that was lowest but not significantly lower than the graded dynamics was weighed against the delay
+    by the fold t alone, which cannot separate them, and the delay was named (dynamics 1x, seed 7: the graded
+    form's encompassing test against the delay p = 0.0005)."""
+    best = supported[0]
+    name = finding_of(best)
+    if name != best.effect:
+        plain = next((c for c in supported if c.effect == name), None)
+        if plain is not None and paired_t(plain.fold_mse, best.fold_mse) <= t_crit:
+            return plain
+    return best
+
+
 def complexity(c) -> tuple[int, float]:
     """The parsimony order of a candidate: (free per-frame series besides z, effective parameters).
 
@@ -109,16 +134,19 @@ def support_a_richer_form(results: list, Y, W, s, halves, seed: int, b_rmse: flo
     return out
 
 
-def test_the_lowest_against_simpler(results: list, Y, W, s, halves, seed: int) -> None:
-    """For the supported candidate with the lowest held-out RMSE and each simpler supported one
+def test_the_lowest_against_simpler(results: list, Y, W, s, halves, seed: int, t_crit: float = math.inf) -> None:
+    """For the leading supported candidate (:func:`leading_candidate`: the lowest held-out RMSE, or the plain form
+    of an effect whose other form is not significantly lower) and each simpler supported one
     (:func:`complexity`): the cross-fitted encompassing test (:mod:`rce_gtsam.diagnosis.encompassing`) of whether
     the lower one's model predicts what the simpler one leaves; its p goes into the lower one's
     ``extra["encompassing_p"][simpler name]`` where the test applies (the simpler effect can be undone: a delay)."""
     sup = [c for c in results if c.supported]
     if len(sup) < 2:
         return
-    best = sup[0]
-    for c in sup[1:]:
+    best = leading_candidate(sup, t_crit)
+    for c in sup:
+        if c is best:
+            continue
         if complexity(c) < complexity(best):
             if c.effect in best.extra.get("form_test_p", {}):  # already run by support_a_richer_form
                 p, z = best.extra["form_test_p"][c.effect], best.extra["form_test_z"][c.effect]
@@ -135,7 +163,8 @@ def choose_verdict(results: list, t_crit: float, same_kind: bool = False,
                    p_pair: float | None = None) -> tuple[str | None, dict]:
     """The verdict among supported candidates, with a parsimony rule.
 
-    Start from the supported candidate with the lowest held-out RMSE. If a simpler supported candidate (fewer
+    Start from the supported candidate with the lowest held-out RMSE (or, where that is another form of a supported
+    effect and not significantly better than it, that effect: :func:`leading_candidate`). If a simpler supported candidate (fewer
     free per-frame series, then fewer effective parameters: :func:`complexity`) is not significantly worse than it (paired t over folds of the log MSE ratio
     below the same threshold as the support test), the simplest such candidate is the verdict: the data
     cannot tell them apart, and the extra parameters are not earned. Where the lowest candidate carries an
@@ -155,14 +184,14 @@ def choose_verdict(results: list, t_crit: float, same_kind: bool = False,
     sup = [c for c in results if c.supported]
     if not sup:
         return None, {}
-    best = sup[0]
+    best = leading_candidate(sup, t_crit)
     pair = {}
     simpler = []
     # same_kind: a simpler candidate of the same kind (both operators on z: delay and inertia both put a lag
     # between the excitation and the joint, and at low frequency inertia IS a lag) also counts when it is not
     # supported on its own, as long as it lowers the held-out error: "a lag" is what the data support, and the
     # extra parameters of the complex form must earn their keep against the simple one
-    pool = sup[1:] + ([c for c in results if not c.supported and c.improvement_pct > 0
+    pool = [c for c in sup if c is not best] + ([c for c in results if not c.supported and c.improvement_pct > 0
                        and effect_kind(c) is not None and effect_kind(c) == effect_kind(best)] if same_kind else [])
     enc = best.extra.get("encompassing_p", {}) if p_pair is not None else {}
     for c in pool:
@@ -171,7 +200,7 @@ def choose_verdict(results: list, t_crit: float, same_kind: bool = False,
         better = enc[c.effect] <= p_pair if c.effect in enc else t > t_crit
         if complexity(c) < complexity(best) and not better:
             simpler.append(c)
-    out = {"lowest_heldout": best.effect, "t_vs_lowest": pair}
+    out = {"lowest_heldout": sup[0].effect, "leading": best.effect, "t_vs_lowest": pair}
     if enc:
         out["encompassing_p"] = dict(enc)
     if not simpler:
