@@ -255,3 +255,31 @@ def test_a_significant_score_test_waives_the_aic_hurdle_but_not_the_held_out_err
     assert earns_its_place(0.99, 1.0, +30.0, 0.01, 0.001, calibrated=True)
     assert not earns_its_place(1.01, 1.0, -30.0, 0.01, 0.001, calibrated=True)   # held-out error must fall
     assert not earns_its_place(0.99, 1.0, -30.0, 1e-4, 0.001, calibrated=True)   # and by the resolution
+
+
+def test_a_form_that_is_not_significantly_better_than_its_plain_effect_lets_the_plain_effect_lead():
+    """Resonances (dynamics with each joint's own frequency) lowest but not significantly below the graded
+    dynamics: dynamics leads, and its encompassing test against the delay decides (p <= p_pair: dynamics named;
+    the fold t alone would prefer the one-parameter delay). Clearly better: the form leads and is named; the
+    verdict function returns the candidate, diagnose() reports its finding."""
+    from types import SimpleNamespace as C
+    from rce_gtsam import effects
+    from rce_gtsam.diagnosis.verdict import choose_verdict, finding_of, leading_candidate
+    rng = np.random.default_rng(3)
+    base = 1 + 0.05 * rng.standard_normal(16)
+    noisy = lambda f: base * f * (1 + 0.01 * rng.standard_normal(16))  # noqa: E731
+    res = C(effect="resonances", supported=True, heldout_rmse=0.90, fold_mse=noisy(0.80), extra={"k_eff": 60.0},
+            fit=C(model=C(effects=[effects.Resonances()])))
+    dyn = C(effect="dynamics", supported=True, heldout_rmse=0.91, fold_mse=res.fold_mse * (1 + 0.03 * rng.standard_normal(16)),
+            extra={"k_eff": 40.0, "encompassing_p": {"delay": 0.0005}}, fit=C(model=C(effects=[effects.Dynamics()])))
+    dly = C(effect="delay", supported=True, heldout_rmse=0.92, fold_mse=dyn.fold_mse * (1 + 0.03 * rng.standard_normal(16)),
+            extra={"k_eff": 38.0})
+    assert finding_of(res) == "dynamics" and finding_of(dyn) == "dynamics" and finding_of(dly) == "delay"
+    assert leading_candidate([res, dyn, dly], t_crit=2.6) is dyn
+    v, info = choose_verdict([res, dyn, dly], t_crit=2.6, p_pair=0.005)
+    assert v == "dynamics" and info["leading"] == "dynamics" and info["lowest_heldout"] == "resonances"
+    res_far = C(**{**vars(res), "heldout_rmse": 0.6, "fold_mse": noisy(0.36)})
+    assert leading_candidate([res_far, dyn, dly], t_crit=2.6) is res_far
+    assert choose_verdict([res_far, dyn, dly], t_crit=2.6, p_pair=0.005)[0] == "resonances"
+    # without the plain form among the supported, the form leads whatever its margin
+    assert leading_candidate([res, dly], t_crit=2.6) is res
