@@ -99,14 +99,16 @@ def test_score_test_is_calibrated_on_coloured_noise_and_finds_the_effect(name):
 
 def test_diagnose_runs_the_score_test_where_an_effect_has_one_and_splits_alpha():
     """The diagnosis: delay, dynamics, the saturation and the second excitation carry score_p; the others do not.
-    Their fold t threshold is the Bonferroni quantile at alpha / (2 C) and their score threshold alpha / (2 C) (C candidates); significant =
+    Their fold t threshold is the Bonferroni quantile at alpha / (2 C) and their score threshold alpha / (2 C) (C effects the
+    candidates can name: two forms of one effect share its share); significant =
     either test, supported = significant and the held-out error falls. The delay in these matrices is found."""
     from scipy import stats
 
     from rce_gtsam.diagnosis.diagnose import diagnose
     Y, s, *_ = synth("delay", seed=4, E=12, T=600, noise=0.15)
     d = diagnose(Y, root_distance=s, n_folds=8)
-    C = len(d.candidates)
+    C = len({effects.finding(c.effect) for c in d.candidates})
+    assert C == d.settings["n_findings"] == len(d.candidates) - 1  # resonances is a form of dynamics
     assert d.settings["score_threshold_p"] == pytest.approx(0.05 / (2 * C))
     assert d.settings["evidence_threshold_t_split"] == pytest.approx(stats.t.ppf(1 - 0.05 / (2 * C), 7))
     with_test = set(NEAR_NULL) | {n for n in effects.names() if effects.make(n).score_excitation == "between_rows"}
