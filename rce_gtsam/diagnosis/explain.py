@@ -111,6 +111,9 @@ def explain(diag: Diagnosis) -> str:
         lines.append(f"What it means: {eff.physics} Fit the model with {type(eff).__name__}() and read kappa "
                      "from the extended fit.")
     lead = par.get("leading", par.get("lowest_heldout"))
+    def leads(cand) -> str:
+        return (f"has the lowest held-out RMSE ({cand.heldout_rmse:.3f} deg)" if cand.effect == par.get("lowest_heldout")
+                else f"leads (held-out RMSE {cand.heldout_rmse:.3f} deg)")
     if lead is not None and lead != par.get("lowest_heldout"):
         low = diag.candidate(par["lowest_heldout"])
         lines.append(f"{low.effect} has the lowest held-out RMSE ({low.heldout_rmse:.3f} deg) but is another form of "
@@ -119,7 +122,7 @@ def explain(diag: Diagnosis) -> str:
                      f"{diag.settings['evidence_threshold_t']:.2f}), so {lead} is the form weighed against the others.")
     if par.get("preferred_simpler") == c.effect and c.effect in enc:
         lo = diag.candidate(lead)
-        lines.append(f"Parsimony: {lo.effect} has the lowest held-out RMSE ({lo.heldout_rmse:.3f} deg), but what it "
+        lines.append(f"Parsimony: {lo.effect} {leads(lo)}, but what it "
                      f"predicts in the residuals {c.effect} leaves is not significant (encompassing test p = "
                      f"{enc[c.effect]:.3g} > {thr:.3g}): the data do not ask for its extra parameters, so the simpler "
                      f"effect is the verdict ({lo.effect} is not excluded).")
@@ -129,7 +132,7 @@ def explain(diag: Diagnosis) -> str:
             for k, v in enc.items()) + ".")
     elif par.get("preferred_simpler") == c.effect:
         lo = diag.candidate(lead)
-        lines.append(f"Parsimony: {lo.effect} has the lowest held-out RMSE ({lo.heldout_rmse:.3f} deg) but is not "
+        lines.append(f"Parsimony: {lo.effect} {leads(lo)} but is not "
                      f"significantly better than {c.effect} (paired t = {par['t_vs_lowest'].get(c.effect, float('nan')):.2f}"
                      f" < {diag.settings['evidence_threshold_t']:.2f}) and "
                      + ("fits a free time course of its own, which can imitate the simpler effect's"
