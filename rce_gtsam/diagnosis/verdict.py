@@ -134,7 +134,7 @@ def support_a_richer_form(results: list, Y, W, s, halves, seed: int, b_rmse: flo
     return out
 
 
-def test_the_lowest_against_simpler(results: list, Y, W, s, halves, seed: int, t_crit: float = math.inf) -> None:
+def test_the_lowest_against_simpler(results: list, Y, W, s, halves, seed: int, t_crit: float) -> None:
     """For the leading supported candidate (:func:`leading_candidate`: the lowest held-out RMSE, or the plain form
     of an effect whose other form is not significantly lower) and each simpler supported one
     (:func:`complexity`): the cross-fitted encompassing test (:mod:`rce_gtsam.diagnosis.encompassing`) of whether
