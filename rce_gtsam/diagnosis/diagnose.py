@@ -87,7 +87,7 @@ from .score_test import effect_score_test, half_fits, is_significant, score_is_s
 from .settings import BLOCK_LENGTH, FULL_ITER, N_FOLDS, CV_ITER, RESOLUTION
 from .statistics import ResidualContext
 from .sysid import ResidualAnalysis, residual_analysis
-from .verdict import (choose_verdict, earns_its_place, support_a_richer_form,
+from .verdict import (choose_verdict, earns_its_place, finding_of, support_a_richer_form,
                                 test_the_lowest_against_simpler)
 from ..model import ModelFit, ResponseModel, validate_inputs
 from ..model.row_sets import (edge_halves, edge_nodes_from_labels, node_disjoint_split,  # noqa: F401 (re-exported)
@@ -341,7 +341,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     # share moved the score tests' threshold from 0.005 to 0.0042 and lost borderline lags: dynamics 0.75x seed
     # 1, delay p = 0.0050). The nominal family-wise bound becomes (n_candidates / n_findings) alpha (6 % for six
     # candidates of five findings); measured on effect-free pipeline data: 0 of 40 verdicts (bench_diagnose)
-    n_c = max(len({e.finding or e.name for e in cands}), 1)
+    n_c = max(len({e.verdict_name for e in cands}), 1)
     t_crit = float(stats.t.ppf(1 - alpha / n_c, max(int(used.sum()) - 1, 1)))
     # an effect with a full-data score test has two tests, each at half its share of alpha (Bonferroni)
     t_crit_split = float(stats.t.ppf(1 - alpha / (2 * n_c), max(int(used.sum()) - 1, 1)))
@@ -403,7 +403,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         test_the_lowest_against_simpler(results, Y, W, s, halves, seed, t_crit)
     verdict_effect, parsimony = choose_verdict(results, t_crit, p_pair=p_crit_score)
     # the finding a verdict reports: another form of a library effect reports that effect (resonances: dynamics)
-    verdict = None if verdict_effect is None else next(e.finding or e.name for e in cands if e.name == verdict_effect)
+    named = None if verdict_effect is None else next(c for c in results if c.effect == verdict_effect)
+    verdict = None if named is None else finding_of(named)
     worst_e, worst_f, summary = worst_edges_and_frames(base, labels, block_length, frames)
     settings = {"n_folds": len(blocks), "fold_blocks": blocks, "buffer_frames": gap, "block_length": block_length,
                 "seed": seed, "alpha": alpha, "evidence_threshold_t": t_crit, "resolution": resolution,
@@ -417,9 +418,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     budget = None
     if noise_floor is not None:
         added = {}
-        if verdict_effect is not None:
-            vf = next(c.fit for c in results if c.effect == verdict_effect)
-            added[verdict_effect] = (vf.residuals, vf.n_params)
+        if named is not None:
+            added[verdict_effect] = (named.fit.residuals, named.fit.n_params)
         budget = variance_budget(Y, base.residuals, base.n_params, noise_floor, added, labels,
                                  base_kappa=base.kappa)
     diag = Diagnosis(baseline=base, baseline_heldout_rmse=b_rmse, baseline_fold_mse=b_mse, candidates=results,

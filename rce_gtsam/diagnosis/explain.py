@@ -157,13 +157,14 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
     """Readable text report of a diagnosis."""
     b = diag.baseline
     st = diag.settings
+    n_effects = st.get("n_findings", len(diag.candidates))
     out = ["[[Diagnosis]]",
            f"    baseline: rank-1 (kappa_e z_t), {b.Y.shape[0]} edges x {b.Y.shape[1]} frames, "
            f"{b.n_obs} observations; response {st['response']}; weighted {st['weighted']}",
            f"    held-out scheme: {st['n_folds']} contiguous test blocks, buffer {st['buffer_frames']} frames each side, "
            f"z estimated on half the edges and scored on the other half; evidence threshold t > "
-           f"{st['evidence_threshold_t']:.2f} (alpha {st['alpha']} / {st.get('n_findings', len(diag.candidates))} effects"
-           f"{'' if st.get('n_findings', len(diag.candidates)) == len(diag.candidates) else ', forms of one effect sharing its share'}) and AIC lower",
+           f"{st['evidence_threshold_t']:.2f} (alpha {st['alpha']} / {n_effects} effects"
+           f"{'' if n_effects == len(diag.candidates) else ', forms of one effect sharing its share'}) and AIC lower",
            f"    z on held-out frames estimated from {len(st['edge_halves'][0])} edges, scored on "
            f"{len(st['edge_halves'][1])} (and swapped); the two sets share no tracked node: "
            f"{'yes' if st.get('node_disjoint_halves') else 'no (too few edges)'}",

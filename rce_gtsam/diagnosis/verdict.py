@@ -46,19 +46,23 @@ def maxt_verdict(diag: "Diagnosis") -> str | None:
     return choose_verdict(swapped, diag.settings["maxt_critical_t"])[0]
 
 
+def candidate_effect(c):
+    """The :class:`~rce_gtsam.effects.Effect` instance of candidate ``c`` in its fitted model, or None when it has
+    no fit."""
+    model = getattr(getattr(c, "fit", None), "model", None)
+    return next((e for e in getattr(model, "effects", ()) if e.name == c.effect), None)
+
+
 def effect_kind(c) -> str | None:
     """The kind of a candidate's effect ("operator", "output", "additive"), or None when it has no fit."""
-    model = getattr(getattr(c, "fit", None), "model", None)
-    eff = next((e for e in getattr(model, "effects", ()) if e.name == c.effect), None)
-    return getattr(eff, "kind", None)
+    return getattr(candidate_effect(c), "kind", None)
 
 
 def finding_of(c) -> str:
     """What a verdict for candidate ``c`` reports: its effect's :attr:`~rce_gtsam.effects.Effect.finding` where the
     effect is another form of a library effect, else its own name."""
-    model = getattr(getattr(c, "fit", None), "model", None)
-    eff = next((e for e in getattr(model, "effects", ()) if e.name == c.effect), None)
-    return getattr(eff, "finding", None) or c.effect
+    eff = candidate_effect(c)
+    return c.effect if eff is None else eff.verdict_name
 
 
 def leading_candidate(supported: list, t_crit: float):

@@ -46,8 +46,7 @@ def names() -> tuple[str, ...]:
 def finding(name: str) -> str:
     """What a verdict for the effect called ``name`` reports: its :attr:`~rce_gtsam.effects.Effect.finding` when
     it is another form of a library effect, else ``name`` (unknown names are returned as they are)."""
-    cls = CANDIDATES.get(name)
-    return (cls.finding or name) if cls is not None else name
+    return make(name).verdict_name if name in CANDIDATES else name
 
 
 def make(name: str) -> Effect:

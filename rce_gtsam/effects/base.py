@@ -86,6 +86,11 @@ class Effect:
     #: two per node-disjoint half to tell a second shared course from the first).
     min_rows: ClassVar[int] = 1
 
+    @property
+    def verdict_name(self) -> str:
+        """The name a verdict for this effect reports: its :attr:`finding`, else its own name."""
+        return self.finding or self.name
+
     # -- description ------------------------------------------------------------------------------
     def parameters(self, n_edges: int) -> tuple[Parameter, ...]:
         """Static parameters of this term."""
