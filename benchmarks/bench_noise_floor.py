@@ -22,6 +22,7 @@ import numpy as np
 def one(seed: int, frames: int) -> dict:
     from dataclasses import replace
 
+    from rce_gtsam.diagnosis.budget import budget_of
     from rce_gtsam.diagnosis.noise_floor import noise_floor_of
     from rce_gtsam.pipeline import analyze
     from rce_gtsam.sim.simulate import NoiseConfig, SimulationConfig, simulate
@@ -41,7 +42,14 @@ def one(seed: int, frames: int) -> dict:
     yref = y + np.nanmean(Y - y, axis=1, keepdims=True)
     true_rows = np.nanmean((Y - yref) ** 2, axis=1)
     nf = noise_floor_of(res)
-    return {"seed": seed, "sigma_mult": sig, "drift_mult": drift, "along_ratio": ratio,
+    b = budget_of(res)
+    ok = np.isfinite(Y)
+    true_var = float(np.mean((Y - yref)[ok] ** 2))
+    return {"budget_status": b.status, "budget_floor_over_true": b.noise_floor / true_var,
+            "unexplained_z": b.unexplained / b.unexplained_se if b.unexplained_se > 0 else float("nan"),
+            "unexplained_share": b.share(b.unexplained), "rank1_share": b.share(b.rank1),
+            "upper_share": b.share(b.unexplained + 2 * b.unexplained_se),
+"seed": seed, "sigma_mult": sig, "drift_mult": drift, "along_ratio": ratio,
             "true_rms": float(np.sqrt(true_rows.mean())), "est_rms": nf.rms_deg,
             "rows_within_25": float(np.mean(np.abs(np.sqrt(nf.variance_deg2 / true_rows) - 1) <= 0.25)),
             "q": nf.across_over_along, "q_true": 1.0 / ratio ** 2, "valid": float(nf.valid.mean()),
@@ -57,18 +65,25 @@ def main() -> int:
     t0 = time.perf_counter()
     rows = []
     print(f"{'seed':>4} {'sigma x':>7} {'drift x':>7} {'along':>5} {'true deg':>8} {'est deg':>8} {'ratio':>6} "
-          f"{'rows<=25%':>9} {'q':>6} {'q set':>6} {'consistent':>10}")
+          f"{'rows<=25%':>9} {'q':>6} {'q set':>6} {'consistent':>10} {'floor/true var':>14} {'unexpl z':>8} "
+          f"{'budget':>12}")
     for s in range(a.first_seed, a.first_seed + a.seeds):
         r = one(s, a.frames)
         rows.append(r)
         print(f"{s:>4} {r['sigma_mult']:>7.1f} {r['drift_mult']:>7.1f} {r['along_ratio']:>5.1f} {r['true_rms']:>8.3f} "
               f"{r['est_rms']:>8.3f} {r['est_rms'] / r['true_rms']:>6.2f} {100 * r['rows_within_25']:>8.0f}% "
-              f"{r['q']:>6.3f} {r['q_true']:>6.3f} {100 * r['valid']:>9.0f}%", flush=True)
+              f"{r['q']:>6.3f} {r['q_true']:>6.3f} {100 * r['valid']:>9.0f}% "
+              f"{r['budget_floor_over_true']:>14.2f} {r['unexplained_z']:>8.2f} {r['budget_status']:>12}", flush=True)
     ratio = np.array([r["est_rms"] / r["true_rms"] for r in rows])
     print(f"\nestimated / true angle-noise RMS over {len(rows)} branches: median {np.median(ratio):.3f}, "
           f"range {ratio.min():.3f}-{ratio.max():.3f}; within 25 %: {int(np.sum(np.abs(ratio - 1) <= 0.25))}/{len(rows)}; "
           f"rows within 25 % (median over branches) {100 * np.median([r['rows_within_25'] for r in rows]):.0f}%; "
           f"{time.perf_counter() - t0:.0f} s")
+    fv = np.array([r["budget_floor_over_true"] for r in rows])
+    status = [r["budget_status"] for r in rows]
+    print(f"variance budget on these effect-free branches: floor / true noise variance median {np.median(fv):.3f}, "
+          f"RMS relative error {np.sqrt(np.mean((fv - 1) ** 2)):.3f}; status noise {status.count('noise')}, "
+          f"misses {status.count('misses')} (false), inconclusive {status.count('inconclusive')}")
     return 0
 
 

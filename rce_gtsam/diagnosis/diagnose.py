@@ -156,7 +156,8 @@ class Diagnosis:
         """``"effect"`` (a candidate explains the misfit), ``"adequate"`` (what the rank-1 model leaves is
         consistent with the noise floor), ``"misses"`` (significantly more than noise is left and no candidate
         explains it), ``"inconclusive"`` (the noise floor is only bounded and the bounds straddle the
-        residual), or ``"untested"`` (no noise floor was given: held-out comparison only)."""
+        residual, or the record is too short to exclude a miss as large as the noise floor:
+        ``budget.reason``), or ``"untested"`` (no noise floor was given: held-out comparison only)."""
         if self.verdict is not None:
             return "effect"
         if self.budget is None:

@@ -69,10 +69,14 @@ def explain(diag: Diagnosis) -> str:
         worst = sorted(b.per_segment, key=lambda r: -(r["unexplained"] or 0.0))[:3]
         where = ", ".join(f"{r['segment']} ({r['unexplained']:.2g} deg^2)" for r in worst if (r["unexplained"] or 0) > 0)
         if b.status == "noise":
-            upper = share(b.unexplained + 2 * b.unexplained_se)
             return (head + f" That is consistent with zero: what the rank-1 model leaves is at the tracking-noise level,"
-                    f" and the model is adequate for these data — but with this record the unexplained share could still"
-                    f" be as large as {max(upper, 0):.0f}% (2 SE); a longer recording narrows that." + closest)
+                    f" and the model is adequate for these data — at most {max(share(b.upper), 0):.0f}% could still"
+                    f" hide in the residual (2 SE), no more than the noise floor; a longer recording narrows that."
+                    + closest)
+        if b.reason == "too_uncertain":
+            return (head + f" That is consistent with zero, but this record cannot show that the model is adequate:"
+                    f" the unexplained share could be as large as {share(b.upper):.0f}% (2 SE), more than the noise"
+                    f" floor's {share(b.noise_floor):.0f}%. Inconclusive; a longer recording narrows that." + closest)
         if b.status == "misses":
             return (head + " That is significantly more than noise, and no candidate effect in the library explains it:"
                     f" the model misses real structure, most in segments {where or 'none singled out'}."
@@ -187,7 +191,8 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
         out.append(f"    total {bd.total:.4g}   rank-1 {bd.rank1:.4g} ({pc(bd.rank1):.0f}%)   "
                    + "".join(f"{k} {v:.3g} ({pc(v):.0f}%)   " for k, v in bd.effects.items())
                    + f"noise floor {bd.noise_floor:.4g} ({pc(bd.noise_floor):.0f}%)   unexplained {bd.unexplained:.3g} "
-                   f"+/- {bd.unexplained_se:.2g} ({pc(bd.unexplained):+.0f}%): {bd.status}")
+                   f"+/- {bd.unexplained_se:.2g} ({pc(bd.unexplained):+.0f}%): {bd.status}"
+                   + (f" ({bd.reason.replace('_', ' ')})" if bd.reason else ""))
         nf = diag.noise_floor
         out.append(f"    noise floor from segment stretch (inextensibility) x across/along ratio {nf.across_over_along:.2f}; "
                    f"{int(nf.valid.sum())}/{len(nf.valid)} segments consistent, others use the white-noise lower bound")
