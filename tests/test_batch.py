@@ -73,7 +73,8 @@ def test_summary_matches_each_recording_and_reports_the_broken_one(inputs, first
     out, code = first_run
     assert code == 1  # one recording failed
     summary = pd.read_csv(out / "summary.csv")
-    assert list(summary.columns[:7]) == ["id", "plant", "treatment", "status", "kind", "preset", "verdict"]
+    assert list(summary.columns[:8]) == ["id", "plant", "treatment", "status", "kind", "preset", "verdict",
+                                         "diagnosis_status"]
     assert summary.columns[-1] == "error"
     broken = summary[summary.id == "broken"]
     assert len(broken) == 1 and broken.status.iloc[0] == "failed" and broken.kappa.isna().all()
@@ -89,14 +90,18 @@ def test_summary_matches_each_recording_and_reports_the_broken_one(inputs, first
         assert (mine.treatment == r["treatment"]).all()
         for col in ("parent", "child", "zone", "kappa", "kappa_ci_low", "kappa_ci_high", "uncertainty"):
             assert mine[col].tolist() == comp[col].tolist()
-        verdict = json.loads((out / r["id"] / "diagnosis.json").read_text())["verdict"] or "none"
-        assert (mine.verdict == verdict).all()
+        diag = json.loads((out / r["id"] / "diagnosis.json").read_text())
+        assert (mine.verdict == (diag["verdict"] or "none")).all()
+        assert (mine.diagnosis_status == diag["status"]).all() and diag["status"] in {
+            "effect", "adequate", "misses", "inconclusive"}
     assert set(summary[summary.id == "v1"].kind) == {"video"}
     doc = json.loads((out / "summary.json").read_text())
     assert doc["batch"]["n_recordings"] == 7 and doc["batch"]["n_failed"] == 1 and doc["batch"]["n_computed"] == 6
     by_id = {d["id"]: d for d in doc["recordings"]}
     assert by_id["broken"]["error_kind"] == "input" and by_id["p2"]["metadata"]["treatment"] == "wind"
     assert by_id["p1"]["heldout_rmse_deg"]["baseline"] > 0
+    assert by_id["p1"]["budget"]["status"] in {"noise", "misses", "inconclusive"}
+    assert by_id["p1"]["diagnosis_status"] == json.loads((out / "p1" / "diagnosis.json").read_text())["status"]
     assert len(by_id["p1"]["segments"]) == len(summary[summary.id == "p1"])
     for name in ("kappa_by_zone.png", "verdicts.png", "uncertainty.png"):
         assert (out / "figures" / name).stat().st_size > 10_000

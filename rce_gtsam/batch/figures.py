@@ -2,8 +2,9 @@
 
 * ``kappa_by_zone.png`` — one panel per zone (proximal, mid, distal): every segment's kappa with its 95 %
   CI, one column per recording (log scale; kappa = 1, each branch's geometric mean, dashed);
-* ``verdicts.png`` — (a) how many recordings got each diagnosis verdict (``none``: the rank-1 model was not
-  beaten; ``failed``: the recording did not run); (b) per recording, the held-out RMSE (deg) of the rank-1
+* ``verdicts.png`` — (a) how many recordings got each diagnosis verdict (``none (adequate)``: no effect
+  beats the rank-1 model and the rest is at the noise floor; ``none (misses)``: more than noise is left;
+  ``none (inconclusive)``; ``failed``: the recording did not run); (b) per recording, the held-out RMSE (deg) of the rank-1
   baseline and of the model with the verdict's effect;
 * ``uncertainty.png`` — U_e = CI width / kappa of every segment per recording, coloured by zone, with
   each recording's median.
@@ -21,7 +22,8 @@ from ..viz.style import FIG_WIDTH_IN, RC, ZONE_COLORS
 from .summary import RecordingSummary
 
 ZONES = ("proximal", "mid", "distal")
-VERDICT_COLORS = {"none": "#9e9e9e", "failed": "#000000", "delay": "#1b9e77", "dynamics": "#d95f02",
+VERDICT_COLORS = {"none (adequate)": "#9e9e9e", "none (inconclusive)": "#cfcfcf", "none (misses)": "#5f5f5f",
+                  "none": "#9e9e9e", "failed": "#000000", "delay": "#1b9e77", "dynamics": "#d95f02",
                   "second_mode": "#7570b3", "offset": "#e7298a", "nonlinear": "#66a61e"}
 
 
@@ -31,7 +33,10 @@ def _label(r: RecordingSummary) -> str:
 
 
 def _verdict(r: RecordingSummary) -> str:
-    return "failed" if r.status == "failed" else (r.verdict or "none")
+    if r.status == "failed":
+        return "failed"
+    v = r.verdict or "none"
+    return f"none ({r.diagnosis_status})" if v == "none" and r.diagnosis_status not in (None, "untested") else v
 
 
 def fig_kappa_by_zone(recordings: list[RecordingSummary]):
@@ -101,7 +106,7 @@ def fig_verdicts(recordings: list[RecordingSummary]):
         ax.bar(x + 0.2, np.nan_to_num(after), width=0.4,
                color=[VERDICT_COLORS.get(v, "#444444") for v in verdicts], label="with the verdict's effect")
         for i, v in enumerate(verdicts):
-            if v in ("none", "failed"):
+            if v.startswith("none") or v == "failed":
                 ax.text(i + 0.2, (base[i] if np.isfinite(base[i]) else 0) * 0.02, v, rotation=90, ha="center",
                         va="bottom", fontsize=6, color="0.25")
         ax.set_xticks(x, [_label(r) for r in recordings], rotation=90, fontsize=6 if n > 10 else 7)
@@ -114,7 +119,7 @@ def fig_verdicts(recordings: list[RecordingSummary]):
         ax.set_title("(b) Held-out error: baseline vs verdict")
         ax.legend(handles=[Patch(color="#bdbdbd", label="rank-1 baseline")]
                   + [Patch(color=VERDICT_COLORS.get(k, "#444444"), label=f"+ {k}") for k in kinds
-                     if k not in ("none", "failed")], loc="upper right", fontsize=6)
+                     if not (k.startswith("none") or k == "failed")], loc="upper right", fontsize=6)
     return fig
 
 

@@ -2,13 +2,15 @@
 
 ``summary.csv`` columns: ``id``, the manifest's metadata columns, ``status`` (ok / failed), ``kind``
 (video / tracks), ``preset``, ``verdict`` (the diagnosis' missing effect, ``none`` when the rank-1 model is
-not beaten), then every column of the recording's ``compliance_summary.csv`` for each segment with a bend
+not beaten), ``diagnosis_status`` (what a ``none`` means: ``adequate`` — the rest is at the noise floor —,
+``misses`` — more than noise is left and no candidate explains it —, ``inconclusive``; ``effect`` with a
+verdict; diagnosis.json's ``status``), then every column of the recording's ``compliance_summary.csv`` for each segment with a bend
 (parent, child, depth, zone, root_distance_px, rest_length_px, kappa, kappa_ci_low, kappa_ci_high,
 uncertainty = U_e, a ``quality`` column when the analysis writes one, ..., fit_rmse_deg), and ``error``.
 A failed recording has one row with its error and empty segment columns.
 
 ``summary.json``: ``{"batch": {...counts, timing, manifest, options...}, "recordings": [{id, status,
-error, metadata, verdict, explanation, heldout_rmse_deg: {baseline, verdict}, elapsed_s, worker,
+error, metadata, verdict, diagnosis_status, budget, explanation, heldout_rmse_deg: {baseline, verdict}, elapsed_s, worker,
 folder, segments: [...]}, ...]}``.
 """
 
@@ -24,7 +26,7 @@ from .manifest import Manifest
 from .process import Outcome
 
 #: Per-recording columns that come before the segment columns.
-RECORDING_COLUMNS = ("id", "status", "kind", "preset", "verdict")
+RECORDING_COLUMNS = ("id", "status", "kind", "preset", "verdict", "diagnosis_status")
 
 
 @dataclass(frozen=True)
@@ -47,6 +49,11 @@ class RecordingSummary:
         if self.diagnosis is None:
             return None
         return self.diagnosis.get("verdict") or "none"
+
+    @property
+    def diagnosis_status(self) -> str | None:
+        """diagnosis.json's ``status``: effect, adequate, misses, inconclusive or untested (None when failed)."""
+        return None if self.diagnosis is None else self.diagnosis.get("status")
 
 
 def read_recordings(manifest: Manifest, out: Path, outcomes: dict[str, Outcome], options) -> list[RecordingSummary]:
@@ -78,7 +85,7 @@ def summary_table(manifest: Manifest, recordings: list[RecordingSummary]) -> pd.
                 seg_cols.append(c)
     for r in recordings:
         head = {"id": r.id, **r.metadata, "status": r.status, "kind": r.kind, "preset": r.preset,
-                "verdict": r.verdict}
+                "verdict": r.verdict, "diagnosis_status": r.diagnosis_status}
         if r.segments.empty:
             df = pd.DataFrame([head])
         else:
@@ -108,7 +115,8 @@ def summary_document(manifest: Manifest, recordings: list[RecordingSummary], bat
             "id": r.id, "status": r.status, "kind": r.kind, "preset": r.preset, "metadata": r.metadata,
             "error": r.outcome.error, "error_kind": r.outcome.error_kind, "computed": r.outcome.status != "skipped",
             "elapsed_s": r.outcome.elapsed_s, "worker": r.outcome.worker, "folder": str(r.folder.resolve()),
-            "verdict": r.verdict, "explanation": d.get("explanation"),
+            "verdict": r.verdict, "diagnosis_status": r.diagnosis_status, "budget": d.get("budget"),
+            "explanation": d.get("explanation"),
             "heldout_rmse_deg": None if r.diagnosis is None else {
                 "baseline": (d.get("baseline") or {}).get("heldout_rmse"),
                 "verdict": cand[verdict].get("heldout_rmse") if verdict in cand else None},

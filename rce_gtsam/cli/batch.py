@@ -56,15 +56,17 @@ def run(args: argparse.Namespace) -> int:
 
 
 def format_outcomes(result) -> str:
-    """One line per recording (status, verdict, segments, seconds) and the totals."""
+    """One line per recording (status, verdict, what the diagnosis found, segments, seconds) and the totals."""
     by_id = {rid: g for rid, g in result.summary.groupby("id", sort=False)}
-    lines = [f"{'id':<16} {'status':<8} {'verdict':<12} {'segments':>8} {'time (s)':>9}"]
+    lines = [f"{'id':<16} {'status':<8} {'verdict':<12} {'diagnosis':<12} {'segments':>8} {'time (s)':>9}"]
     for rid, o in result.outcomes.items():
         g = by_id.get(rid)
         verdict = g["verdict"].iloc[0] if g is not None and isinstance(g["verdict"].iloc[0], str) else "-"
+        found = (g["diagnosis_status"].iloc[0] if g is not None and isinstance(g["diagnosis_status"].iloc[0], str)
+                 else "-")
         nseg = int(g["kappa"].notna().sum()) if g is not None and "kappa" in g else 0
         status = {"ok": "computed", "skipped": "cached"}.get(o.status, o.status)
-        lines.append(f"{rid:<16} {status:<8} {verdict:<12} {nseg:>8} {o.elapsed_s:9.1f}")
+        lines.append(f"{rid:<16} {status:<8} {verdict:<12} {found:<12} {nseg:>8} {o.elapsed_s:9.1f}")
     lines.append(f"{len(result.outcomes)} recordings: {result.count('ok')} computed, {result.count('skipped')} "
                  f"unchanged (skipped), {result.count('failed')} failed; {result.wall_s:.1f} s")
     return "\n".join(lines)
