@@ -70,8 +70,9 @@ def explain(diag: Diagnosis) -> str:
         where = ", ".join(f"{r['segment']} ({r['unexplained']:.2g} deg^2)" for r in worst if (r["unexplained"] or 0) > 0)
         if b.status == "noise":
             return (head + f" That is consistent with zero: what the rank-1 model leaves is at the tracking-noise level,"
-                    f" and the model is adequate for these data — at most {max(share(b.upper), 0):.0f}% could still"
-                    f" hide in the residual (2 SE), no more than the noise floor; a longer recording narrows that."
+                    f" and the model is adequate for these data: at most {max(share(b.upper), 0):.0f}% of the variance"
+                    f" could still be a missed effect (2 SE), no more than the noise floor's"
+                    f" {share(b.noise_floor):.0f}%; a longer recording narrows that."
                     + closest)
         if b.reason == "too_uncertain":
             return (head + f" That is consistent with zero, but this record cannot show that the model is adequate:"
