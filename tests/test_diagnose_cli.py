@@ -45,10 +45,12 @@ def test_diagnose_sample_json_report_figures_recording(tmp_path, capsys):
     assert d["verdict"] is None
     assert [p.name for p in js.parent.iterdir()] == ["diagnosis.json"]  # no temp file left behind
     names = {p.name for p in figs.iterdir()}
-    assert {"heldout_error.png", "residuals_diagnosis.png", "residuals.png", "compliance.png"} <= names
+    assert {"heldout_error.png", "residuals_diagnosis.png", "residuals.png", "compliance.png",
+            "variance_budget.png", "residual_analysis.png"} <= names
     assert not [n for n in names if n.startswith(".")]
     paths = Counter(str(ch.entity_path) for ch in RrdReader(str(rrd)).stream())
     assert "/diagnosis/report" in paths and "/diagnosis/heldout" in paths
+    assert "/diagnosis/budget/unexplained_deg2" in paths and "/diagnosis/budget/noise_floor_deg2" in paths
 
 
 def test_diagnose_finds_hidden_offset_and_prints_fit_report(tmp_path, capsys):

@@ -88,6 +88,25 @@ def test_diagnosis_figures(analysis, tmp_path):
         _png_ok(p, min_bytes=5_000)
 
 
+def test_variance_budget_figure(tmp_path):
+    """variance_budget.png from diagnosis.json's budget: a row worse than no model (R^2 < 0), a row whose floor
+    is only a lower bound, a negative unexplained part, and an added effect."""
+    from rce_gtsam.viz.budget import fig_variance_budget
+    from rce_gtsam.viz.style import save_png
+    budget = {"total": 4.0, "rank1": 2.0, "effects": {"delay": 0.4}, "noise_floor": 1.0, "unexplained": 0.6,
+              "unexplained_se": 0.2, "status": "inconclusive", "reason": "floor_bounded"}
+    rows = [{"segment": "1->2", "total": 3.0, "rank1": -0.6, "effects": {"delay": 0.1}, "noise_floor": 0.05,
+             "noise_floor_is_lower_bound": True, "unexplained": 3.45, "unexplained_se": 1.0},
+            {"segment": "2->3", "total": 5.0, "rank1": 3.0, "effects": {"delay": 0.5}, "noise_floor": 1.8,
+             "noise_floor_is_lower_bound": False, "unexplained": -0.3, "unexplained_se": 0.4}]
+    fig = fig_variance_budget(budget, rows)
+    ax = fig.axes[0]
+    assert "inconclusive (floor bounded)" in ax.get_title(loc="left")
+    assert [t.get_text() for t in ax.get_yticklabels()] == ["whole branch", "1->2 *", "2->3"]
+    assert ax.get_xlim()[0] < -19  # the R^2 < 0 row is drawn left of zero
+    _png_ok(save_png(fig, tmp_path / "variance_budget.png"), min_bytes=5_000)
+
+
 def test_figures_as_extra_writer(analysis, tmp_path):
     """write_figures plugs into AnalysisResult.write as an extra writer (atomic output folder)."""
     from rce_gtsam.viz import write_figures

@@ -137,11 +137,16 @@ def test_diagnosis_and_view_command(analysis, tmp_path):
             "candidates": [{"effect": "delay", "heldout_rmse": 0.7, "evidence": 12.0},
                            {"effect": "offset", "heldout_rmse": 0.98, "evidence": 0.5}],
             "worst_edges": [{"edge": "5->6", "rms": 1.2}], "worst_frames": [{"start": 10, "end": 30}],
-            "after_prediction": (result.fit.predict() * 0.9).tolist()}
+            "after_prediction": (result.fit.predict() * 0.9).tolist(),
+            "budget": {"total": 2.0, "rank1": 1.0, "effects": {}, "noise_floor": 0.8, "unexplained": 0.2,
+                       "unexplained_se": 0.1, "status": "noise"},
+            "budget_per_segment": [{"segment": str(i), "total": 2.0, "rank1": 1.0, "noise_floor": 0.8,
+                                    "unexplained": 0.2, "unexplained_se": 0.3} for i in range(E)]}
     (out / "diagnosis.json").write_text(json.dumps(diag))
     assert main(["view", str(out), "--rrd", str(tmp_path / "v.rrd")]) == 0
     temporal, static = _rows(tmp_path / "v.rrd")
     assert static["/diagnosis/report"] == 1 and static["/diagnosis/heldout"] == 1
+    assert all(static[f"/diagnosis/budget/{p}_deg2"] == 1 for p in ("total", "rank1", "noise_floor", "unexplained"))
     assert sum(k.startswith("/diagnosis/after/") for k in temporal) == E
     assert temporal["/image/tracks/raw"] == 0  # the simulation's tracks were never a file
     _verify(tmp_path / "v.rrd")

@@ -28,6 +28,8 @@ def build_blueprint(view: AnalysisView, diagnosis=None, video: bool = False, n_e
     if diagnosis is not None:
         docs.insert(0, rrb.TextDocumentView(origin="diagnosis/report", name="Diagnosis"))
         docs.append(rrb.BarChartView(origin="diagnosis/heldout", name="Held-out RMSE: baseline, candidates"))
+        docs.append(rrb.BarChartView(origin="diagnosis/budget/unexplained_deg2",
+                                     name="Unexplained variance per segment (deg², root → tip)"))
         docs.append(rrb.TimeSeriesView(origin="diagnosis/after", name="Before / after adding the effect"))
     docs.append(rrb.BarChartView(origin="summary/kappa", name="κ per edge (root → tip)"))
     return rrb.Blueprint(

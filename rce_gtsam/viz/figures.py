@@ -368,8 +368,9 @@ def fig_before_after(Y, pred_before, pred_after, frames, labels, effect: str, n:
 
 def write_diagnosis_figures(diagnosis, out_dir: str | Path, result=None) -> dict[str, Path]:
     """Write ``heldout_error.png`` and, when the diagnosis carries them, ``residuals_diagnosis.png``
-    (``residuals`` (E, T) degrees) and ``effect_before_after.png`` (``after_prediction`` (E, T), with
-    ``result`` for the observed data and the rank-1 prediction)."""
+    (``residuals`` (E, T) degrees), ``effect_before_after.png`` (``after_prediction`` (E, T), with
+    ``result`` for the observed data and the rank-1 prediction), ``variance_budget.png`` (``budget``) and
+    ``residual_analysis.png``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = {"heldout_error.png": _save(fig_heldout(diagnosis), out / "heldout_error.png")}
@@ -395,6 +396,11 @@ def write_diagnosis_figures(diagnosis, out_dir: str | Path, result=None) -> dict
             fig_before_after(resp.Y, result.fit.predict(), np.asarray(after, float), resp.frames,
                              [f"{j}→{c}" for j, c in resp.edges], _get(diagnosis, "verdict") or "effect"),
             out / "effect_before_after.png")
+    budget = _get(diagnosis, "budget")
+    if budget is not None:
+        from .budget import fig_variance_budget
+        written["variance_budget.png"] = _save(fig_variance_budget(budget, _get(diagnosis, "budget_per_segment")),
+                                               out / "variance_budget.png")
     ra = _get(diagnosis, "residual_analysis_obj")
     if ra is not None:
         from .residual_analysis import fig_residual_analysis

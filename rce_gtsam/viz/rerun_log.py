@@ -15,7 +15,8 @@ Entities (timelines ``frame`` = video frame index, and ``time`` = seconds into t
 * ``residuals/<edge>`` — observed minus predicted, degrees;
 * ``summary/kappa`` (bar chart) and ``summary/table`` (markdown table of kappa, CI, U_e);
 * from :func:`log_diagnosis`: ``diagnosis/report`` (markdown), ``diagnosis/heldout`` (bar chart of
-  held-out RMSE: baseline then each candidate), and ``diagnosis/after/<edge>`` (observed, rank-1 and
+  held-out RMSE: baseline then each candidate), ``diagnosis/budget/{total,rank1,noise_floor,unexplained}_deg2``
+  (the variance budget per segment, bar charts root -> tip), and ``diagnosis/after/<edge>`` (observed, rank-1 and
   extended-model prediction) when the diagnosis carries the extended model's prediction.
 
 Everything per frame is sent in bulk with ``send_columns`` (one call per entity), not row by row.
@@ -323,6 +324,7 @@ def log_diagnosis(diagnosis, rec: rr.RecordingStream, view: AnalysisView | None 
     vals = [float(v) if _isnum(v) else 0.0 for v in vals]
     if vals:
         rec.log("diagnosis/heldout", rr.BarChart(np.array(vals)), static=True)
+    log_budget(diagnosis, rec)
     ra = _get(diagnosis, "residual_analysis_obj") or _get(diagnosis, "residual_analysis")
     if ra is not None and hasattr(ra, "freqs"):
         log_residual_analysis(ra, rec, [view.edge_name(e) for e in view.edges] if view is not None else None)
@@ -343,6 +345,24 @@ def log_diagnosis(diagnosis, rec: rr.RecordingStream, view: AnalysisView | None 
                                   names=["observed (deg)", "rank-1 κ·z (deg)", f"with {name} (deg)"]), static=True)
         rec.send_columns(p, indexes=idx, columns=rr.Scalars.columns(
             scalars=np.stack([view.Y[i], view.pred[i], after[i]], axis=1)))
+
+
+#: the variance-budget parts logged per segment under ``diagnosis/budget/<part>_deg2`` (root -> tip)
+BUDGET_PARTS = ("total", "rank1", "noise_floor", "unexplained")
+
+
+def log_budget(diagnosis, rec: rr.RecordingStream) -> None:
+    """The variance budget per segment (deg^2, in the response's edge order): one bar chart per part of
+    :data:`BUDGET_PARTS` under ``diagnosis/budget/``. Nothing when the diagnosis has no budget."""
+    budget = _get(diagnosis, "budget")
+    if budget is None:
+        return
+    rows = _get(diagnosis, "budget_per_segment") if isinstance(budget, dict) else budget.per_segment
+    if not rows:
+        return
+    for part in BUDGET_PARTS:
+        vals = np.array([r.get(part) if _isnum(r.get(part)) else np.nan for r in rows], dtype=float)
+        rec.log(f"diagnosis/budget/{part}_deg2", rr.BarChart(np.nan_to_num(vals)), static=True)
 
 
 def log_residual_analysis(ra, rec: rr.RecordingStream, names=None) -> None:
