@@ -44,7 +44,8 @@ def fig_variance_budget(budget, per_segment=None, title: str | None = None):
     bars = [{"segment": "whole branch", "total": overall["total"], "rank1": overall["rank1"],
              "effects": overall.get("effects") or {}, "noise_floor": overall["noise_floor"],
              "unexplained": overall["unexplained"], "unexplained_se": se_total,
-             "noise_floor_is_lower_bound": False}] + rows
+             "noise_floor_is_lower_bound": False,  # a star only: part of its floor may be a bound
+             "starred": any(r.get("noise_floor_is_lower_bound") for r in rows)}] + rows
     n = len(bars)
     with plt.rc_context(RC):
         fig, ax = plt.subplots(figsize=(FIG_WIDTH_IN, 1.0 + 0.2 * n), constrained_layout=True)
@@ -74,7 +75,8 @@ def fig_variance_budget(budget, per_segment=None, title: str | None = None):
             if se > 0:
                 ax.errorbar(left + un, i, xerr=2 * se, fmt="none", ecolor="0.15", elinewidth=0.8, capsize=2)
             ax.text(1.0, i, f"{tot:.3g}", transform=ax.get_yaxis_transform(), ha="left", va="center", fontsize=6)
-        ax.set_yticks(range(n), [str(b["segment"]) + (" *" if b.get("noise_floor_is_lower_bound") else "")
+        ax.set_yticks(range(n), [str(b["segment"]) + (" *" if b.get("noise_floor_is_lower_bound") or b.get("starred")
+                                                      else "")
                                  for b in bars], fontsize=6)
         ax.get_yticklabels()[0].set_fontweight("bold")
         ax.invert_yaxis()
