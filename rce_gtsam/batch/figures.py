@@ -4,8 +4,8 @@
   CI, one column per recording (log scale; kappa = 1, each branch's geometric mean, dashed);
 * ``verdicts.png`` — (a) how many recordings got each diagnosis verdict (``none (adequate)``: no effect
   beats the rank-1 model and the rest is at the noise floor; ``none (misses)``: more than noise is left;
-  ``none (inconclusive)``; ``failed``: the recording did not run); (b) per recording, the held-out RMSE (deg) of the rank-1
-  baseline and of the model with the verdict's effect;
+  ``none (inconclusive)``; ``failed``: the recording did not run); (b) per recording, the held-out RMSE
+  (deg) of the rank-1 baseline and of the model with the verdict's effect;
 * ``uncertainty.png`` — U_e = CI width / kappa of every segment per recording, coloured by zone, with
   each recording's median.
 

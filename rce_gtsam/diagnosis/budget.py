@@ -72,7 +72,8 @@ class VarianceBudget:
 
     @property
     def upper(self) -> float:
-        """The largest unexplained variance the record allows at 2 SE (deg^2)."""
+        """The largest unexplained variance the record allows at 2 SE (deg^2): the bound the status rule
+        compares with the noise floor at its default ``z_crit`` of 2."""
         return self.unexplained + 2.0 * self.unexplained_se
 
     def share(self, part: float) -> float:

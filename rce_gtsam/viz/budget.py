@@ -88,7 +88,8 @@ def fig_variance_budget(budget, per_segment=None, title: str | None = None):
         ax.axvline(0.0, color="0.3", lw=0.6)
         from matplotlib.patches import Patch
         handles = [Patch(color=RANK1_COLOR, label="rank-1 κ·z")]
-        handles += [Patch(color=EFFECT_COLORS[j % len(EFFECT_COLORS)], label=f"+ {k}") for j, k in enumerate(effects)]
+        handles += [Patch(color=EFFECT_COLORS[j % len(EFFECT_COLORS)], label=f"+ {k}")
+                    for j, k in enumerate(effects)]
         handles += [Patch(color=NOISE_COLOR, label="noise floor"),
                     Patch(facecolor=NOISE_COLOR, hatch="///", edgecolor="0.45",
                           label="* noise floor only a lower bound"),
