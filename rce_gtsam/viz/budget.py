@@ -10,7 +10,6 @@ segment and a swinging tip read alike; the total (deg^2) is printed at the right
 
 from __future__ import annotations
 
-
 from .style import FIG_WIDTH_IN, RC
 
 RANK1_COLOR = "#4393c3"
