@@ -97,15 +97,15 @@ def test_reports_label_the_rows_as_the_response_does(offset_sim):
     """One source for the "joint->child" row labels: the response's, in order (the variance budget and the
     labels the diagnosis would parse tracked nodes from read them there)."""
     from rce_gtsam.diagnosis.budget import budget_of
-    from rce_gtsam.model.row_sets import edge_nodes_from_labels
+    from rce_gtsam.model.row_sets import UNKNOWN_PARENT, edge_nodes_from_labels
 
     res = rce_gtsam.analyze(offset_sim / "tracks.csv", offset_sim / "graph.json", n_boot=0)
     labels = res.response.edge_labels
     assert labels == [f"{j}->{c}" for j, c in res.response.edges]
     assert [row["segment"] for row in budget_of(res).per_segment] == labels
     nodes = edge_nodes_from_labels(labels)
-    assert [n - {"\0root?"} <= set(map(str, b.nodes)) for n, b in
-            zip(nodes, (res.bending.bends[k] for k in res.response.bend_rows))] == [True] * len(labels)
+    bends = [res.bending.bends[k] for k in res.response.bend_rows]
+    assert all(n - {UNKNOWN_PARENT} <= set(map(str, b.nodes)) for n, b in zip(nodes, bends)), (nodes, bends)
 
 
 def test_extended_fit_keeps_the_rank1_interface(chain):

@@ -27,13 +27,18 @@ def edge_halves(s: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return np.array(sorted(A)), np.array(sorted(B))
 
 
+#: The node that stands for a joint's parent when no row names it (the joint's parent is the root, whose
+#: position the labels do not give): every row whose parent it is counts as sharing it.
+UNKNOWN_PARENT = "\0root?"
+
+
 def edge_nodes_from_labels(labels) -> list[frozenset] | None:
     """The tracked nodes whose position errors enter each row, from ``"joint->child"`` labels, or None.
 
     Row (j, c) is the bend at joint j between the segments (parent(j), j) and (j, c): its angle is computed
     from three tracked nodes, {parent(j), j, c}. parent(j) is the joint of the row whose child is j; when no
-    row has child j (j's parent is the root), a shared placeholder stands for it — conservative: every such
-    row is treated as sharing that node."""
+    row has child j (j's parent is the root), a shared placeholder (:data:`UNKNOWN_PARENT`) stands for it —
+    conservative: every such row is treated as sharing that node."""
     pairs = []
     for lab in labels:
         parts = str(lab).split("->")
@@ -41,7 +46,7 @@ def edge_nodes_from_labels(labels) -> list[frozenset] | None:
             return None
         pairs.append((parts[0].strip(), parts[1].strip()))
     parent = {c: j for j, c in pairs}
-    return [frozenset({parent.get(j, "\0root?"), j, c}) for j, c in pairs]
+    return [frozenset({parent.get(j, UNKNOWN_PARENT), j, c}) for j, c in pairs]
 
 
 def shared_node_matrix(s: np.ndarray, edge_nodes=None) -> np.ndarray:
