@@ -69,12 +69,13 @@ class VarianceBudget:
     per_segment: list = field(default_factory=list)
     floor_is_bound: list = field(default_factory=list)
     reason: str | None = None
+    z_crit: float = 2.0
 
     @property
     def upper(self) -> float:
-        """The largest unexplained variance the record allows at 2 SE (deg^2): the bound the status rule
-        compares with the noise floor at its default ``z_crit`` of 2."""
-        return self.unexplained + 2.0 * self.unexplained_se
+        """The largest unexplained variance the record allows at ``z_crit`` SE (deg^2): the bound the status
+        rule compares with the noise floor."""
+        return self.unexplained + self.z_crit * self.unexplained_se
 
     def share(self, part: float) -> float:
         """``part`` as a fraction of the total variance."""
@@ -160,8 +161,8 @@ def variance_budget(Y: np.ndarray, base_residuals: np.ndarray, base_params: int,
     if final_ms <= RESOLUTION * total:  # nothing left worth a word (noise-free tracks)
         status = "noise"
     elif unexplained <= z_crit * se:
-        status, reason = (("noise", None) if unexplained + z_crit * se <= floor
-                          else ("inconclusive", "too_uncertain"))
+        upper = unexplained + z_crit * se  # VarianceBudget.upper
+        status, reason = ("noise", None) if upper <= floor else ("inconclusive", "too_uncertain")
     elif low > z_crit * se:
         status = "misses"
     else:
@@ -178,7 +179,7 @@ def variance_budget(Y: np.ndarray, base_residuals: np.ndarray, base_params: int,
                     "r_squared": _f(1.0 - base_rows[e] / tot_rows[e]) if tot_rows[e] > 0 else None})
     return VarianceBudget(total=total, rank1=total - base_ms, effects=eff_out, noise_floor=floor,
                           unexplained=unexplained, unexplained_se=se, unexplained_range=(low, unexplained),
-                          status=status, reason=reason, per_segment=per,
+                          status=status, reason=reason, z_crit=z_crit, per_segment=per,
                           floor_is_bound=[str(labels[e]) for e in range(len(Y)) if not valid[e]])
 
 

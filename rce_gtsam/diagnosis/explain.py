@@ -71,13 +71,14 @@ def explain(diag: Diagnosis) -> str:
         if b.status == "noise":
             return (head + f" That is consistent with zero: what the rank-1 model leaves is at the tracking-noise level,"
                     f" and the model is adequate for these data: at most {max(share(b.upper), 0):.0f}% of the variance"
-                    f" could still be a missed effect (2 SE), no more than the noise floor's"
+                    f" could still be a missed effect ({b.z_crit:g} SE), no more than the noise floor's"
                     f" {share(b.noise_floor):.0f}%; a longer recording narrows that."
                     + closest)
         if b.reason == "too_uncertain":
             return (head + f" That is consistent with zero, but this record cannot show that the model is adequate:"
-                    f" the unexplained share could be as large as {share(b.upper):.0f}% (2 SE), more than the noise"
-                    f" floor's {share(b.noise_floor):.0f}%. Inconclusive; a longer recording narrows that." + closest)
+                    f" the unexplained share could be as large as {share(b.upper):.0f}% ({b.z_crit:g} SE), more than"
+                    f" the noise floor's {share(b.noise_floor):.0f}%. Inconclusive; a longer recording narrows that."
+                    + closest)
         if b.status == "misses":
             return (head + " That is significantly more than noise, and no candidate effect in the library explains it:"
                     f" the model misses real structure, most in segments {where or 'none singled out'}."
