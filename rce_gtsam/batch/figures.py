@@ -39,6 +39,11 @@ def _verdict(r: RecordingSummary) -> str:
     return f"none ({r.diagnosis_status})" if v == "none" and r.diagnosis_status not in (None, "untested") else v
 
 
+def _names_no_effect(verdict: str) -> bool:
+    """A bar of :func:`_verdict` that names no effect ("none (...)", "failed"): no '+ effect' legend entry."""
+    return verdict.startswith("none") or verdict == "failed"
+
+
 def fig_kappa_by_zone(recordings: list[RecordingSummary]):
     """kappa with 95 % CI per segment, one panel per zone, one column per recording."""
     import matplotlib.pyplot as plt
@@ -106,7 +111,7 @@ def fig_verdicts(recordings: list[RecordingSummary]):
         ax.bar(x + 0.2, np.nan_to_num(after), width=0.4,
                color=[VERDICT_COLORS.get(v, "#444444") for v in verdicts], label="with the verdict's effect")
         for i, v in enumerate(verdicts):
-            if v.startswith("none") or v == "failed":
+            if _names_no_effect(v):
                 ax.text(i + 0.2, (base[i] if np.isfinite(base[i]) else 0) * 0.02, v, rotation=90, ha="center",
                         va="bottom", fontsize=6, color="0.25")
         ax.set_xticks(x, [_label(r) for r in recordings], rotation=90, fontsize=6 if n > 10 else 7)
@@ -119,7 +124,7 @@ def fig_verdicts(recordings: list[RecordingSummary]):
         ax.set_title("(b) Held-out error: baseline vs verdict")
         ax.legend(handles=[Patch(color="#bdbdbd", label="rank-1 baseline")]
                   + [Patch(color=VERDICT_COLORS.get(k, "#444444"), label=f"+ {k}") for k in kinds
-                     if not (k.startswith("none") or k == "failed")], loc="upper right", fontsize=6)
+                     if not _names_no_effect(k)], loc="upper right", fontsize=6)
     return fig
 
 

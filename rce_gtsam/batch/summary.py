@@ -5,8 +5,8 @@
 not beaten), ``diagnosis_status`` (what a ``none`` means: ``adequate`` — the rest is at the noise floor —,
 ``misses`` — more than noise is left and no candidate explains it —, ``inconclusive``; ``effect`` with a
 verdict; diagnosis.json's ``status``), then every column of the recording's ``compliance_summary.csv`` for
-each segment with a bend (parent, child, depth, zone, root_distance_px, rest_length_px, kappa, kappa_ci_low, kappa_ci_high,
-uncertainty = U_e, a ``quality`` column when the analysis writes one, ..., fit_rmse_deg), and ``error``.
+each segment with a bend (parent, child, depth, zone, root_distance_px, rest_length_px, kappa, kappa_ci_low,
+kappa_ci_high, uncertainty = U_e, a ``quality`` column when the analysis writes one, ..., fit_rmse_deg), and ``error``.
 A failed recording has one row with its error and empty segment columns.
 
 ``summary.json``: ``{"batch": {...counts, timing, manifest, options...}, "recordings": [{id, status,
