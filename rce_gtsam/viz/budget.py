@@ -3,9 +3,10 @@
 One horizontal bar per segment (root at the top) and one for the whole branch, each the segment's bending
 variance split into shares: explained by the rank-1 model, by each added effect, the model-free noise floor,
 and what is left unexplained, with its +/- 2 SE. A hatched noise floor (segment marked ``*``) is only a lower
-bound (the segment stretches by more than tracking noise could). A negative rank-1 share (the fit predicts the
-segment worse than its rest angle does, R^2 < 0) is drawn left of zero. Shares of each bar's own total variance (%), so a stiff root
-segment and a swinging tip read alike; the total (deg^2) is printed at the right.
+bound (the segment stretches by more than tracking noise could); the whole branch is starred when any segment
+is. A negative rank-1 share (the fit predicts the segment worse than its rest angle does, R^2 < 0) is drawn
+left of zero. Shares of each bar's own total variance (%), so a stiff root segment and a swinging tip read
+alike; the total (deg^2) is printed at the right.
 """
 
 from __future__ import annotations
@@ -41,15 +42,16 @@ def fig_variance_budget(budget, per_segment=None, title: str | None = None):
     se_total = overall.get("unexplained_se") or 0.0
     bars = [{"segment": "whole branch", "total": overall["total"], "rank1": overall["rank1"],
              "effects": overall.get("effects") or {}, "noise_floor": overall["noise_floor"],
-             "unexplained": overall["unexplained"], "unexplained_se": se_total,
-             "noise_floor_is_lower_bound": False,  # a star only: part of its floor may be a bound
-             "starred": any(r.get("noise_floor_is_lower_bound") for r in rows)}] + rows
+             "unexplained": overall["unexplained"], "unexplained_se": se_total}] + rows
+    bounded = [bool(r.get("noise_floor_is_lower_bound")) for r in rows]
+    labels = ["whole branch" + (" *" if any(bounded) else "")] + [
+        str(r["segment"]) + (" *" if bd else "") for r, bd in zip(rows, bounded)]
     n = len(bars)
     with plt.rc_context(RC):
         fig, ax = plt.subplots(figsize=(FIG_WIDTH_IN, 1.0 + 0.2 * n), constrained_layout=True)
         for i, b in enumerate(bars):
             tot = b.get("total") or 0.0
-            if not tot or tot <= 0:
+            if tot <= 0:
                 continue
             pc = lambda v: 100.0 * float(v or 0.0) / tot  # noqa: E731
             left = 0.0
@@ -73,9 +75,7 @@ def fig_variance_budget(budget, per_segment=None, title: str | None = None):
             if se > 0:
                 ax.errorbar(left + un, i, xerr=2 * se, fmt="none", ecolor="0.15", elinewidth=0.8, capsize=2)
             ax.text(1.0, i, f"{tot:.3g}", transform=ax.get_yaxis_transform(), ha="left", va="center", fontsize=6)
-        ax.set_yticks(range(n), [str(b["segment"]) + (" *" if b.get("noise_floor_is_lower_bound") or b.get("starred")
-                                                      else "")
-                                 for b in bars], fontsize=6)
+        ax.set_yticks(range(n), labels, fontsize=6)
         ax.get_yticklabels()[0].set_fontweight("bold")
         ax.invert_yaxis()
         ax.axhline(0.5, color="0.3", lw=0.6)

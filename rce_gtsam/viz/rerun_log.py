@@ -354,10 +354,12 @@ BUDGET_PARTS = ("total", "rank1", "noise_floor", "unexplained")
 def log_budget(diagnosis, rec: rr.RecordingStream) -> None:
     """The variance budget per segment (deg^2, in the response's edge order): one bar chart per part of
     :data:`BUDGET_PARTS` under ``diagnosis/budget/``. Nothing when the diagnosis has no budget."""
+    from .budget import budget_rows
+
     budget = _get(diagnosis, "budget")
     if budget is None:
         return
-    rows = _get(diagnosis, "budget_per_segment") if isinstance(budget, dict) else budget.per_segment
+    _, rows = budget_rows(budget, _get(diagnosis, "budget_per_segment"))
     if not rows:
         return
     for part in BUDGET_PARTS:
