@@ -59,7 +59,8 @@ def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = N
     Runs :func:`rce_gtsam.diagnosis.diagnose.diagnose` on ``result.response`` (Y in degrees, inverse-variance
     weights when the preset's compliance fit is weighted, normalised root distance, edge labels
     ``"joint->child"``, video frame of each column) with the preset's block length and whole compliance config (so the
-    baseline is the rank-1 fit ``rce analyze`` reports). ``effects``: candidate names (``"a,b"`` or a sequence; default all six); ``seed``: seed of
+    baseline is the rank-1 fit ``rce analyze`` reports). ``effects``: candidate names (``"a,b"`` or a sequence;
+    default all six); ``seed``: seed of
     the stratified edge split; ``n_folds``: cross-validation blocks (default: diagnose's N_FOLDS, 16).
     Returns a :class:`~rce_gtsam.diagnosis.diagnose.Diagnosis`.
     """

@@ -46,7 +46,8 @@ def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str
     below its.
 
     Returns {t: the fold-paired t the verdict uses, threshold_t, supported (significant and a
-    lower held-out error), score_p (None without a score test), full_data_t (:func:`~rce_gtsam.model.series.loss_difference_test`), full_data_dof, improvement_pct (held-out
+    lower held-out error), score_p (None without a score test), full_data_t
+    (:func:`~rce_gtsam.model.series.loss_difference_test`), full_data_dof, improvement_pct (held-out
     RMSE, baseline -> oracle), fold_mse (per fold, pooled as the candidates' are: pair it with a rival
     candidate's to ask whether even the true form beats that rival), params (the true shared parameters used), fit
     (the oracle's fit on all frames, a :class:`~rce_gtsam.model.ModelFit`: to run the verdict's pair test with
