@@ -93,6 +93,10 @@ def test_alternative_starts_are_valid_states_the_model_fits_from(name):
     else:
         assert len(record["errors"]) == 1 + len(alts)
         assert cross_prediction_error(fit, halves) == pytest.approx(min(record["errors"]))
+        # the maximum-likelihood fit among the starts, which the encompassing tests use
+        ml = record["lowest_in_sample_fit"]
+        assert ml.wsse <= fit.wsse and ml.wsse <= plain.wsse * (1 + 1e-9)
+        assert (record["lowest_in_sample"] == record["chosen"]) == (ml is fit)
 
 
 @pytest.mark.parametrize("name", BUILTIN)

@@ -44,16 +44,19 @@ extended by that effect (:mod:`rce_gtsam.effects`), and compares them on **held-
   false-alarm rate stays <= alpha. *Supported* = significant AND a lower held-out RMSE AND a lower AIC than
   the baseline's (waived when the full-data score test is significant: the AIC guards the fold t) AND at
   least ``resolution`` of the bending variance off the held-out error: the held-out
-  error stays what the user watches fall. AIC/BIC and the likelihood-ratio test use the effective sample of serially correlated
+  error stays what the user watches fall. AIC/BIC and the likelihood-ratio test use the effective sample of
+  serially correlated
   residuals (n_eff = sum_e n_e (1 - rho_e) / (1 + rho_e), per-frame latents counted as n_eff / E values,
   :func:`effective_sample`); with rho ~ 0.9-0.97 the nominal AIC favours every extra term.
 * Verdict: the supported effect with the lowest held-out RMSE — unless a supported effect with fewer
-  effective parameters is not significantly worse by the same paired t (:func:`~rce_gtsam.diagnosis.verdict.choose_verdict`; e.g. a
+  effective parameters is not significantly worse by the same paired t
+  (:func:`~rce_gtsam.diagnosis.verdict.choose_verdict`; e.g. a
   1-parameter delay over 3-parameter dynamics, which reproduces a delay at low frequencies), or None.
-  Delay and inertia are two forms of one lag: where the supported lag is the delay and the dynamics candidate,
-  not supported by its own (weaker, cross-fitted) tests, predicts the held-out frames better and predicts what
-  the delay leaves (the encompassing test at the full-data threshold), dynamics is supported as the lag's richer
-  form (:func:`~rce_gtsam.diagnosis.verdict.support_a_richer_form`) and the same pair rule decides.
+  Delay and inertia are two forms of one lag: where the delay is supported and the dynamics candidate lowers
+  the held-out error and predicts what the delay leaves (the encompassing test at the full-data threshold),
+  dynamics is the lag's form, supported as such if its own (weaker, cross-fitted) tests fall short
+  (:func:`~rce_gtsam.diagnosis.verdict.support_a_richer_form`), and it takes the delay's place in the verdict
+  whichever of the two is lower in held-out RMSE (:func:`~rce_gtsam.diagnosis.verdict.leading_candidate`).
 
 Residual-structure statistics explain *why* (lag regression on dz/dt, acceleration/spectral structure,
 singular values, per-edge offset and trend, curvature against the prediction). Units: degrees, frames.
@@ -116,9 +119,14 @@ class CandidateResult:
     supported: bool
     statistics: dict
     extra: dict = field(default_factory=dict)  # effective-sample IC terms, likelihood-ratio test
+    #: the fit of the same model with the lowest in-sample error among its starts (the maximum-likelihood fit;
+    #: None: ``fit`` is that one): the encompassing test between two forms of one lag also tries it
+    #: (:func:`~rce_gtsam.diagnosis.verdict.form_test`)
+    ml_fit: ModelFit | None = None
 
     def as_dict(self) -> dict:
-        return {**_jsonable(self.extra), "effect": self.effect, "heldout_rmse": _num(self.heldout_rmse), "evidence": _num(self.evidence),
+        return {**_jsonable(self.extra), "effect": self.effect, "heldout_rmse": _num(self.heldout_rmse),
+                "evidence": _num(self.evidence),
                 "improvement_pct": _num(self.improvement_pct), "delta_aic": _num(self.delta_aic),
                 "delta_bic": _num(self.delta_bic), "supported": bool(self.supported),
                 "fit_rmse": _num(self.fit.rmse), "n_params": _count(self.fit.n_params),
@@ -388,11 +396,14 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         if starts:
             extra["start_cross_prediction_sse"] = starts["errors"]
             extra["start_chosen"] = starts["chosen"]
+            extra["start_lowest_in_sample"] = starts["lowest_in_sample"]
         calibrated = score_is_significant(None if score is None else score.p, p_crit_score)
         supported = bool(significant and earns_its_place(rmse, b_rmse, daic, gain_share, resolution, calibrated))
         results.append(CandidateResult(effect=eff.name, fit=full, heldout_rmse=rmse, fold_mse=mse, evidence=ev,
                                        improvement_pct=imp, delta_aic=daic, delta_bic=dbic, supported=supported,
-                                       statistics=stats_all.get(eff.name, {}), extra=extra))
+                                       statistics=stats_all.get(eff.name, {}), extra=extra,
+                                       ml_fit=(starts["lowest_in_sample_fit"]
+                                               if starts and starts["lowest_in_sample"] != starts["chosen"] else None)))
     results.sort(key=lambda c: c.heldout_rmse)
     mt = sign_flip_max_t(b_mse, [c.fold_mse for c in results], alpha=alpha, seed=seed)
     for c, p in zip(results, mt.p_adjusted):
@@ -401,7 +412,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                                                                            c.extra["heldout_gain_share"], resolution))
     if node_disjoint:
         results = support_a_richer_form(results, Y, W, s, halves, seed, b_rmse, resolution, p_crit_score)
-        test_the_lowest_against_simpler(results, Y, W, s, halves, seed, t_crit)
+        test_the_lowest_against_simpler(results, Y, W, s, halves, seed, t_crit, p_crit_score)
     verdict_effect, parsimony = choose_verdict(results, t_crit, p_pair=p_crit_score)
     # the finding a verdict reports: another form of a library effect reports that effect (resonances: dynamics)
     named = None if verdict_effect is None else next(c for c in results if c.effect == verdict_effect)
@@ -410,7 +421,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     settings = {"n_folds": len(blocks), "fold_blocks": blocks, "buffer_frames": gap, "block_length": block_length,
                 "seed": seed, "alpha": alpha, "evidence_threshold_t": t_crit, "resolution": resolution,
                 "evidence_threshold_t_split": t_crit_split, "score_threshold_p": p_crit_score,
-                "heldout_total_variance": total_var, "maxt_critical_t": mt.critical_t, "maxt_flips": mt.n_flips, "prior_strength": prior_strength,
+                "heldout_total_variance": total_var, "maxt_critical_t": mt.critical_t, "maxt_flips": mt.n_flips,
+                "prior_strength": prior_strength,
                 "response": response, "edge_halves": [halves[0].tolist(), halves[1].tolist()],
                 "node_disjoint_halves": node_disjoint, "weighted": weights is not None,
                 "residual_lag1_autocorrelation": ess["rho"], "n_obs": ess["n"], "n_eff": ess["n_eff"],
@@ -424,7 +436,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         budget = variance_budget(Y, base.residuals, base.n_params, noise_floor, added, labels,
                                  base_kappa=base.kappa)
     diag = Diagnosis(baseline=base, baseline_heldout_rmse=b_rmse, baseline_fold_mse=b_mse, candidates=results,
-                     verdict=verdict, verdict_effect=verdict_effect, explanation="", worst_edges=worst_e, worst_frames=worst_f,
+                     verdict=verdict, verdict_effect=verdict_effect, explanation="", worst_edges=worst_e,
+                     worst_frames=worst_f,
                      residual_summary=summary, settings=settings, edge_labels=labels, budget=budget,
                      baseline_frame_loss=b_loss, baseline_heldout_prediction=b_pred,
                      residual_analysis=residual_analysis(

@@ -67,9 +67,11 @@ def explain(diag: Diagnosis) -> str:
                 f"model-free noise floor is {share(b.noise_floor):.0f}%, which leaves {share(b.unexplained):+.0f}% "
                 f"unexplained (+/- {share(b.unexplained_se):.0f}%).")
         worst = sorted(b.per_segment, key=lambda r: -(r["unexplained"] or 0.0))[:3]
-        where = ", ".join(f"{r['segment']} ({r['unexplained']:.2g} deg^2)" for r in worst if (r["unexplained"] or 0) > 0)
+        where = ", ".join(f"{r['segment']} ({r['unexplained']:.2g} deg^2)" for r in worst
+                          if (r["unexplained"] or 0) > 0)
         if b.status == "noise":
-            return (head + f" That is consistent with zero: what the rank-1 model leaves is at the tracking-noise level,"
+            return (head + " That is consistent with zero: what the rank-1 model leaves is at the tracking-noise"
+                    " level,"
                     f" and the model is adequate for these data: at most {max(share(b.upper), 0):.0f}% of the variance"
                     f" could still be a missed effect ({b.z_crit:g} SE), no more than the noise floor's"
                     f" {share(b.noise_floor):.0f}%; a longer recording narrows that."
@@ -86,7 +88,8 @@ def explain(diag: Diagnosis) -> str:
                     " cross-spectrum singular values) for what kind of structure it is.")
         bound = ", ".join(b.floor_is_bound[:6]) + (" ..." if len(b.floor_is_bound) > 6 else "")
         return (head + f" Inconclusive: on {len(b.floor_is_bound)} segments ({bound}) the segments stretch with the "
-                f"branch's motion by more than tracking noise could (out-of-plane swing, or a tracker sliding along the "
+                "branch's motion by more than tracking noise could (out-of-plane swing, or a tracker sliding along "
+                "the "
                 f"stem), so there the noise floor is only bounded: the unexplained part lies between "
                 f"{share(b.unexplained_range[0]):+.0f}% and {share(b.unexplained_range[1]):+.0f}% of the variance."
                 + closest + " Out-of-plane motion is outside this 2-D model; a second camera view would settle it.")
@@ -109,8 +112,8 @@ def explain(diag: Diagnosis) -> str:
         lines.append(f"Its own tests fall short; it is named as the richer form of the lag that {form_of} finds "
                      f"({form_of}: held-out RMSE {o.improvement_pct:.1f}% lower, evidence t = {o.evidence:.1f}"
                      + ("" if osp is None else f", full-data score test p = {osp:.2g}")
-                     + f"): {c.effect} predicts what {form_of} leaves in the residuals (encompassing test p = "
-                     f"{c.extra['form_test_p'][form_of]:.3g} <= {thr:.3g}).")
+                     + f"): {c.effect} predicts what {form_of} leaves in the residuals "
+                     f"({form_p_text(c, form_of, thr)}).")
     eff = next((e for e in c.fit.model.effects if e.name == c.effect), None)
     if eff is not None:
         lines.append(eff.explain(c.fit.effect_summary().get(c.effect, {}), c.statistics))
@@ -118,9 +121,20 @@ def explain(diag: Diagnosis) -> str:
                      "from the extended fit.")
     lead = par.get("leading", par.get("lowest_heldout"))
     def leads(cand) -> str:
-        return (f"has the lowest held-out RMSE ({cand.heldout_rmse:.3f} deg)" if cand.effect == par.get("lowest_heldout")
+        return (f"has the lowest held-out RMSE ({cand.heldout_rmse:.3f} deg)"
+                if cand.effect == par.get("lowest_heldout")
                 else f"leads (held-out RMSE {cand.heldout_rmse:.3f} deg)")
-    if lead is not None and lead != par.get("lowest_heldout"):
+    lowest = par.get("lowest_heldout")
+    lead_form_p = diag.candidate(lead).extra.get("form_test_p", {}) if lead is not None else {}
+    said = set()  # the simpler candidates whose encompassing test a sentence has quoted
+    if lead is not None and lead != lowest and lowest in lead_form_p and lead_form_p[lowest] <= thr:
+        said.add(lowest)
+        if form_of != lowest:
+            low = diag.candidate(lowest)
+            lines.append(f"{low.effect} has the lowest held-out RMSE ({low.heldout_rmse:.3f} deg), but {lead}, the "
+                         f"richer form of the same lag, predicts what {low.effect} leaves in the residuals "
+                         f"({form_p_text(diag.candidate(lead), lowest, thr)}), so {lead} leads.")
+    elif lead is not None and lead != lowest:
         low = diag.candidate(par["lowest_heldout"])
         lines.append(f"{low.effect} has the lowest held-out RMSE ({low.heldout_rmse:.3f} deg) but is another form of "
                      f"{lead} and not significantly better than it (paired t = "
@@ -132,20 +146,26 @@ def explain(diag: Diagnosis) -> str:
                      f"predicts in the residuals {c.effect} leaves is not significant (encompassing test p = "
                      f"{enc[c.effect]:.3g} > {thr:.3g}): the data do not ask for its extra parameters, so the simpler "
                      f"effect is the verdict ({lo.effect} is not excluded).")
-    elif lead == c.effect and enc and not form_of:
+    elif lead == c.effect and set(enc) - said and not form_of:
         lines.append("Against the simpler " + ", ".join(
             f"{k}: the residuals it leaves hold what {c.effect} predicts (encompassing test p = {v:.3g} <= {thr:.3g})"
-            for k, v in enc.items()) + ".")
+            for k, v in enc.items() if k not in said) + ".")
     elif par.get("preferred_simpler") == c.effect:
         lo = diag.candidate(lead)
         lines.append(f"Parsimony: {lo.effect} {leads(lo)} but is not "
-                     f"significantly better than {c.effect} (paired t = {par['t_vs_lowest'].get(c.effect, float('nan')):.2f}"
+                     f"significantly better than {c.effect} (paired t = "
+                     f"{par['t_vs_lowest'].get(c.effect, float('nan')):.2f}"
                      f" < {diag.settings['evidence_threshold_t']:.2f}) and "
                      + ("fits a free time course of its own, which can imitate the simpler effect's"
                         if complexity(lo)[0] > complexity(c)[0] else
                         f"needs more parameters ({lo.extra.get('k_eff', float('nan')):.0f} vs "
                         f"{c.extra.get('k_eff', float('nan')):.0f} effective)")
                      + "; the simpler effect is the verdict.")
+    if par.get("richer_form_of"):
+        lag = par["richer_form_of"]
+        lines.append(f"{lag} and {c.effect} are two forms of one lag, and {c.effect} predicts what {lag} leaves in "
+                     f"the residuals ({form_p_text(c, lag, thr)}): the "
+                     "richer form is named.")
     others = [o.effect for o in diag.candidates if o.supported and o.effect != c.effect]
     if others:
         lines.append("Also supported (partly mimicking the same misfit, or further effects): " + ", ".join(others)
@@ -153,8 +173,20 @@ def explain(diag: Diagnosis) -> str:
     return " ".join(lines)
 
 
+def form_p_text(c, simpler: str, thr: float) -> str:
+    """"encompassing test p = P <= THR" for candidate ``c``'s test against ``simpler``
+    (:func:`~rce_gtsam.diagnosis.verdict.form_test`), saying where P is the smaller of two fits' p times 2."""
+    text = f"encompassing test p = {c.extra['form_test_p'][simpler]:.3g} <= {thr:.3g}"
+    raw = c.extra.get("form_test_p_per_fit", {}).get(simpler, {})
+    if len(raw) > 1:
+        text += (f": the smaller p of its {len(raw)} fits, {' and '.join(f'{v:.3g}' for v in raw.values())}, "
+                 f"times {len(raw)}")
+    return text
+
+
 def _support_label(c) -> str:
-    """The report's "supported" cell: yes / no, or the lag it is the richer form of (:func:`~rce_gtsam.diagnosis.verdict.support_a_richer_form`)."""
+    """The report's "supported" cell: yes / no, or the lag it is the richer form of
+    (:func:`~rce_gtsam.diagnosis.verdict.support_a_richer_form`)."""
     form_of = c.extra.get("supported_as_form_of")
     return f"yes, as the richer form of {form_of}" if form_of else ("yes" if c.supported else "no")
 
@@ -167,7 +199,8 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
     out = ["[[Diagnosis]]",
            f"    baseline: rank-1 (kappa_e z_t), {b.Y.shape[0]} edges x {b.Y.shape[1]} frames, "
            f"{b.n_obs} observations; response {st['response']}; weighted {st['weighted']}",
-           f"    held-out scheme: {st['n_folds']} contiguous test blocks, buffer {st['buffer_frames']} frames each side, "
+           f"    held-out scheme: {st['n_folds']} contiguous test blocks, buffer {st['buffer_frames']} frames "
+           "each side, "
            f"z estimated on half the edges and scored on the other half; evidence threshold t > "
            f"{st['evidence_threshold_t']:.2f} (alpha {st['alpha']} / {n_effects} effects"
            f"{'' if n_effects == len(diag.candidates) else ', forms of one effect sharing its share'}) and AIC lower",
@@ -184,7 +217,8 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
         out.append(f"    worst edge {w['edge']:<10} residual RMS {w['residual_rms_deg']:.3f} deg "
                    f"({w['ratio_to_overall']:.2f}x overall)")
     for w in diag.worst_frames:
-        out.append(f"    worst frames {w['first_frame']}-{w['last_frame']}: residual RMS {w['residual_rms_deg']:.3f} deg "
+        out.append(f"    worst frames {w['first_frame']}-{w['last_frame']}: residual RMS "
+                   f"{w['residual_rms_deg']:.3f} deg "
                    f"({w['ratio_to_overall']:.2f}x overall)")
     if diag.budget is not None:
         bd = diag.budget
@@ -196,7 +230,8 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
                    f"+/- {bd.unexplained_se:.2g} ({pc(bd.unexplained):+.0f}%): {bd.status}"
                    + (f" ({bd.reason.replace('_', ' ')})" if bd.reason else ""))
         nf = diag.noise_floor
-        out.append(f"    noise floor from segment stretch (inextensibility) x across/along ratio {nf.across_over_along:.2f}; "
+        out.append("    noise floor from segment stretch (inextensibility) x across/along ratio "
+                   f"{nf.across_over_along:.2f}; "
                    f"{int(nf.valid.sum())}/{len(nf.valid)} segments consistent, others use the white-noise lower bound")
     out.append("[[Candidates]]  (held-out RMSE before -> after, deg)")
     out.append(f"    {'effect':<12} {'held-out RMSE':>22} {'change':>8} {'evidence t':>11} {'score p':>9} {'dAIC':>10} "

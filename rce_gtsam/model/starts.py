@@ -58,8 +58,13 @@ def solve_from_starts(model, Y, W, s, halves, start=None, max_iter: int | None =
     """``model.solve(Y, W, s, start=start, max_iter=max_iter)``, then again from every alternative start its
     effects propose (:meth:`~rce_gtsam.effects.Effect.alternative_starts` of each fitted state); the fit with the
     smallest :func:`cross_prediction_error` on the row sets ``halves`` wins. Returns (fit, {"errors": the
-    criterion of each start, first the plain one, "chosen": its index}); with no alternative, the plain fit and
-    an empty record."""
+    criterion of each start, first the plain one, "chosen": its index, "lowest_in_sample": the index of the fit
+    with the lowest weighted SSE, "lowest_in_sample_fit": that fit}); with no alternative, the plain fit and an
+    empty record.
+
+    The lowest in-sample fit is the maximum-likelihood one, which the cross-prediction criterion can pass over
+    for a more damped one (see the module's note): the diagnosis' test between two forms of one lag also tries
+    it (:func:`rce_gtsam.diagnosis.verdict.form_test`)."""
     fit = model.solve(Y, W, s, start=start, max_iter=max_iter)
     alternatives = []
     for i, eff in enumerate(model.effects):
@@ -74,4 +79,6 @@ def solve_from_starts(model, Y, W, s, halves, start=None, max_iter: int | None =
                                 max_iter=max_iter) for states in alternatives]
     errors = [cross_prediction_error(f, halves) for f in fits]
     best = int(np.argmin(errors))
-    return fits[best], {"errors": errors, "chosen": best}
+    lowest = int(np.argmin([f.wsse for f in fits]))
+    return fits[best], {"errors": errors, "chosen": best, "lowest_in_sample": lowest,
+                        "lowest_in_sample_fit": fits[lowest]}
