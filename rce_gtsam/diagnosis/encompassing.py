@@ -35,8 +35,10 @@ it moved to the full fit's own excitation with a refitted null: delay 16/19/19/1
 confusions 0/0/0/0/0 and 0/4/0/0/0 (the delay is now supported on more dynamics recordings, and this test
 must then find the resonance: dynamics 1x seed 3, held-out gain 3.4 % against the delay's 0.4 %, was not
 separated). Also asking the fold t (richer named when either test says so) named 6 of 37 delay recordings
-dynamics to fix that one: not adopted. The diagnosis uses it only between two
-candidates that are both supported (see :func:`choose_verdict <rce_gtsam.diagnosis.verdict.choose_verdict>`).
+dynamics to fix that one: not adopted. The diagnosis runs it between every supported lag and each richer form
+that lowers the held-out error, from each of that form's fits (:func:`rce_gtsam.diagnosis.verdict.form_test`,
+:func:`~rce_gtsam.diagnosis.verdict.support_a_richer_form`); the verdict's parsimony rule reads it
+(:func:`~rce_gtsam.diagnosis.verdict.choose_verdict`).
 
 Units: degrees (residuals, predictions), frames (time); p and z are unitless.
 """

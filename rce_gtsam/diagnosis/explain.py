@@ -70,8 +70,8 @@ def explain(diag: Diagnosis) -> str:
         where = ", ".join(f"{r['segment']} ({r['unexplained']:.2g} deg^2)" for r in worst
                           if (r["unexplained"] or 0) > 0)
         if b.status == "noise":
-            return (head + " That is consistent with zero: what the rank-1 model leaves is at the tracking-noise"
-                    " level,"
+            return (head + " That is consistent with zero: what the rank-1 model leaves is at the"
+                    " tracking-noise level,"
                     f" and the model is adequate for these data: at most {max(share(b.upper), 0):.0f}% of the variance"
                     f" could still be a missed effect ({b.z_crit:g} SE), no more than the noise floor's"
                     f" {share(b.noise_floor):.0f}%; a longer recording narrows that."
@@ -89,8 +89,7 @@ def explain(diag: Diagnosis) -> str:
         bound = ", ".join(b.floor_is_bound[:6]) + (" ..." if len(b.floor_is_bound) > 6 else "")
         return (head + f" Inconclusive: on {len(b.floor_is_bound)} segments ({bound}) the segments stretch with the "
                 "branch's motion by more than tracking noise could (out-of-plane swing, or a tracker sliding along "
-                "the "
-                f"stem), so there the noise floor is only bounded: the unexplained part lies between "
+                f"the stem), so there the noise floor is only bounded: the unexplained part lies between "
                 f"{share(b.unexplained_range[0]):+.0f}% and {share(b.unexplained_range[1]):+.0f}% of the variance."
                 + closest + " Out-of-plane motion is outside this 2-D model; a second camera view would settle it.")
     c = diag.verdict_candidate
@@ -164,8 +163,7 @@ def explain(diag: Diagnosis) -> str:
     if par.get("richer_form_of"):
         lag = par["richer_form_of"]
         lines.append(f"{lag} and {c.effect} are two forms of one lag, and {c.effect} predicts what {lag} leaves in "
-                     f"the residuals ({form_p_text(c, lag, thr)}): the "
-                     "richer form is named.")
+                     f"the residuals ({form_p_text(c, lag, thr)}): the richer form is named.")
     others = [o.effect for o in diag.candidates if o.supported and o.effect != c.effect]
     if others:
         lines.append("Also supported (partly mimicking the same misfit, or further effects): " + ", ".join(others)
