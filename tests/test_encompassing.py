@@ -228,3 +228,16 @@ def test_the_lag_forms_are_weighed_with_the_inertia_fit_that_has_the_lowest_in_s
     assert d.verdict == "dynamics"
     assert "the smaller p of its 2 fits" in d.explanation and "times 2" in d.explanation
     json.dumps(d.as_dict())  # the per-fit p values reach diagnosis.json
+
+
+def test_the_explanation_quotes_the_pair_test_with_its_fits():
+    """One fit: the p and the threshold. Two fits: also both raw p values and the Bonferroni factor, with the right
+    comparison sign either side of the threshold."""
+    from rce_gtsam.diagnosis.explain import form_p_text
+    one = types.SimpleNamespace(extra={"form_test_p": {"delay": 0.0085}})
+    assert form_p_text(one, "delay", 0.005) == "encompassing test p = 0.0085 > 0.005"
+    two = types.SimpleNamespace(extra={"form_test_p": {"delay": 0.003},
+                                       "form_test_p_per_fit": {"delay": {"chosen": 0.027,
+                                                                         "maximum_likelihood": 0.0015}}})
+    assert form_p_text(two, "delay", 0.005) == ("encompassing test p = 0.003 <= 0.005: the smaller p of its 2 fits, "
+                                                "0.027 and 0.0015, times 2")

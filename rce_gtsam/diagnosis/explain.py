@@ -142,8 +142,10 @@ def explain(diag: Diagnosis) -> str:
     if par.get("preferred_simpler") == c.effect and c.effect in enc:
         lo = diag.candidate(lead)
         lines.append(f"Parsimony: {lo.effect} {leads(lo)}, but what it "
-                     f"predicts in the residuals {c.effect} leaves is not significant (encompassing test p = "
-                     f"{enc[c.effect]:.3g} > {thr:.3g}): the data do not ask for its extra parameters, so the simpler "
+                     f"predicts in the residuals {c.effect} leaves is not significant ("
+                     + (form_p_text(lo, c.effect, thr) if c.effect in lo.extra.get("form_test_p", {}) else
+                        f"encompassing test p = {enc[c.effect]:.3g} > {thr:.3g}")
+                     + "): the data do not ask for its extra parameters, so the simpler "
                      f"effect is the verdict ({lo.effect} is not excluded).")
     elif lead == c.effect and set(enc) - said and not form_of:
         lines.append("Against the simpler " + ", ".join(
@@ -172,9 +174,10 @@ def explain(diag: Diagnosis) -> str:
 
 
 def form_p_text(c, simpler: str, thr: float) -> str:
-    """"encompassing test p = P <= THR" for candidate ``c``'s test against ``simpler``
+    """"encompassing test p = P <= THR" (or "> THR") for candidate ``c``'s test against ``simpler``
     (:func:`~rce_gtsam.diagnosis.verdict.form_test`), saying where P is the smaller of two fits' p times 2."""
-    text = f"encompassing test p = {c.extra['form_test_p'][simpler]:.3g} <= {thr:.3g}"
+    p = c.extra['form_test_p'][simpler]
+    text = f"encompassing test p = {p:.3g} {'<=' if p <= thr else '>'} {thr:.3g}"
     raw = c.extra.get("form_test_p_per_fit", {}).get(simpler, {})
     if len(raw) > 1:
         text += (f": the smaller p of its {len(raw)} fits, {' and '.join(f'{v:.3g}' for v in raw.values())}, "
