@@ -45,13 +45,12 @@ extended by that effect (:mod:`rce_gtsam.effects`), and compares them on **held-
   the baseline's (waived when the full-data score test is significant: the AIC guards the fold t) AND at
   least ``resolution`` of the bending variance off the held-out error: the held-out
   error stays what the user watches fall. AIC/BIC and the likelihood-ratio test use the effective sample of
-  serially correlated
-  residuals (n_eff = sum_e n_e (1 - rho_e) / (1 + rho_e), per-frame latents counted as n_eff / E values,
-  :func:`effective_sample`); with rho ~ 0.9-0.97 the nominal AIC favours every extra term.
+  serially correlated residuals (n_eff = sum_e n_e (1 - rho_e) / (1 + rho_e), per-frame latents counted as
+  n_eff / E values, :func:`effective_sample`); with rho ~ 0.9-0.97 the nominal AIC favours every extra term.
 * Verdict: the supported effect with the lowest held-out RMSE — unless a supported effect with fewer
   effective parameters is not significantly worse by the same paired t
-  (:func:`~rce_gtsam.diagnosis.verdict.choose_verdict`; e.g. a
-  1-parameter delay over 3-parameter dynamics, which reproduces a delay at low frequencies), or None.
+  (:func:`~rce_gtsam.diagnosis.verdict.choose_verdict`; e.g. a 1-parameter delay over 3-parameter dynamics,
+  which reproduces a delay at low frequencies), or None.
   Delay and inertia are two forms of one lag: where the delay is supported and the dynamics candidate lowers
   the held-out error and predicts what the delay leaves (the encompassing test at the full-data threshold),
   dynamics is the lag's form, supported as such if its own (weaker, cross-fitted) tests fall short

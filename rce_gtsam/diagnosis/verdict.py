@@ -100,12 +100,12 @@ def leading_candidate(supported: list, t_crit: float, p_pair: float | None = Non
     return best
 
 
-def candidate_fits(c) -> list:
-    """The fits of candidate ``c`` an encompassing test weighs: its fit (the start chosen for the held-out
-    score), and its maximum-likelihood fit among its starts where that is another
-    (:attr:`~rce_gtsam.diagnosis.diagnose.CandidateResult.ml_fit`)."""
+def candidate_fits(c) -> dict:
+    """The fits of candidate ``c`` an encompassing test weighs, by name: ``"chosen"`` (its fit, the start chosen
+    for the held-out score) and, where it is another, ``"maximum_likelihood"`` (the lowest in-sample fit among
+    its starts, :attr:`~rce_gtsam.diagnosis.diagnose.CandidateResult.ml_fit`)."""
     ml = getattr(c, "ml_fit", None)
-    return [c.fit] if ml is None else [c.fit, ml]
+    return {"chosen": c.fit} if ml is None else {"chosen": c.fit, "maximum_likelihood": ml}
 
 
 def form_test(simple, richer, Y, W, s, halves, seed: int):
@@ -115,7 +115,7 @@ def form_test(simple, richer, Y, W, s, halves, seed: int):
     (times their number, at most 1). Returns (p, z of that fit's test, {fit: raw p}) or None where the test
     does not apply."""
     raw = {}
-    for name, fit in zip(("chosen", "maximum_likelihood"), candidate_fits(richer)):
+    for name, fit in candidate_fits(richer).items():
         test = encompassing_test(simple.fit, fit, Y, W, s, halves, seed=seed, max_iter=FULL_ITER)
         if test is None:
             return None
