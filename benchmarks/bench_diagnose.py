@@ -34,6 +34,8 @@ Usage: python benchmarks/bench_diagnose.py [--seeds 10] [--frames 900] [--effect
        [--noise-free]  (noise-free tracks through the same pipeline)
        [--held-out]  (each effect in its held-out form, rce_gtsam.sim.simulate.EFFECT_FORMS, under HELD_OUT_NOISE:
                       physics and noise the diagnosis was not written for, standing in for another simulator)
+       [--shape n_nodes=8,fps=60,branch_layout=tree,root_sway_deg=3]  (recordings of another shape than the
+                      simulator's default: 20-node chain, 30 fps; --frames sets their length)
        [--matrices]  (fast: simulator equations + noise instead of the pipeline, for development)
        [--cache DIR]  (keep each case's pipeline output there: a re-run after a change to the diagnosis only
                        re-diagnoses; the pipeline seconds of a cached case print as 0)
@@ -67,8 +69,9 @@ def held_out_form(effect: str) -> str:
     return list(EFFECT_FORMS[effect])[1]
 
 
-def case(effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False):
-    """(Y, weights, root_distance, kappa_true, truth (E, T) or None, pipeline seconds, edge labels)."""
+def case(effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False, shape=None):
+    """(Y, weights, root_distance, kappa_true, truth (E, T) or None, pipeline seconds, edge labels). ``shape``:
+    :class:`~rce_gtsam.sim.simulate.SimulationConfig` fields other than the simulator's defaults (``--shape``)."""
     from rce_gtsam.sim.simulate import EFFECT_DEFAULTS
     strength = None if effect is None or mult == 1.0 else EFFECT_DEFAULTS[effect] * mult
     if matrices:
@@ -85,6 +88,7 @@ def case(effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=Fa
             kw["noise"] = NoiseConfig(**HELD_OUT_NOISE)
         if effect is not None:
             kw["effect_form"] = {effect: held_out_form(effect)}
+    kw.update(shape or {})
     sim = simulate(SimulationConfig(effects=() if effect is None else (effect,), seed=seed, n_frames=frames, **kw))
     t = time.perf_counter()
     res = analyze(sim.tracks, sim.graph, preset="default", n_boot=0)
@@ -109,23 +113,45 @@ def form_p(c) -> str:
     return "".join(f" enc p({k})={v:.4f}" for k, v in ps.items())
 
 
-def cached_case(cache, effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False):
+def cached_case(cache, effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False, shape=None):
     """:func:`case`, its pipeline output kept in (and read back from) the folder ``cache`` when one is given
     (one .npz per effect, strength, seed, length and noise setting; the pipeline seconds of a cached case
     are 0)."""
     if cache is None or matrices:
-        return case(effect, seed, frames, matrices, mult, noise_free, held_out)
+        return case(effect, seed, frames, matrices, mult, noise_free, held_out, shape)
     path = Path(cache) / (f"{effect or 'none'}_{mult:g}_{seed}_{frames}{'_noisefree' if noise_free else ''}"
-                          f"{'_heldout' if held_out else ''}.npz")
+                          f"{'_heldout' if held_out else ''}{shape_suffix(shape)}.npz")
     if path.exists():
         d = np.load(path)
         return d["Y"], (d["W"] if d["W"].size else None), d["s"], d["k"], d["y"], 0.0, list(d["labels"])
-    Y, W, s, k, y, tp, labels = case(effect, seed, frames, matrices, mult, noise_free, held_out)
+    Y, W, s, k, y, tp, labels = case(effect, seed, frames, matrices, mult, noise_free, held_out, shape)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".part.npz")
     np.savez(tmp, Y=Y, W=W if W is not None else np.array([]), s=s, k=k, y=y, labels=np.array(labels))
     tmp.replace(path)
     return Y, W, s, k, y, tp, labels
+
+
+def parse_shape(text: str) -> dict:
+    """``--shape`` text, ``"n_nodes=8,fps=60,branch_layout=tree"``, as SimulationConfig overrides, each value of
+    its field's type. One line naming the field on a bad entry (ValueError)."""
+    from dataclasses import fields
+
+    from rce_gtsam.sim.simulate import SimulationConfig
+    types = {f.name: type(f.default) for f in fields(SimulationConfig)
+             if isinstance(f.default, (int, float, str)) and f.name not in ("seed", "n_frames")}
+    out = {}
+    for item in filter(None, (t.strip() for t in text.split(","))):
+        key, _, value = item.partition("=")
+        if key not in types or not value:
+            raise ValueError(f"--shape {item!r}: expected FIELD=VALUE with FIELD one of {', '.join(sorted(types))}")
+        out[key] = types[key](value)
+    return out
+
+
+def shape_suffix(shape) -> str:
+    """The cache file's tag of a ``--shape`` (empty for the simulator's defaults)."""
+    return "".join(f"_{k}-{v}" for k, v in sorted((shape or {}).items()))
 
 
 def oracle_pair_test(d, o):
@@ -213,7 +239,14 @@ def main() -> int:
     ap.add_argument("--effects", default="none,delay,dynamics,second_mode,offset,nonlinear")
     ap.add_argument("--folds", type=int, default=None,
                     help="cross-validation blocks of diagnose (default: diagnose's own, N_FOLDS = 16)")
+    ap.add_argument("--shape", default="",
+                    help="simulated recordings of another shape: SimulationConfig fields, e.g. "
+                         "n_nodes=8,fps=60,branch_layout=tree,root_sway_deg=3 (frames: --frames)")
     a = ap.parse_args()
+    try:
+        shape = parse_shape(a.shape)
+    except ValueError as err:
+        ap.error(str(err))
     from scipy import stats
 
     from rce_gtsam.diagnosis.diagnose import diagnose
@@ -224,7 +257,7 @@ def main() -> int:
     mults = [float(m) for m in a.strength_mult.split(",")]
     print(f"input: {'matrices (simulator equations + noise)' if a.matrices else 'full pipeline (simulate -> analyze default preset)'}; "
           f"{a.seeds} seeds from {a.first_seed}, {a.frames} frames, effect strength {a.strength_mult} x default; "
-          f"{'HELD-OUT forms and noise; ' if a.held_out else ''}"
+          f"{'HELD-OUT forms and noise; ' if a.held_out else ''}{f'shape {a.shape}; ' if shape else ''}"
           "oracle = the hidden effect's candidate with its true shared parameters, through the same folds", flush=True)
     # the core model's config: the default preset's, as `rce diagnose` runs it (rce_gtsam.diagnosis.io);
     # the matrices mode keeps diagnose's own default
@@ -238,7 +271,7 @@ def main() -> int:
             okf, orcf, ok, orc, conf, imp_v, imp_h, ceil, kb, ka, ts, tps, tru, nsr = 0, 0, 0, 0, 0, [], [], [], [], [], [], [], [], []
             for sd in range(a.first_seed, a.first_seed + a.seeds):
                 Y, W, s, k, y, tp, labels = cached_case(a.cache, hidden, sd, a.frames, a.matrices, mult,
-                                                        a.noise_free, a.held_out)
+                                                        a.noise_free, a.held_out, shape)
                 t = time.perf_counter()
                 d = diagnose(Y, weights=W, root_distance=s, seed=0, edge_labels=labels, n_folds=a.folds,
                              config=config)

@@ -14,7 +14,7 @@ def test_a_cached_case_runs_the_pipeline_once_and_reads_back_the_same(tmp_path, 
     rng = np.random.default_rng(0)
     Y, s = rng.standard_normal((4, 30)), np.linspace(0.2, 1, 4)
 
-    def fake_case(effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False):
+    def fake_case(effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False, shape=None):
         calls.append((effect, seed, frames, mult, noise_free, held_out))
         return Y, None, s, np.ones(4), Y * 0.5, 1.5, ["0->1", "1->2", "2->3", "3->4"]
 
@@ -23,11 +23,28 @@ def test_a_cached_case_runs_the_pipeline_once_and_reads_back_the_same(tmp_path, 
     again = bench_diagnose.cached_case(str(tmp_path), "delay", 3, 30, False, 0.75)
     other = bench_diagnose.cached_case(str(tmp_path), "delay", 3, 30, False, 0.75, noise_free=True)
     held = bench_diagnose.cached_case(str(tmp_path), "delay", 3, 30, False, 0.75, held_out=True)
-    assert len(calls) == 3 and calls[1][-2] is True          # the noise-free case is a different file
+    tree = bench_diagnose.cached_case(str(tmp_path), "delay", 3, 30, False, 0.75,
+                                      shape=bench_diagnose.parse_shape("branch_layout=tree,n_nodes=9"))
+    assert len(calls) == 4 and calls[1][-2] is True          # the noise-free case is a different file
     assert calls[2][-1] is True                              # and so is the held-out forms and noise case
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["delay_0.75_3_30.npz", "delay_0.75_3_30_heldout.npz",
-                                                          "delay_0.75_3_30_noisefree.npz"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [   # and a recording of another shape
+        "delay_0.75_3_30.npz", "delay_0.75_3_30_branch_layout-tree_n_nodes-9.npz", "delay_0.75_3_30_heldout.npz",
+        "delay_0.75_3_30_noisefree.npz"]
+    assert tree[5] == 1.5
     assert held[5] == 1.5
     np.testing.assert_array_equal(again[0], first[0])
     assert again[1] is None and again[5] == 0.0 and again[6] == first[6]  # no weights; cached: 0 pipeline seconds
     assert other[5] == 1.5
+
+
+def test_shape_text_becomes_typed_simulation_fields_and_a_bad_field_is_named():
+    assert bench_diagnose.parse_shape("n_nodes=8, fps=60,branch_layout=tree") == {
+        "n_nodes": 8, "fps": 60.0, "branch_layout": "tree"}
+    assert bench_diagnose.parse_shape("") == {}
+    for bad in ("nodes=8", "fps=", "seed=3"):
+        try:
+            bench_diagnose.parse_shape(bad)
+        except ValueError as err:
+            assert repr(bad.strip()) in str(err)
+        else:  # pragma: no cover
+            raise AssertionError(f"{bad!r} accepted")
