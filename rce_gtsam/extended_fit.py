@@ -121,7 +121,7 @@ def fit_extended(Y, names, config: ComplianceConfig, weights=None, root_distance
     model = build_model(names, config)
     base = model.without_effects().fit(Y, weights=weights, root_distance=root_distance)
     Yv, W, s = validate_inputs(Y, weights, root_distance)
-    halves = node_disjoint_split(s, shared_node_matrix(s, edge_nodes), 0)
+    halves = node_disjoint_split(s, shared_node_matrix(s, edge_nodes), 0, edge_nodes=edge_nodes)
     if halves is None:
         full = model.fit(Y, weights=weights, root_distance=root_distance, init=base)
     else:

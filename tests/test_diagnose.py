@@ -69,6 +69,30 @@ def test_node_disjoint_split_on_a_chain():
     assert (shared_node_matrix(s) == shared).all()
 
 
+def test_node_disjoint_split_on_a_tree():
+    """A 20-node tree (a main stem 0-14 and a 5-node side branch from node 6, as ``rce simulate`` makes it):
+    root-distance order interleaves the side branch with the stem, and the one pattern the seed drew left no
+    split at all, so the diagnosis fell back to halves that share nodes and ran none of its full-data tests. The
+    walk along the branch keeps the side branch in one run, and the best of every deal gives two large sets that
+    share no node and both span most of the branch."""
+    from rce_gtsam.diagnosis.diagnose import edge_nodes_from_labels, node_disjoint_split, shared_node_matrix
+    from rce_gtsam.model.row_sets import walk_order
+    labels = ["1->2", "2->3", "3->4", "4->5", "5->6", "6->15", "6->7", "15->16", "7->8", "16->17", "17->18",
+              "8->9", "9->10", "18->19", "10->11", "11->12", "12->13", "13->14"]
+    s = np.array([0.13, 0.23, 0.28, 0.36, 0.42, 0.48, 0.5, 0.54, 0.55, 0.58, 0.62, 0.63, 0.71, 0.72, 0.76, 0.85,
+                  0.92, 1.0])
+    nodes = edge_nodes_from_labels(labels)
+    shared = shared_node_matrix(s, nodes)
+    walk = [labels[i] for i in walk_order(s, shared, nodes)]
+    side = [walk.index(lab) for lab in ("15->16", "16->17", "17->18", "18->19")]
+    assert side == list(range(side[0], side[0] + 4))  # the side branch is one run of the walk
+    for seed in range(4):
+        A, B = node_disjoint_split(s, shared, seed, edge_nodes=nodes)
+        assert len(A) >= 5 and len(B) >= 5
+        assert not any(nodes[a] & nodes[b] for a in A for b in B)
+        assert min(np.ptp(s[A]), np.ptp(s[B])) >= 0.5  # both sets span most of the branch
+
+
 def test_effective_sample_of_ar1_residuals():
     from types import SimpleNamespace
     from rce_gtsam.diagnosis.diagnose import effective_sample

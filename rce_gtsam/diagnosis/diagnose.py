@@ -313,8 +313,9 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     base_model = ResponseModel(config=config)
     base = base_model.solve(Y, W, s)
     blocks = fold_blocks(T, N_FOLDS if n_folds is None else n_folds, block_length)
-    shared = shared_node_matrix(s, edge_nodes if edge_nodes is not None else edge_nodes_from_labels(labels))
-    split = node_disjoint_split(s, shared, seed)
+    nodes = edge_nodes if edge_nodes is not None else edge_nodes_from_labels(labels)
+    shared = shared_node_matrix(s, nodes)
+    split = node_disjoint_split(s, shared, seed, edge_nodes=nodes)
     node_disjoint = split is not None
     halves = split if node_disjoint else edge_halves(s, seed)
     # full fits first: the CV buffer must cover the longest memory any fitted term has (a tip lag longer

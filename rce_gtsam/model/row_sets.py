@@ -65,28 +65,107 @@ def shared_node_matrix(s: np.ndarray, edge_nodes=None) -> np.ndarray:
     return np.abs(rank[:, None] - rank[None, :]) <= 2
 
 
-def node_disjoint_split(s: np.ndarray, shared: np.ndarray, seed: int, run: int = 3):
+def walk_order(s: np.ndarray, shared: np.ndarray, edge_nodes=None) -> np.ndarray:
+    """The rows in the order of a walk along the branch: depth first over rows that share a tracked node, at every
+    step to the row sharing the most nodes with this one (the next bend along the same stem shares two; a bend
+    across a fork shares one), then the nearest to the root, so each side branch comes as one run instead of
+    interleaved with the main stem by root distance. ``edge_nodes``: per row, its tracked nodes (without them
+    every shared node counts the same). On a chain it is root-distance order."""
+    E = len(s)
+    nodes = None if edge_nodes is None else [frozenset(n) for n in edge_nodes]
+    seen = np.zeros(E, bool)
+    out = []
+    for start in np.argsort(s, kind="stable"):
+        stack = [int(start)]
+        while stack:
+            r = stack.pop()
+            if seen[r]:
+                continue
+            seen[r] = True
+            out.append(r)
+            nxt = [int(q) for q in np.flatnonzero(shared[r] & ~seen)]
+            overlap = {q: 1 if nodes is None else len(nodes[r] & nodes[q]) for q in nxt}
+            # pushed worst first, so the best is popped next
+            stack.extend(sorted(nxt, key=lambda q: (overlap[q], -s[q], -q)))
+    return np.array(out, int)
+
+
+def node_disjoint_split(s: np.ndarray, shared: np.ndarray, seed: int, run: int = 3, edge_nodes=None):
     """Two sets of rows (A, B) with no tracked node in common, both spanning root to tip, or None.
 
-    Rows in root-distance order are dealt in the repeating pattern A^m, gap, gap, B^m, gap, gap (m = ``run``,
+    Rows in the order of a walk along the branch (:func:`walk_order`, which ``edge_nodes`` guide: root-distance
+    order on a chain, each side branch as one run on a tree) are dealt in the repeating pattern A^m, gap, gap, B^m, gap, gap (m = ``run``,
     reduced to 2 or 1 for short branches; the phase of the pattern drawn with ``seed``); B rows that still
-    share a node with an A row (trees, where root-distance order interleaves branches) are dropped. The
-    two gap rows separate the runs because bends up to two joints apart share a node (see
-    :func:`shared_node_matrix`). Held-out latents estimated on A therefore carry none of the tracking noise
-    of the B rows they are scored on. Rows that share no node at all (``edge_nodes`` says so) get the plain
-    interleaved halves of :func:`edge_halves`."""
+    share a node with an A row are dropped. The two gap rows separate the runs because bends up to two joints
+    apart share a node (see :func:`shared_node_matrix`). Held-out latents estimated on A therefore carry none of
+    the tracking noise of the B rows they are scored on. Rows that share no node at all (``edge_nodes`` says
+    so) get the plain interleaved halves of :func:`edge_halves`.
+
+    On a branched graph (the walk is not root-distance order) one pattern along the walk leaves rows idle at
+    every fork, and the one the seed draws can leave too few (a 20-node tree with a 5-node side branch: no split
+    at all, so the diagnosis fell back to halves that share nodes and ran none of its full-data tests). There
+    every phase of each run length is dealt, the rows that share no node with the other set are added to a set
+    (:func:`grow_disjoint`), and the deal whose smaller set is largest and spans most of the branch is kept
+    (:func:`best_branched_split`; longer runs, then the seed's order of phases, break ties)."""
     E = len(s)
     if not (shared & ~np.eye(E, dtype=bool)).any():
         return edge_halves(s, seed)  # no two rows share a node: interleaved halves need no gap
-    order = np.argsort(s, kind="stable")
+    order = walk_order(s, shared, edge_nodes)
     rng = np.random.default_rng(seed)
+    if not np.array_equal(order, np.argsort(s, kind="stable")):
+        return best_branched_split(s, order, shared, rng, run)
     for m in range(run, 0, -1):
         period = 2 * m + 4
         phase = int(rng.integers(period))
-        pos = (np.arange(E) + phase) % period
-        A = order[pos < m]
-        B = order[(pos >= m + 2) & (pos < 2 * m + 2)]
-        B = np.array([b for b in B if not shared[b, A].any()], int)
+        A, B = deal(order, shared, m, phase)
         if len(A) >= max(1, E // 5) and len(B) >= max(1, E // 5):
             return np.sort(A), np.sort(B)
     return None
+
+
+def deal(order: np.ndarray, shared: np.ndarray, m: int, phase: int) -> tuple[np.ndarray, np.ndarray]:
+    """Rows of ``order`` dealt A^m, gap, gap, B^m, gap, gap from ``phase``; B rows sharing a node with A dropped."""
+    pos = (np.arange(len(order)) + phase) % (2 * m + 4)
+    A = order[pos < m]
+    B = order[(pos >= m + 2) & (pos < 2 * m + 2)]
+    return A, np.array([b for b in B if not shared[b, A].any()], int)
+
+
+def grow_disjoint(A: np.ndarray, B: np.ndarray, order: np.ndarray, shared: np.ndarray):
+    """(A, B) with every idle row of ``order`` that shares no node with one set added to it (to the smaller set
+    where it shares none with either), in walk order until none is left to add: the sets stay node-disjoint."""
+    inA = np.zeros(len(order), bool)
+    inB = np.zeros(len(order), bool)
+    inA[A], inB[B] = True, True
+    changed = True
+    while changed:
+        changed = False
+        for r in order:
+            if inA[r] or inB[r]:
+                continue
+            to_a, to_b = not shared[r, inB].any(), not shared[r, inA].any()
+            if to_a and (not to_b or inA.sum() <= inB.sum()):
+                inA[r] = changed = True
+            elif to_b:
+                inB[r] = changed = True
+    return np.flatnonzero(inA), np.flatnonzero(inB)
+
+
+def best_branched_split(s: np.ndarray, order: np.ndarray, shared: np.ndarray, rng: np.random.Generator,
+                        run: int):
+    """:func:`node_disjoint_split` on a branched graph: every phase of every run length, grown; kept: the deal
+    whose smaller set is largest, weighted by the share of the root distances the narrower set spans (growing
+    can fill a whole stretch of the stem into one set, and a set that covers only the middle of the branch
+    cannot tell where along it an effect lies). None when no deal gives both sets a fifth of the rows."""
+    E = len(order)
+    full = max(float(np.ptp(s)), 1e-12)
+    best, best_key = None, -1.0
+    for m in range(run, 0, -1):
+        for phase in rng.permutation(2 * m + 4):
+            A, B = grow_disjoint(*deal(order, shared, m, int(phase)), order, shared)
+            if min(len(A), len(B)) < max(1, E // 5):
+                continue
+            key = min(len(A), len(B)) * min(np.ptp(s[A]), np.ptp(s[B])) / full
+            if key > best_key:
+                best, best_key = (np.sort(A), np.sort(B)), key
+    return best
