@@ -94,10 +94,10 @@ def node_disjoint_split(s: np.ndarray, shared: np.ndarray, seed: int, run: int =
     """Two sets of rows (A, B) with no tracked node in common, both spanning root to tip, or None.
 
     Rows in the order of a walk along the branch (:func:`walk_order`, which ``edge_nodes`` guide: root-distance
-    order on a chain, each side branch as one run on a tree) are dealt in the repeating pattern A^m, gap, gap, B^m, gap, gap (m = ``run``,
-    reduced to 2 or 1 for short branches; the phase of the pattern drawn with ``seed``); B rows that still
-    share a node with an A row are dropped. The two gap rows separate the runs because bends up to two joints
-    apart share a node (see :func:`shared_node_matrix`). Held-out latents estimated on A therefore carry none of
+    order on a chain, each side branch as one run on a tree) are dealt in the repeating pattern A^m, gap, gap,
+    B^m, gap, gap (m = ``run``, reduced to 2 or 1 for short branches; the phase of the pattern drawn with
+    ``seed``); B rows that still share a node with an A row are dropped. The two gap rows separate the runs
+    because bends up to two joints apart share a node (see :func:`shared_node_matrix`). Held-out latents estimated on A therefore carry none of
     the tracking noise of the B rows they are scored on. Rows that share no node at all (``edge_nodes`` says
     so) get the plain interleaved halves of :func:`edge_halves`.
 
