@@ -44,6 +44,25 @@ def significant_but_not_named(diag: Diagnosis) -> str:
             "the data show.")
 
 
+def heldout_null_text(c) -> str:
+    """The held-out gain's surrogate test of an effect made of per-segment courses of time
+    (:mod:`rce_gtsam.diagnosis.heldout_null`), as a clause starting with "; ", or empty where it did not run."""
+    p = c.extra.get("heldout_null_p")
+    if p is None:
+        return ""
+    thr = c.extra.get("heldout_null_threshold_p", float("nan"))
+    sp, sthr = c.extra.get("shared_course_p"), c.extra.get("shared_course_threshold_p", float("nan"))
+    if p <= thr:
+        return f"; its held-out gain beats phase surrogates of the residuals, p = {p:.2g} <= {thr:.2g}"
+    if sp is not None and sp <= sthr:
+        return (f"; two sets of segments that share no tracked node share a time course (p = {sp:.2g} <= "
+                f"{sthr:.2g}), which tracker drift, each node's own, cannot give")
+    return (f"; but slow noise of the residuals' own spectrum (tracker drift) gains as much on held-out frames "
+            f"(phase surrogates p = {p:.2g} > {thr:.2g})"
+            + ("" if sp is None else f" and no time course is common to two sets of segments that share no "
+               f"tracked node (p = {sp:.2g} > {sthr:.2g})"))
+
+
 def explain(diag: Diagnosis) -> str:
     """Plain-language explanation of the verdict with the numbers behind it."""
     base = diag.baseline_heldout_rmse
@@ -55,7 +74,7 @@ def explain(diag: Diagnosis) -> str:
             closest = (f" The closest candidate, {best.effect}, changes held-out RMSE to {best.heldout_rmse:.3f} deg "
                        f"({-best.improvement_pct:+.1f}%), evidence t = {best.evidence:.2f} against the threshold "
                        f"{best.extra.get('threshold_t', diag.settings['evidence_threshold_t']):.2f}"
-                       + ("" if sp is None else f", full-data score test p = {sp:.2g}") + ".")
+                       + ("" if sp is None else f", full-data score test p = {sp:.2g}") + heldout_null_text(best) + ".")
         closest += significant_but_not_named(diag)
         b = diag.budget
         if b is None:
@@ -95,6 +114,7 @@ def explain(diag: Diagnosis) -> str:
     c = diag.verdict_candidate
     sp = c.extra.get("score_p")
     score = ("" if sp is None else f"; full-data score test p = {sp:.2g} against {c.extra['score_threshold_p']:.2g}")
+    score += heldout_null_text(c)
     named = c.effect if c.effect == diag.verdict else f"{diag.verdict} (in the form {c.effect})"
     lines = [f"Missing effect: {named}. Adding it lowers the held-out RMSE from {base:.3f} to "
              f"{c.heldout_rmse:.3f} deg ({c.improvement_pct:.1f}% lower; evidence t = {c.evidence:.1f} over "

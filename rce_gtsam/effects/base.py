@@ -195,6 +195,15 @@ class Effect:
         G = self.score_directions(kappa, z, s)
         return None if G is None else (G, "quadratic")
 
+    def heldout_time_basis(self, n_frames: int) -> np.ndarray | None:
+        """(K, n_frames) the time courses this effect adds to each segment on its own (per-segment coefficients on
+        fixed courses of time: an offset's 1 and a creep's t), or None (the default). Where given, the
+        diagnosis names the effect only if, besides the held-out fold t, the held-out gain of per-segment fits on
+        these courses beats phase surrogates of the residuals (:mod:`rce_gtsam.diagnosis.heldout_null`): slow
+        tracker drift gives every segment such a course, and the fold t, taking its blocks as independent,
+        would credit it to the effect."""
+        return None
+
     def scan_label(self, peak: int) -> dict:
         """For a ``"max"`` test (a scan over one parameter): {name_unit: value} of the scanned value whose score
         was largest (``peak`` indexes the directions of :meth:`test_directions`), kept in ``diagnosis.json`` as

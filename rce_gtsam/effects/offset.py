@@ -159,6 +159,11 @@ class Offset(Effect):
         dof = state.get("dof")
         return super().n_free(state, n_edges, n_frames_observed) if dof is None else float(dof)
 
+    def heldout_time_basis(self, n_frames: int) -> np.ndarray:
+        """The term's own columns: 1 and, with the creep, t / T centred (n_frames frames)."""
+        tt = (np.arange(n_frames) - (n_frames - 1) / 2) / max(n_frames, 1)
+        return np.stack([np.ones(n_frames), tt]) if self.trend else np.ones((1, n_frames))
+
     def describe(self, state):
         p = state["params"]
         return {"rms_offset_deg": float(np.sqrt(np.mean(p["c"] ** 2))),
