@@ -18,8 +18,10 @@ only *when* the noise happens new, missing entries missing; :func:`~rce_gtsam.mo
 The p is the share of surrogates whose gain reaches the data's. A creep puts its power into one coherent
 ramp, which the surrogates spread over random slow waves.
 
-**A veto, not a calibrated test.** The diagnosis requires it *as well as* the fold t
-(:meth:`~rce_gtsam.effects.Effect.heldout_time_basis`), at alpha: it can only take verdicts away. Phase
+**A veto, not a calibrated test.** The diagnosis requires it (at alpha), or a time course common to two
+node-disjoint row sets (:func:`~rce_gtsam.diagnosis.score_test.shared_time_course_test`, which drift of
+different nodes cannot give), *as well as* the fold t (:meth:`~rce_gtsam.effects.Effect.heldout_time_basis`):
+they can only take verdicts away. Phase
 surrogates are periodic, so they lack the start-to-end change a slow wander has, and on drift alone whose
 correlation time nears the record's length the test fires as the fold t does (pure AR(1) drift plus white
 noise, 480 frames: p <= 0.05 on 2 of 20 records at a correlation time of 15 frames, 3 of 20 at 30, 15 of 20
