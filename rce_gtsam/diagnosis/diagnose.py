@@ -369,7 +369,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     ess = effective_sample(base)
     base_ic = effective_ic(base, ess)
     results = []
-    shared_p = None  # the shared-time-course test of the baseline, run where an effect's veto needs it
+    shared_p = None  # the baseline's shared-time-course test: a second excitation's score, or run for the drift check
     for eff, model, full, starts in fulls:
         sse, cnt, sse_t, cnt_t = heldout_errors(model, full, Y, W, s, blocks, halves, gap, cv_iter=CV_ITER,
                                                 per_frame=True)
@@ -402,6 +402,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
             if score.peak is not None:
                 extra["score_peak"] = eff.scan_label(score.peak)
             significant = is_significant(ev, t_crit_split, score.p, p_crit_score)
+            if eff.score_excitation == "between_rows":  # the very test the drift check below asks (same seed)
+                shared_p = score.p
         basis = eff.heldout_time_basis(T)
         if basis is not None and significant and score is None:
             # slow per-segment courses: tracker drift gives every segment one, and the fold t credits it to the
