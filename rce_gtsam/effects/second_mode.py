@@ -33,7 +33,7 @@ class SecondMode(Effect):
     kind = "additive"
     # no direction to score along (w is unknown), but w is common to all segments: the full-data test asks whether
     # two node-disjoint row sets' residuals move together (score_test.shared_time_course_test; effect-free
-    # pipeline seeds 1/40 at p <= 0.005, 3/40 at p <= 0.05)
+    # pipeline seeds 0/40 at p <= 0.005, 3/40 at p <= 0.05; delay at 1x 0/40 at p <= 0.005)
     score_excitation = "between_rows"
     equation = "y_e(t) = kappa_e z_t + mu_e w_t   (w: RMS 1, mu in degrees)"
     fitting = ("alternating generalised least squares on the partial residual with the noise's correlation "
