@@ -48,10 +48,11 @@ extended by that effect (:mod:`rce_gtsam.effects`), and compares them on **held-
   significant only if, besides its fold t, the data show something drift cannot do: a held-out gain beyond
   phase surrogates of the residuals at alpha (:mod:`rce_gtsam.diagnosis.heldout_null`), or a time course
   common to the two node-disjoint row sets (the second excitation's test, at its threshold: each node drifts
-  on its own). *Supported* = significant AND a lower held-out RMSE AND a lower AIC than
-  the baseline's (waived when the full-data score test is significant: the AIC guards the fold t) AND at
-  least ``resolution`` of the bending variance off the held-out error: the held-out
-  error stays what the user watches fall. AIC/BIC and the likelihood-ratio test use the effective sample of
+  on its own), or trends laid out along the branch otherwise than a node's tracking error reaches the bends
+  (+1, -2, +1; :mod:`rce_gtsam.diagnosis.drift_pattern`, at alpha). *Supported* = significant AND a lower
+  held-out RMSE AND a lower AIC than the baseline's (waived when the full-data score test is significant: the
+  AIC guards the fold t) AND at least ``resolution`` of the bending variance off the held-out error: the
+  held-out error stays what the user watches fall. AIC/BIC and the likelihood-ratio test use the effective sample of
   serially correlated residuals (n_eff = sum_e n_e (1 - rho_e) / (1 + rho_e), per-frame latents counted as
   n_eff / E values, :func:`effective_sample`); with rho ~ 0.9-0.97 the nominal AIC favours every extra term.
 * Verdict: the supported effect with the lowest held-out RMSE — unless a supported effect with fewer
@@ -89,6 +90,7 @@ from scipy import stats
 from .. import effects as effects_mod
 from .budget import VarianceBudget, variance_budget
 from .explain import explain, render_diagnosis_report
+from .drift_pattern import drift_pattern_test
 from .heldout import fold_blocks, frame_loss, heldout_errors, paired_t
 from .heldout_null import heldout_gain_null_test
 from .maxt import sign_flip_max_t
@@ -408,15 +410,20 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         if basis is not None and significant and score is None:
             # slow per-segment courses: tracker drift gives every segment one, and the fold t credits it to the
             # effect. Named only if something drift cannot do is seen as well: a held-out gain beyond what slow
-            # noise of the residuals' own spectrum gives, or a course common to two row sets that share no
-            # tracked node (each node drifts on its own)
+            # noise of the residuals' own spectrum gives, a course common to two row sets that share no
+            # tracked node (each node drifts on its own), or courses laid out along the branch otherwise than
+            # a node's error reaches the bends (+1, -2, +1; drift_pattern)
             null = heldout_gain_null_test(base, blocks, gap, basis, seed=seed)
+            pattern = drift_pattern_test(base, basis, seed=seed)
             if shared_p is None and node_disjoint:
                 shared_p = shared_time_course_test(base, halves, seed=seed).p
             extra.update({"heldout_null_p": null.p, "heldout_null_threshold_p": alpha,
                           "shared_course_p": shared_p, "shared_course_threshold_p": p_crit_score,
+                          "drift_pattern_p": None if pattern is None else pattern.p,
+                          "drift_pattern_threshold_p": alpha,
                           "significant_by_fold_t": significant})
-            significant = bool(null.p <= alpha or (shared_p is not None and shared_p <= p_crit_score))
+            significant = bool(null.p <= alpha or (shared_p is not None and shared_p <= p_crit_score)
+                               or (pattern is not None and pattern.p <= alpha))
         extra["significant"] = significant
         if starts:
             extra["start_cross_prediction_sse"] = starts["errors"]

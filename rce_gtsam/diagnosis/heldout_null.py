@@ -28,7 +28,8 @@ noise, 480 frames: p <= 0.05 on 2 of 20 records at a correlation time of 15 fram
 at 120). Taking each surrogate as a window of a four times longer series halved that (8 of 20 at 120) but
 kept only 7 of 20 creeps at 6x the simulator's default, against 15 with plain surrogates. What separates a
 creep from slow tracker drift physically is where it sits, not when: a node's drift turns its three bends in
-the pattern +1, -2, +1, a joint's creep only its own bend; this test does not use that.
+the pattern +1, -2, +1, a joint's creep only its own bend; this test does not use that, and
+:mod:`rce_gtsam.diagnosis.drift_pattern` does.
 
 Measured through the pipeline (default preset, 900 frames): effect-free recordings, smallest p 0.16 of 20 at
 30 frames/s and 0.20 of 20 at 60 frames/s (the three named by the fold t at 60 frames/s: 0.36-0.44); offset +
@@ -49,22 +50,28 @@ from .score_test import SURROGATE_BATCH, ScoreTest, robust_residuals
 N_NULL = 1000  # phase surrogates (p-value resolution 1/1001; the test is used at alpha = 0.05)
 
 
+def basis_coefficients(X: np.ndarray, M: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """(..., E, K) each row's weighted least-squares coefficients on the time ``basis`` (K, T) for residual sets
+    X (..., E, T; 0 where missing) with weights M (E, T; 0 = missing). Units: those of X per unit of each
+    basis course."""
+    K = basis.shape[0]
+    A = np.einsum("et,kt,lt->ekl", M, basis, basis)
+    A = A + 1e-9 * np.maximum(np.trace(A, axis1=1, axis2=2), 1e-300)[:, None, None] * np.eye(K)
+    rhs = np.einsum("et,...et,kt->...ek", M, X, basis)
+    return np.linalg.solve(A, rhs[..., None])[..., 0]
+
+
 def heldout_gain(X: np.ndarray, M: np.ndarray, blocks, gap: int, basis: np.ndarray) -> np.ndarray:
     """(n,) the held-out gain of per-segment fits on ``basis`` for each residual set of X (n, E, T; 0 where
     missing) with weights M (E, T; 0 = missing): for every fold block [a, b), each segment's weighted least
     squares on the frames outside [a - gap, b + gap), scored on the block as sum M (x^2 - (x - fit)^2), summed
     over blocks and segments (weighted deg^2). ``basis``: (K, T) time courses."""
     n, E, T = X.shape
-    K = basis.shape[0]
     gain = np.zeros(n)
     for a, b in blocks:
         train = np.ones(T, bool)
         train[max(0, a - gap):min(T, b + gap)] = False
-        Mt = M * train[None]
-        A = np.einsum("et,kt,lt->ekl", Mt, basis, basis)
-        A = A + 1e-9 * np.maximum(np.trace(A, axis1=1, axis2=2), 1e-300)[:, None, None] * np.eye(K)
-        rhs = np.einsum("et,net,kt->nek", Mt, X, basis)
-        coef = np.linalg.solve(A[None], rhs[..., None])[..., 0]
+        coef = basis_coefficients(X, M * train[None], basis)
         fit = np.einsum("nek,kt->net", coef, basis[:, a:b])
         Xb = X[:, :, a:b]
         gain += np.einsum("et,net->n", M[:, a:b], Xb ** 2 - (Xb - fit) ** 2)

@@ -99,10 +99,11 @@ def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str
         out = _scored_test(diag, Y, pred, threshold_t=st["evidence_threshold_t_split"],
                            score_p=score.p, score_threshold_p=st["score_threshold_p"])
     # an effect of per-segment courses of time also needs what tracker drift cannot give (its held-out gain
-    # beyond phase surrogates, or a course common to two node-disjoint row sets; rce_gtsam.diagnosis.diagnose);
-    # both tests read the baseline's residuals only, so the oracle's are the candidate's. Where the candidate's
-    # fold t fell short they did not run; the oracle then keeps its own fold t alone
-    # (where the check ran, the candidate's "significant" is its outcome: the fold t had to pass for it to run)
+    # beyond phase surrogates, a course common to two node-disjoint row sets, or courses not laid out as a node's
+    # drift turns its bends; rce_gtsam.diagnosis.diagnose); all three tests read the baseline's residuals only,
+    # so the oracle's are the candidate's. Where the candidate's fold t fell short they did not run; the oracle
+    # then keeps its own fold t alone (where the check ran, the candidate's "significant" is its outcome: the
+    # fold t had to pass for it to run)
     null = next((c.extra for c in diag.candidates if c.effect == effect and "heldout_null_p" in c.extra), None)
     if null is not None:
         out["supported"] = bool(out["supported"] and null["significant"])

@@ -75,17 +75,24 @@ class ResidualContext:
         return cls(R=R, kappa=fit.kappa, z=fit.z, s=fit.root_distance, inflation=ar1_inflation(R))
 
 
-def noise_correlation(R: np.ndarray, shrink: float = 0.05) -> np.ndarray:
-    """(E, E) correlation between edges of the noise in a residual matrix R (E, T), NaN = missing.
-
-    From frame-to-frame differences (pairwise over frames where both rows have both frames), shrunk by
-    ``shrink`` toward the identity so that it stays well conditioned with few frames."""
-    E = R.shape[0]
+def difference_covariance(R: np.ndarray) -> np.ndarray:
+    """(E, E) covariance between the rows of a residual matrix R (E, T; degrees, NaN = missing) of their
+    frame-to-frame differences (deg^2; pairwise over frames where both rows have both frames): the fast
+    tracking noise, and how a node's error reaches the bends beside it."""
     D = np.diff(R, axis=1)
     ok = np.isfinite(D)
     D0 = np.where(ok, D, 0.0)
     n = ok.astype(float) @ ok.T.astype(float)
-    C = (D0 @ D0.T) / np.maximum(n, 1.0)
+    return (D0 @ D0.T) / np.maximum(n, 1.0)
+
+
+def noise_correlation(R: np.ndarray, shrink: float = 0.05) -> np.ndarray:
+    """(E, E) correlation between edges of the noise in a residual matrix R (E, T), NaN = missing.
+
+    From frame-to-frame differences (:func:`difference_covariance`), shrunk by ``shrink`` toward the identity
+    so that it stays well conditioned with few frames."""
+    E = R.shape[0]
+    C = difference_covariance(R)
     d = np.sqrt(np.clip(np.diag(C), 1e-300, None))
     corr = C / np.outer(d, d)
     corr[~np.isfinite(corr)] = 0.0

@@ -199,9 +199,11 @@ class Effect:
         """(K, n_frames) the time courses this effect adds to each segment on its own (per-segment coefficients on
         fixed courses of time: an offset's 1 and a creep's t), or None (the default). Where given, the
         diagnosis names the effect only if, besides the held-out fold t, the held-out gain of per-segment fits on
-        these courses beats phase surrogates of the residuals (:mod:`rce_gtsam.diagnosis.heldout_null`) or two
-        node-disjoint row sets share a time course (the second excitation's test): slow tracker drift gives
-        every segment such a course, and the fold t, taking its blocks as independent, would credit it to the
+        these courses beats phase surrogates of the residuals (:mod:`rce_gtsam.diagnosis.heldout_null`), two
+        node-disjoint row sets share a time course (the second excitation's test), or the segments' coefficients
+        on the courses that change with time are laid out along the branch otherwise than a node's tracking
+        error reaches the bends (:mod:`rce_gtsam.diagnosis.drift_pattern`): slow tracker drift gives every
+        segment such a course, and the fold t, taking its blocks as independent, would credit it to the
         effect."""
         return None
 
