@@ -34,3 +34,19 @@ def synth(effect=None, seed=0, E=12, T=600, noise=0.3, strength=None):
     Y = y + n
     Y[r4.uniform(size=(E, T)) < 0.02] = np.nan
     return Y, s, kappa, z, y
+
+
+def diagnosed_recording(seed, effect=None, strength_mult=1.0, candidates=("offset",), **simulation):
+    """The diagnosis (default preset, ``candidates`` only) of a simulated recording through the whole pipeline:
+    ``effect`` hidden at ``strength_mult`` times the simulator's default, 900 frames, other
+    :class:`~rce_gtsam.sim.simulate.SimulationConfig` fields from ``simulation`` (fps=60, ...)."""
+    from rce_gtsam.diagnosis.diagnose import diagnose
+    from rce_gtsam.pipeline import analyze
+    from rce_gtsam.presets import get_preset
+
+    kw = {} if effect is None else {"effects": (effect,),
+                                    "effect_strength": {effect: strength_mult * sim.EFFECT_DEFAULTS[effect]}}
+    simulated = sim.simulate(sim.SimulationConfig(seed=seed, n_frames=900, **kw, **simulation))
+    r = analyze(simulated.tracks, simulated.graph, preset="default", n_boot=0).response
+    return diagnose(r.Y, weights=r.weights, root_distance=r.root_distance, edge_labels=r.edge_labels,
+                    effects=list(candidates), config=get_preset("default").compliance)

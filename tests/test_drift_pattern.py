@@ -10,6 +10,7 @@ from types import SimpleNamespace
 import numpy as np
 from scipy import signal
 
+from _effect_data import diagnosed_recording
 from rce_gtsam import effects
 from rce_gtsam.diagnosis.drift_pattern import drift_pattern_test
 
@@ -77,16 +78,7 @@ def test_a_creep_the_other_checks_miss_is_named_for_its_layout_along_the_branch(
     but its gain is within what phase surrogates of the residuals give (p = 0.47) and the two node-disjoint
     row sets share no course (p = 0.46); the segments' trends are laid out unlike a node's drift (p = 0.005).
     Before this test the offset was not named here, and the explanation says which check passed."""
-    from rce_gtsam.diagnosis.diagnose import diagnose
-    from rce_gtsam.pipeline import analyze
-    from rce_gtsam.presets import get_preset
-    from rce_gtsam.sim.simulate import EFFECT_DEFAULTS, SimulationConfig, simulate
-
-    sim = simulate(SimulationConfig(effects=("offset",), seed=15, n_frames=900,
-                                    effect_strength={"offset": 4 * EFFECT_DEFAULTS["offset"]}))
-    r = analyze(sim.tracks, sim.graph, preset="default", n_boot=0).response
-    d = diagnose(r.Y, weights=r.weights, root_distance=r.root_distance, edge_labels=r.edge_labels,
-                 effects=["offset"], config=get_preset("default").compliance)
+    d = diagnosed_recording(15, "offset", 4)
     c = d.candidate("offset")
     assert c.extra["heldout_null_p"] > c.extra["heldout_null_threshold_p"]
     assert c.extra["shared_course_p"] > c.extra["shared_course_threshold_p"]

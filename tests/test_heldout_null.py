@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from _effect_data import diagnosed_recording
 from rce_gtsam import effects
 from rce_gtsam.diagnosis.heldout import fold_blocks
 from rce_gtsam.diagnosis.heldout_null import heldout_gain, heldout_gain_null_test
@@ -57,15 +58,7 @@ def test_the_offset_is_not_named_for_the_drift_of_a_60_fps_recording():
     """The recording that made the test: effect-free, 60 frames/s (900 frames = 15 s, drift correlation time
     2 s). The offset + creep lowers the held-out RMSE by 3.5 % with a fold t of 5.0, but its gain is what
     phase surrogates of the residuals give, and the explanation says so."""
-    from rce_gtsam.diagnosis.diagnose import diagnose
-    from rce_gtsam.pipeline import analyze
-    from rce_gtsam.presets import get_preset
-    from rce_gtsam.sim.simulate import SimulationConfig, simulate
-
-    sim = simulate(SimulationConfig(seed=6, fps=60.0, n_frames=900))
-    r = analyze(sim.tracks, sim.graph, preset="default", n_boot=0).response
-    d = diagnose(r.Y, weights=r.weights, root_distance=r.root_distance, edge_labels=r.edge_labels,
-                 effects=["offset"], config=get_preset("default").compliance)
+    d = diagnosed_recording(6, fps=60.0)
     c = d.candidate("offset")
     assert c.extra["significant_by_fold_t"] and c.improvement_pct > 2  # what the fold t alone named
     assert c.extra["heldout_null_p"] > 0.2 and not c.extra["significant"] and d.verdict is None
@@ -87,16 +80,7 @@ def test_a_creep_whose_gain_the_surrogates_match_is_named_for_its_course_common_
     """Offset + creep at 6x the simulator's default (seed 4): its held-out gain (9.7 %, fold t 4.0) is within
     what the phase surrogates give, but the two node-disjoint row sets share the creep's time course, which
     drift, each node's own, cannot give: the offset is named, and the explanation says why."""
-    from rce_gtsam.diagnosis.diagnose import diagnose
-    from rce_gtsam.pipeline import analyze
-    from rce_gtsam.presets import get_preset
-    from rce_gtsam.sim.simulate import EFFECT_DEFAULTS, SimulationConfig, simulate
-
-    sim = simulate(SimulationConfig(effects=("offset",), seed=4, n_frames=900,
-                                    effect_strength={"offset": 6 * EFFECT_DEFAULTS["offset"]}))
-    r = analyze(sim.tracks, sim.graph, preset="default", n_boot=0).response
-    d = diagnose(r.Y, weights=r.weights, root_distance=r.root_distance, edge_labels=r.edge_labels,
-                 effects=["offset"], config=get_preset("default").compliance)
+    d = diagnosed_recording(4, "offset", 6)
     c = d.candidate("offset")
     assert c.extra["heldout_null_p"] > c.extra["heldout_null_threshold_p"]
     assert c.extra["shared_course_p"] <= c.extra["shared_course_threshold_p"]
