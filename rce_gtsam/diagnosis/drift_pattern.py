@@ -29,7 +29,9 @@ under the held-out tracker noise of ``benchmarks/bench_diagnose.py``, 1 of 20 tr
 chains, 0 of 20 with a swaying root (11 of 220, 5.0 %); on synthetic node drift through the bend geometry
 4.5 % of 200. With the segment constants tested too it fired on 18 of 40 (the median reference pose leaves a
 constant of each segment's own). Offset + creep at 4x and 6x the simulator's default: 16 of 20 each; delay at
-1x 0 of 20, a second excitation at 2x 2 of 20.
+1x 0 of 20, a second excitation at 2x 2 of 20. With it the diagnosis (all six candidates) names offset + creep
+on 11 of 20 at 4x and 19 of 20 at 6x (9 and 18 without it; 12 and 19 before any drift check), effect-free
+recordings still 40/40 none at 30 frames/s and 39/40 at 60 frames/s (``benchmarks/bench_diagnose.py``).
 
 **A rescue of the fold t, not a test on its own.** The diagnosis names an offset/creep where its fold t is
 significant and the data show something drift cannot do (:meth:`rce_gtsam.effects.Effect.heldout_time_basis`):
