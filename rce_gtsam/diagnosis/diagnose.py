@@ -52,8 +52,8 @@ extended by that effect (:mod:`rce_gtsam.effects`), and compares them on **held-
   (+1, -2, +1; :mod:`rce_gtsam.diagnosis.drift_pattern`, at alpha). *Supported* = significant AND a lower
   held-out RMSE AND a lower AIC than the baseline's (waived when the full-data score test is significant: the
   AIC guards the fold t) AND at least ``resolution`` of the bending variance off the held-out error: the
-  held-out error stays what the user watches fall. AIC/BIC and the likelihood-ratio test use the effective sample of
-  serially correlated residuals (n_eff = sum_e n_e (1 - rho_e) / (1 + rho_e), per-frame latents counted as
+  held-out error stays what the user watches fall. AIC/BIC and the likelihood-ratio test use the effective
+  sample of serially correlated residuals (n_eff = sum_e n_e (1 - rho_e) / (1 + rho_e), per-frame latents counted as
   n_eff / E values, :func:`effective_sample`); with rho ~ 0.9-0.97 the nominal AIC favours every extra term.
 * Verdict: the supported effect with the lowest held-out RMSE — unless a supported effect with fewer
   effective parameters is not significantly worse by the same paired t
@@ -89,8 +89,8 @@ from scipy import stats
 
 from .. import effects as effects_mod
 from .budget import VarianceBudget, variance_budget
-from .explain import explain, render_diagnosis_report
 from .drift_pattern import drift_pattern_test
+from .explain import explain, render_diagnosis_report
 from .heldout import fold_blocks, frame_loss, heldout_errors, paired_t
 from .heldout_null import heldout_gain_null_test
 from .maxt import sign_flip_max_t

@@ -59,12 +59,12 @@ def heldout_null_text(c) -> str:
                 f"{sthr:.2g}), which tracker drift, each node's own, cannot give")
     dp, dthr = c.extra.get("drift_pattern_p"), c.extra.get("drift_pattern_threshold_p", float("nan"))
     if dp is not None and dp <= dthr:
-        return (f"; the segments' slow courses are not laid out as a node's tracking drift turns its bends "
+        return (f"; the segments' trends are not laid out as a node's tracking drift turns its bends "
                 f"(neighbours in opposite senses; p = {dp:.2g} <= {dthr:.2g})")
     return (f"; but slow noise of the residuals' own spectrum (tracker drift) gains as much on held-out frames "
             f"(phase surrogates p = {p:.2g} > {thr:.2g})"
-            + ("" if dp is None else f", the segments' slow courses alternate along the branch as a node's "
-               f"drift turns its bends (p = {dp:.2g} > {dthr:.2g})")
+            + ("" if dp is None else f", the segments' trends are laid out as a node's drift could lay them out "
+               f"(p = {dp:.2g} > {dthr:.2g})")
             + ("" if sp is None else f" and no time course is common to two sets of segments that share no "
                f"tracked node (p = {sp:.2g} > {sthr:.2g})"))
 
