@@ -60,7 +60,9 @@ def heldout_null_text(c) -> str:
     dp, dthr = c.extra.get("drift_pattern_p"), c.extra.get("drift_pattern_threshold_p", float("nan"))
     if dp is not None and dp <= dthr:
         return (f"; the segments' trends are not laid out as a node's tracking drift turns its bends "
-                f"(neighbours in opposite senses; p = {dp:.2g} <= {dthr:.2g})")
+                f"(neighbours in opposite senses; p = {dp:.2g} <= {dthr:.2g}), which assumes that a node's slow and fast "
+                f"tracking errors share their layout (so on the simulator, only partly checked on real footage: "
+                f"look at the raw tracks for slow drift before trusting it)")
     return (f"; but slow noise of the residuals' own spectrum (tracker drift) gains as much on held-out frames "
             f"(phase surrogates p = {p:.2g} > {thr:.2g})"
             + ("" if dp is None else f", the segments' trends are laid out as a node's drift could lay them out "
