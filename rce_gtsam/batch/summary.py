@@ -52,7 +52,8 @@ class RecordingSummary:
 
     @property
     def diagnosis_status(self) -> str | None:
-        """diagnosis.json's ``status``: effect, adequate, misses, inconclusive or untested (None when failed)."""
+        """diagnosis.json's ``status``: effect, adequate, misses, inconclusive, untested or uncalibrated (None
+        when failed)."""
         return None if self.diagnosis is None else self.diagnosis.get("status")
 
 

@@ -168,6 +168,9 @@ class Diagnosis:
     #: the candidate the verdict comes from, where it is another form of the effect ``verdict`` names
     #: (:attr:`~rce_gtsam.effects.Effect.finding`: "resonances" for the finding "dynamics"); else ``verdict``
     verdict_effect: str | None = None
+    #: the analysis' settings under which the diagnosis is not calibrated (rce_gtsam.diagnosis.domain): no
+    #: effect is named where there are any
+    outside_domain: tuple = ()
 
     @property
     def status(self) -> str:
@@ -175,7 +178,11 @@ class Diagnosis:
         consistent with the noise floor), ``"misses"`` (significantly more than noise is left and no candidate
         explains it), ``"inconclusive"`` (the noise floor is only bounded and the bounds straddle the
         residual, or the record is too short to exclude a miss as large as the noise floor:
-        ``budget.reason``), or ``"untested"`` (no noise floor was given: held-out comparison only)."""
+        ``budget.reason``), ``"untested"`` (no noise floor was given: held-out comparison only), or
+        ``"uncalibrated"`` (the analysis' settings lie outside the domain the tests are calibrated on,
+        :attr:`outside_domain`: nothing is named)."""
+        if self.outside_domain:
+            return "uncalibrated"
         if self.verdict is not None:
             return "effect"
         if self.budget is None:
@@ -293,7 +300,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
              block_length: int = BLOCK_LENGTH, prior_strength: float | None = None, response: str | None = None,
              alpha: float = 0.05, edge_labels=None, frames=None, edge_nodes=None,
              config: ComplianceConfig | None = None, noise_floor: NoiseFloor | None = None,
-             resolution: float = RESOLUTION) -> Diagnosis:
+             resolution: float = RESOLUTION, outside_domain: tuple[str, ...] = ()) -> Diagnosis:
     """Diagnose which physical effect the rank-1 model misses.
 
     Y: (E, T) bend response in degrees (NaN = missing/outlier); weights: (E, T) >= 0 or None;
@@ -312,6 +319,10 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     named (default :data:`RESOLUTION`, 0.1 %), however significant: on noise-free data the pipeline's own
     small distortions (the smoother, the angle geometry) are "significant" at any size, and a second mode
     worth 1e-5 of the variance is no finding.
+    outside_domain: the analysis' settings under which the diagnosis is not calibrated
+    (:func:`~rce_gtsam.diagnosis.domain.settings_outside_domain`, which :func:`~rce_gtsam.diagnosis.io.diagnose_result`
+    passes): every test still runs, but no effect is named (``settings["verdict_outside_domain"]`` keeps
+    the one that would have been) and the status reads ``"uncalibrated"``.
     """
     Y, W, s = validate_inputs(Y, weights, root_distance)
     E, T = Y.shape
@@ -449,6 +460,9 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     # the finding a verdict reports: another form of a library effect reports that effect (resonances: dynamics)
     named = None if verdict_effect is None else next(c for c in results if c.effect == verdict_effect)
     verdict = None if named is None else finding_of(named)
+    would_name = verdict
+    if outside_domain:  # the tests' calibration does not hold here: nothing is named (domain.py)
+        verdict_effect, named, verdict = None, None, None
     worst_e, worst_f, summary = worst_edges_and_frames(base, labels, block_length, frames)
     settings = {"n_folds": len(blocks), "fold_blocks": blocks, "buffer_frames": gap, "block_length": block_length,
                 "seed": seed, "alpha": alpha, "evidence_threshold_t": t_crit, "resolution": resolution,
@@ -459,7 +473,9 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                 "node_disjoint_halves": node_disjoint, "weighted": weights is not None,
                 "residual_lag1_autocorrelation": ess["rho"], "n_obs": ess["n"], "n_eff": ess["n_eff"],
                 "frames_eff": ess["t_eff"], "baseline_k_eff": base_ic["k_eff"], "parsimony": parsimony,
-                "encompassing_threshold_p": p_crit_score, "n_findings": n_c}
+                "encompassing_threshold_p": p_crit_score, "n_findings": n_c,
+                "outside_domain": list(outside_domain),
+                "verdict_outside_domain": would_name if outside_domain else None}
     budget = None
     if noise_floor is not None:
         added = {}
@@ -478,7 +494,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                          np.where(noise_floor.valid[:, None], noise_floor.series_deg, 0.0)
                          if noise_floor is not None else None,
                          shared=shared, root_distance=s),
-                     noise_floor=noise_floor)
+                     noise_floor=noise_floor, outside_domain=tuple(outside_domain))
     object.__setattr__(diag, "explanation", explain(diag))
     return diag
 

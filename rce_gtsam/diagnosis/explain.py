@@ -71,8 +71,22 @@ def heldout_null_text(c) -> str:
                f"tracked node (p = {sp:.2g} > {sthr:.2g})"))
 
 
+def outside_domain_text(diag: Diagnosis) -> str:
+    """Why a diagnosis outside its calibrated domain names nothing (:mod:`rce_gtsam.diagnosis.domain`), and what it
+    would have named."""
+    would = diag.settings.get("verdict_outside_domain")
+    return ("No effect is named: this analysis' settings lie outside the domain the diagnosis' tests are calibrated "
+            "on (" + "; ".join(diag.outside_domain) + "). Under such settings effect-free simulated recordings get "
+            "a verdict, so one here would say nothing about the plant"
+            + ("" if would is None else f" (it would have been {would})")
+            + ". The candidates' numbers are for inspection only; to diagnose, use the default preset "
+            "(rce diagnose --preset default; its kappa differs from the paper method's).")
+
+
 def explain(diag: Diagnosis) -> str:
     """Plain-language explanation of the verdict with the numbers behind it."""
+    if diag.outside_domain:
+        return outside_domain_text(diag)
     base = diag.baseline_heldout_rmse
     if diag.verdict is None:
         best = diag.candidates[0] if diag.candidates else None
@@ -290,7 +304,8 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
     none_text = {"adequate": "none (the rank-1 model is adequate: the residual is at the noise floor)",
                  "misses": "none of the candidates, but the rank-1 model misses more than noise",
                  "inconclusive": "none of the candidates; whether the rest is noise is inconclusive",
-                 "untested": "none (no candidate beats the rank-1 model on held-out frames)"}
+                 "untested": "none (no candidate beats the rank-1 model on held-out frames)",
+                 "uncalibrated": "none named (the diagnosis is not calibrated for this analysis' settings)"}
     form = (f" (in the form {diag.verdict_effect})"
             if diag.verdict_effect not in (None, diag.verdict) else "")
     out.append(f"    {diag.verdict or none_text.get(diag.status, 'none')}{form}")

@@ -53,29 +53,43 @@ def parse_effect_names(effects: str | Sequence[str] | None, source: str = "--eff
     return tuple(dict.fromkeys(names))
 
 
-def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = None):
-    """Diagnose the rank-1 model of an analysis: which physical effect does it miss?
-
-    Runs :func:`rce_gtsam.diagnosis.diagnose.diagnose` on ``result.response`` (Y in degrees, inverse-variance
-    weights when the preset's compliance fit is weighted, normalised root distance, edge labels
-    ``"joint->child"``, video frame of each column) with the preset's block length and whole compliance config (so the
-    baseline is the rank-1 fit ``rce analyze`` reports). ``effects``: candidate names (``"a,b"`` or a sequence;
-    default all six); ``seed``: seed of
-    the stratified edge split; ``n_folds``: cross-validation blocks (default: diagnose's N_FOLDS, 16).
-    Returns a :class:`~rce_gtsam.diagnosis.diagnose.Diagnosis`.
-    """
-    from .diagnose import diagnose
+def diagnose_inputs(result, effects=None, seed: int = 0, n_folds: int | None = None,
+                    respect_domain: bool = True) -> dict:
+    """The keyword arguments of :func:`rce_gtsam.diagnosis.diagnose.diagnose` for an analysis ``result``:
+    ``result.response`` (Y in degrees, inverse-variance weights when the preset's compliance fit is weighted,
+    normalised root distance, edge labels ``"joint->child"``, video frame of each column), the preset's block
+    length and whole compliance config (so the baseline is the rank-1 fit ``rce analyze`` reports), the noise
+    floor, and the preset's settings the diagnosis is not calibrated for
+    (:func:`~rce_gtsam.diagnosis.domain.settings_outside_domain`; left out with ``respect_domain=False``, which
+    only the benchmark that measures them uses). Other arguments as :func:`diagnose_result`."""
+    from .domain import settings_outside_domain
     from .noise_floor import noise_floor_of
 
     names = parse_effect_names(effects, source="effects")
     resp, cfg = result.response, result.preset.compliance
     kw = {} if n_folds is None else {"n_folds": int(n_folds)}
-    return diagnose(resp.Y, weights=resp.weights if cfg.weighted else None, root_distance=resp.root_distance,
-                    effects=list(names) if names is not None else None, seed=int(seed),
-                    block_length=cfg.block_length, config=cfg,
-                    edge_labels=resp.edge_labels, frames=resp.frames,
-                    edge_nodes=result.bending.nodes_of(resp.bend_rows),
-                    noise_floor=noise_floor_of(result), **kw)
+    return dict(Y=resp.Y, weights=resp.weights if cfg.weighted else None, root_distance=resp.root_distance,
+                effects=list(names) if names is not None else None, seed=int(seed),
+                block_length=cfg.block_length, config=cfg,
+                edge_labels=resp.edge_labels, frames=resp.frames,
+                edge_nodes=result.bending.nodes_of(resp.bend_rows),
+                noise_floor=noise_floor_of(result),
+                outside_domain=settings_outside_domain(result.preset) if respect_domain else (), **kw)
+
+
+def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = None):
+    """Diagnose the rank-1 model of an analysis: which physical effect does it miss?
+
+    Runs :func:`rce_gtsam.diagnosis.diagnose.diagnose` on the analysis (:func:`diagnose_inputs`).
+    ``effects``: candidate names (``"a,b"`` or a sequence; default all six); ``seed``: seed of the stratified
+    edge split; ``n_folds``: cross-validation blocks (default: diagnose's N_FOLDS, 16). Under a preset whose
+    settings lie outside the domain the diagnosis is calibrated on (the ``paper`` preset:
+    :mod:`rce_gtsam.diagnosis.domain`) it names no effect and its status reads ``"uncalibrated"``.
+    Returns a :class:`~rce_gtsam.diagnosis.diagnose.Diagnosis`.
+    """
+    from .diagnose import diagnose
+
+    return diagnose(**diagnose_inputs(result, effects, seed, n_folds))
 
 
 def diagnosis_json(diagnosis, result=None) -> dict:
