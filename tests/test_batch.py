@@ -136,6 +136,9 @@ def test_rerun_recomputes_nothing_and_a_changed_row_alone(inputs, first_run, tmp
     assert third.cluster["kind"] == "local" and third.cluster["n_workers"] == 1
     assert {k for k, o in third.outcomes.items() if o.status == "ok"} == {"p2"}
     assert set(third.summary[third.summary.id == "p2"].preset) == {"paper"}
+    # the diagnosis is not calibrated under the paper preset's settings: nothing named (diagnosis/domain.py)
+    assert set(third.summary[third.summary.id == "p2"].diagnosis_status) == {"uncalibrated"}
+    assert set(third.summary[third.summary.id == "p2"].verdict) == {"none"}
 
 
 def _same_file(a: Path, b: Path):
