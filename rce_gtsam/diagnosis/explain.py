@@ -80,7 +80,7 @@ def outside_domain_text(diag: Diagnosis) -> str:
             "a verdict, so one here would say nothing about the plant"
             + ("" if would is None else f" (it would have been {would})")
             + ". The candidates' numbers are for inspection only; to diagnose, use the default preset "
-            "(rce diagnose --preset default; its kappa differs from the paper method's).")
+            "(rce diagnose --preset default), whose smoothing, rest pose and response the tests were calibrated with.")
 
 
 def explain(diag: Diagnosis) -> str:
