@@ -40,16 +40,10 @@ def analysed(preset, seed: int):
 
 
 def shared_course_p(result) -> float:
-    """p of the shared-time-course test on the analysis' rank-1 fit, with the diagnosis' node-disjoint sets."""
+    """p of the shared-time-course test on the diagnosis' baseline and node-disjoint sets of the analysis."""
+    from rce_gtsam.diagnosis.io import diagnosis_baseline
     from rce_gtsam.diagnosis.score_test import shared_time_course_test
-    from rce_gtsam.model import ResponseModel
-    from rce_gtsam.model.row_sets import edge_nodes_from_labels, node_disjoint_split, shared_node_matrix
-    r, cfg = result.response, result.preset.compliance
-    W = r.weights if cfg.weighted else np.isfinite(r.Y).astype(float)
-    fit = ResponseModel(config=cfg).solve(r.Y, W, r.root_distance)
-    nodes = edge_nodes_from_labels(r.edge_labels)
-    halves = node_disjoint_split(r.root_distance, shared_node_matrix(r.root_distance, nodes), 0, edge_nodes=nodes)
-    return shared_time_course_test(fit, halves).p
+    return shared_time_course_test(*diagnosis_baseline(result)).p
 
 
 def would_name(result) -> str | None:

@@ -56,7 +56,7 @@ def plant(folder: Path) -> dict:
     """{name: p} of the length and bend checks of one real plant."""
     from rce_gtsam.diagnosis.drift_pattern import drift_pattern_test
     from rce_gtsam.graph import load_graph
-    from rce_gtsam.model import ResponseModel
+    from rce_gtsam.diagnosis.io import diagnosis_baseline
     from rce_gtsam.pipeline import analyze
     from rce_gtsam.tracks import load_tracks
 
@@ -67,9 +67,8 @@ def plant(folder: Path) -> dict:
         res = analyze(tracks, graph, preset=preset, n_boot=0, seed=0)
         if preset == "default":
             out["lengths smoothed"] = length_layout_p(res.smoothed.tracks, graph)
-        r = res.response
-        fit = ResponseModel(config=res.preset.compliance).solve(r.Y, r.weights, r.root_distance)
-        out[f"bends {preset}"] = drift_pattern_test(fit, offset_basis(r.Y.shape[1])).p
+        fit, _ = diagnosis_baseline(res)
+        out[f"bends {preset}"] = drift_pattern_test(fit, offset_basis(fit.Y.shape[1])).p
     return out
 
 

@@ -77,6 +77,22 @@ def diagnose_inputs(result, effects=None, seed: int = 0, n_folds: int | None = N
                 outside_domain=settings_outside_domain(result.preset) if respect_domain else (), **kw)
 
 
+def diagnosis_baseline(result, seed: int = 0):
+    """(baseline fit, node-disjoint row sets or None) that :func:`diagnose_result` starts from for an analysis
+    ``result``: the rank-1 model on :func:`diagnose_inputs` (the preset's weights and compliance config), and
+    the split of its rows that share no tracked node (edge-split ``seed``), as
+    :func:`rce_gtsam.diagnosis.diagnose.diagnose` makes them. For the benchmarks that ask one test of an
+    analysis without running the whole diagnosis."""
+    from ..model import ResponseModel, validate_inputs
+    from ..model.row_sets import node_disjoint_split, shared_node_matrix
+
+    resp, cfg = result.response, result.preset.compliance
+    Y, W, s = validate_inputs(resp.Y, resp.weights if cfg.weighted else None, resp.root_distance)
+    nodes = result.bending.nodes_of(resp.bend_rows)
+    return (ResponseModel(config=cfg).solve(Y, W, s),
+            node_disjoint_split(s, shared_node_matrix(s, nodes), seed, edge_nodes=nodes))
+
+
 def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = None):
     """Diagnose the rank-1 model of an analysis: which physical effect does it miss?
 
