@@ -53,6 +53,23 @@ def test_missing_residuals_count_as_zero_and_the_output_is_finite():
     assert np.isfinite(S).all()
 
 
+def test_surrogates_keep_a_gappy_rows_power_on_its_observed_frames():
+    """Callers mask the surrogates where the residuals are missing; a row observed on 40 % of its frames must
+    still get the variance it has there, and the observed frames' mean is the one removed. Before the
+    sqrt(T / n_observed) scale a zero-mean row kept 40 % of it (a null too narrow by 2.5 in variance); before
+    the observed mean, this row's offset of 5 left the zero-filled frames a step that came out as 6.5 times
+    the variance."""
+    rng = np.random.default_rng(3)
+    R = 5.0 + rng.normal(size=(2, 1000))
+    R[0, rng.random(1000) < 0.6] = np.nan
+    S = phase_randomised_residuals(R, 400, np.random.default_rng(4))
+    for e in range(2):
+        seen = np.isfinite(R[e])
+        var_obs = float(np.var(R[e, seen]))
+        var_sur = float(np.mean(S[:, e, seen] ** 2))
+        assert abs(var_sur / var_obs - 1.0) < 0.1, (e, var_sur / var_obs)
+
+
 def test_effective_samples_of_narrowband_and_broadband_excitation():
     rng = np.random.default_rng(0)
     T = 600

@@ -377,7 +377,9 @@ def shared_time_course_test(fit, halves, n_surrogates: int = N_SURROGATES, seed:
     (0/40), 3/40 at p <= 0.05 (4/40); a second excitation p <= 0.005 in 5/16/17/17 of 20 at 1/2/3/4x the
     simulator's default strength (5/17/18/17); delay 0/40 at 1x (10/40), 1/20 at 2x (7/20), 3/20 at 3x (4/20;
     the lag's second-order course, common to the rows, is left); dynamics 1/40 at 1x (5/40), 4/40 at 1.5x
-    (11/40), 0/20 at 2x (8/20).
+    (11/40), 0/20 at 2x (8/20). Since the surrogates keep each row's power on its observed frames
+    (:func:`~rce_gtsam.model.compliance.residual_spectrum`): effect-free 0/40 at p <= 0.005, 2/40 at
+    p <= 0.05; a second excitation 4/15/17/17 of 20 at 1/2/3/4x, its verdicts unchanged.
     Whitening each row's spectrum as well (a coherence) fired on 3/40 effect-free seeds
     and found less: the second excitation shares the wind's low frequencies, where the residuals' power is.
     Units: degrees (residuals); p unitless."""

@@ -485,9 +485,22 @@ def draw_phases(rng: np.random.Generator, n_boot: int, n_frames: int) -> tuple[n
 
 
 def residual_spectrum(R: np.ndarray) -> np.ndarray:
-    """(E, K) Fourier transform of the rows of R (E, T) with NaN set to 0 and each row's mean removed."""
-    X = np.where(np.isfinite(R), R, 0.0)
-    return np.fft.rfft(X - X.mean(axis=1, keepdims=True), axis=1)
+    """(E, K) Fourier transform of the rows of R (E, T; NaN = missing): each row's mean over its observed
+    frames removed, missing frames set to 0, and the row scaled by sqrt(T / n_observed).
+
+    Why the scale: every caller masks its surrogates again where R is missing. A zero-filled row's power is
+    spread by the phase randomisation over all T frames, so the n_observed frames that stay would carry only
+    n_observed / T of the row's power per frame, a null narrower than the noise it stands for (and a mean taken
+    over the zeros too left the filled frames a step of their own). The pipeline leaves a median 6.4 % of the
+    simulator's segment-frames missing (default preset, 900 frames); the second excitation's test between
+    node-disjoint sets gave p <= 0.05 on 6 of 80 effect-free recordings (1 at 0.005) before, 4 (0) with the
+    scale. A recording without missing frames gets the same surrogates as before."""
+    R = np.asarray(R, float)
+    observed = np.isfinite(R)
+    n_obs = observed.sum(axis=1, keepdims=True)
+    mean = np.where(observed, R, 0.0).sum(axis=1, keepdims=True) / np.maximum(n_obs, 1)
+    X = np.where(observed, R - mean, 0.0) * np.sqrt(R.shape[1] / np.maximum(n_obs, 1))
+    return np.fft.rfft(X, axis=1)
 
 
 def surrogate_residuals(F: np.ndarray, n_frames: int, phase: np.ndarray, dc_phase: np.ndarray | None) -> np.ndarray:
