@@ -207,7 +207,8 @@ PAPER = Preset(name="paper")
 #:   samples on plants 2 / 1), where slow tracker drift lives too, so blocks of frames miss most of
 #:   kappa's error. 95 % intervals covered kappa_true for 82.8 % of edges with blocks, 91.1 % with this
 #:   (20 seeds of simulated tracks with 2-s drift). Median U_e on plant 1 / 2: 0.84 / 0.88 with
-#:   blocks, 1.17 / 1.22 with this;
+#:   blocks, 1.17 / 1.22 with this (1.20 / 1.21 since the surrogates keep each segment's power on its
+#:   observed frames, and 92.5 % coverage);
 #: * kept OFF because they did not help: the anisotropic measurement covariance (0.385) and the Huber
 #:   loss (0.278); both stay available as settings.
 #: * kept OFF, a trade: the correlated (generalised least squares) fit, ``correlated=True``. It uses
