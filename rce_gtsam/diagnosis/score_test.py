@@ -383,9 +383,10 @@ def shared_time_course_test(fit, halves, n_surrogates: int = N_SURROGATES, seed:
     Not adopted: larger sets, dealt at the phase whose smaller set is largest (6 + 6 segments of the simulator's
     chain against these 6 + 4), took a second excitation to 10/20 at 1x and 40/40 at 2x (p <= 0.005, 24/40 with
     these sets) but fired on 5-9 of 80 effect-free recordings at p <= 0.05 (1-2 at 0.005), depending on the
-    phase kept; with one set rolled by half the record both splits give 3 of 80, so the excess is something the
-    sets share in time (their noise power's 30-frame envelopes correlate at 0.13 on the recordings that fire,
-    0.02 overall), not a fault of the surrogates.
+    phase kept (3 of 80 for both splits with one set rolled by half the record; normalising each set by its own
+    90-frame power envelope did not lower it). Over the 240 effect-free recordings of seven kinds (see
+    :func:`~rce_gtsam.model.compliance.residual_spectrum`), the first phase of largest sets gave 19 at p <= 0.05
+    and 4 at 0.005, these sets 15 and 2 (1000 surrogates): a lead whose verdicts are still to be measured.
     Whitening each row's spectrum as well (a coherence) fired on 3/40 effect-free seeds
     and found less: the second excitation shares the wind's low frequencies, where the residuals' power is.
     Units: degrees (residuals); p unitless."""
