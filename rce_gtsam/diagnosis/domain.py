@@ -5,8 +5,8 @@ carry independent noise, and take what the rank-1 model leaves to be noise plus 
 rates were measured on signed bending from the median pose of tracks smoothed node by node (the ``default``
 preset). Three settings break those premises, each measured on effect-free simulated recordings (900 frames,
 the simulator's default noise; ``python benchmarks/bench_diagnose_domain.py``: the second excitation's test
-between the node-disjoint sets, p <= 0.005, against 0 of 40 under ``default`` (2 of 40 at 0.05); with the surrogates that keep each segment's
-power on its observed frames, :func:`~rce_gtsam.model.compliance.residual_spectrum`):
+between the node-disjoint sets, p <= 0.005, against 0 of 40 under ``default`` (2 of 40 at 0.05); with the
+surrogates that keep each segment's power on its observed frames, :func:`~rce_gtsam.model.compliance.residual_spectrum`):
 
 * ``smoother.edge_weight > 0``: the edge prior ties each node to its neighbours through the segment between
   them, so a node's tracking error reaches the next set's nodes and the sets share noise (3 of 40; 9 at
@@ -16,8 +16,8 @@ power on its observed frames, :func:`~rce_gtsam.model.compliance.residual_spectr
 * ``compliance.response = "abs"``: |delta beta| folds the sign, a nonlinearity of its own that the effects'
   signatures (a saturation, a second excitation) take up (7 of 40; 18 at 0.05).
 
-The ``paper`` preset sets all three (it reproduces the published method): 32 of 40 (36 at 0.05), and the whole diagnosis
-under it named an effect on 9 of the first 10 effect-free recordings and 5 of seeds 10-14 (second excitation,
+The ``paper`` preset sets all three (it reproduces the published method): 32 of 40 (36 at 0.05), and the whole
+diagnosis under it named an effect on 9 of the first 10 effect-free recordings and 5 of seeds 10-14 (second excitation,
 saturation, dynamics, offset). The paper's other settings, each alone, were not seen to break it: a 5-frame
 moving average 0 of 40, its velocity and acceleration weights 0 of 40, an unweighted fit 1 of 40 (1000
 surrogates); settings not named here are unmeasured. Outside the domain
