@@ -46,7 +46,7 @@ def test_surrogate_means_are_noise_drawn_from_the_lowest_frequency():
     assert np.all(np.abs(means.mean(axis=0)) < 0.1 * expected_sd)
 
 
-def test_missing_residuals_count_as_zero_and_the_output_is_finite():
+def test_missing_residuals_are_left_out_and_the_output_is_finite():
     R = np.random.default_rng(0).normal(size=(2, 50))
     R[0, 10:20] = np.nan
     S = phase_randomised_residuals(R, 3, np.random.default_rng(1))
