@@ -32,8 +32,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .model.compliance import (BootstrapCI, block_bootstrap_indices, excitation_dof, interval_about,
-                         phase_randomised_residuals, posterior_widening, small_sample_factor)
+from .model.compliance import (BootstrapCI, block_bootstrap_indices, centred_observed, excitation_dof,
+                               interval_about, phase_randomised_residuals, posterior_widening,
+                               small_sample_factor)
 from .model import ResponseModel, validate_inputs
 from .model.row_sets import node_disjoint_split, shared_node_matrix
 from .model.starts import solve_from_starts
@@ -257,8 +258,5 @@ def absorption_spectrum(mf, W, s, rng: np.random.Generator, n_probe: int = 16, m
 def restore_absorbed_noise(R: np.ndarray, g: np.ndarray) -> np.ndarray:
     """(E, T) residuals R (NaN = missing) with the power at each frequency divided by its surviving share
     ``g`` (:func:`absorption_spectrum`): phases and cross-spectra kept, mean removed, NaN kept."""
-    obs = np.isfinite(R)
-    X = np.where(obs, R, 0.0)
-    X = X - X.mean(axis=1, keepdims=True)
-    restored = np.fft.irfft(np.fft.rfft(X, axis=1) / np.sqrt(g)[None, :], n=R.shape[1], axis=1)
-    return np.where(obs, restored, np.nan)
+    restored = np.fft.irfft(np.fft.rfft(centred_observed(R), axis=1) / np.sqrt(g)[None, :], n=R.shape[1], axis=1)
+    return np.where(np.isfinite(R), restored, np.nan)
