@@ -1,0 +1,122 @@
+"""False verdicts and detection on the user's path: ``rce simulate --video`` -> ``rce run`` (our tracker on our
+rendered video), effect-free and with a hidden effect, clean and ``outdoor`` renders, measured together.
+
+Each case runs the two commands as a user would (separate processes, the whole wall time counted) and keeps
+the run folder in ``--cache``; a re-run re-uses every case already there, so the summary can be re-printed (or
+re-decided after a change to the diagnosis with ``--rediagnose``, which re-runs ``rce diagnose`` on the cached
+tracks) without re-rendering and re-tracking.
+
+Columns: cases, verdicts named (any effect; for effect-free cases these are false verdicts), right (the
+hidden effect named), the names given, and the median wall seconds of simulate + run.
+
+Usage: python benchmarks/bench_user_path.py --cache DIR [--seeds 20] [--first-seed 100] [--frames 450]
+       [--effects none,delay,dynamics] [--renders clean,outdoor] [--workers 2] [--rediagnose]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from collections import Counter
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+BIN = Path(sys.executable).parent
+
+
+def case_dir(cache: Path, effect: str, render: str, seed: int, frames: int) -> Path:
+    return cache / f"{effect}_{render}_f{frames}_s{seed}"
+
+
+def run_case(cache: str, effect: str, render: str, seed: int, frames: int) -> dict:
+    """simulate -> run for one case (skipped where its diagnosis.json exists); returns its row."""
+    d = case_dir(Path(cache), effect, render, seed, frames)
+    diag = d / "run" / "diagnosis.json"
+    wall = None
+    if not diag.exists():
+        t0 = time.perf_counter()
+        sim = [str(BIN / "rce"), "simulate", "--seed", str(seed), "--frames", str(frames), "--video",
+               "--realism", render, "--out", str(d / "sim")]
+        if effect != "none":
+            sim += ["--effect", effect]
+        subprocess.run(sim, check=True, capture_output=True)
+        run = [str(BIN / "rce"), "run", str(d / "sim" / "video.mp4"), str(d / "sim" / "annotations.json"),
+               str(d / "sim" / "graph.json"), "--out", str(d / "run"), "--seed", "0", "--quiet"]
+        p = subprocess.run(run, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        (d / "wall_s.txt").write_text(f"{wall:.2f}\n")
+        if p.returncode not in (0, 3):
+            (d / "error.txt").write_text(p.stdout + p.stderr)
+            return {"effect": effect, "render": render, "seed": seed, "error": p.stderr.strip()[-300:]}
+    return row_of(d, effect, render, seed)
+
+
+def rediagnose(cache: str, effect: str, render: str, seed: int, frames: int) -> dict:
+    """Re-run ``rce diagnose`` on a cached case's tracks (the diagnosis changed, the tracker did not)."""
+    d = case_dir(Path(cache), effect, render, seed, frames)
+    out = d / "rediagnosis.json"
+    subprocess.run([str(BIN / "rce"), "diagnose", str(d / "run" / "tracks.csv"), str(d / "sim" / "graph.json"),
+                    "--json", str(out), "--seed", "0", "--quiet"], capture_output=True, text=True)
+    return row_of(d, effect, render, seed, name="rediagnosis.json")
+
+
+def row_of(d: Path, effect, render, seed, name=None) -> dict:
+    path = d / name if name else d / "run" / "diagnosis.json"
+    if not path.exists():
+        return {"effect": effect, "render": render, "seed": seed, "error": "no diagnosis"}
+    diag = json.loads(path.read_text())
+    wall = float((d / "wall_s.txt").read_text()) if (d / "wall_s.txt").exists() else float("nan")
+    return {"effect": effect, "render": render, "seed": seed, "verdict": diag.get("verdict"),
+            "status": diag.get("status"), "wall_s": wall,
+            "withheld": (diag.get("settings") or {}).get("verdict_withheld")}
+
+
+def summarise(rows: list[dict]) -> str:
+    import numpy as np
+    lines = [f"{'effect':<10} {'render':<8} {'n':>3} {'named':>6} {'right':>6}  names (withheld)  wall s"]
+    keys = sorted({(r["effect"], r["render"]) for r in rows})
+    for eff, ren in keys:
+        rs = [r for r in rows if r["effect"] == eff and r["render"] == ren and "error" not in r]
+        named = [r["verdict"] for r in rs if r["verdict"]]
+        right = sum(1 for r in rs if r["verdict"] == eff)
+        withheld = Counter(w for r in rs for w in (r.get("withheld") or []))
+        wall = np.nanmedian([r["wall_s"] for r in rs]) if rs else float("nan")
+        lines.append(f"{eff:<10} {ren:<8} {len(rs):>3} {len(named):>6} {right if eff != 'none' else '-':>6}  "
+                     f"{dict(Counter(named))} ({dict(withheld)})  {wall:.0f}")
+    errors = [r for r in rows if "error" in r]
+    if errors:
+        lines.append(f"{len(errors)} cases failed: " + "; ".join(f"{r['effect']}/{r['render']}/{r['seed']}: "
+                                                                 f"{r['error']}" for r in errors[:3]))
+    return "\n".join(lines)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cache", required=True)
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--first-seed", type=int, default=100)
+    ap.add_argument("--frames", type=int, default=450)
+    ap.add_argument("--effects", default="none,delay,dynamics")
+    ap.add_argument("--renders", default="clean,outdoor")
+    ap.add_argument("--workers", type=int, default=max(1, (os.cpu_count() or 2)))
+    ap.add_argument("--rediagnose", action="store_true")
+    ap.add_argument("--json", default=None, help="write the rows here")
+    a = ap.parse_args()
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    jobs = [(a.cache, e, r, s, a.frames) for s in range(a.first_seed, a.first_seed + a.seeds)
+            for e in a.effects.split(",") for r in a.renders.split(",")]
+    fn = rediagnose if a.rediagnose else run_case
+    with ProcessPoolExecutor(a.workers) as pool:
+        rows = list(pool.map(fn, *zip(*jobs)))
+    print(summarise(rows))
+    if a.json:
+        Path(a.json).write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
