@@ -201,6 +201,8 @@ class AnalysisResult:
     effects: tuple[str, ...] = ()
     effects_bootstrap: ExtendedBootstrapInfo | None = None
     time_split: TimeSplitCheck | None = None  # batch-means check that widened the CIs (None: off)
+    #: which kappa to report after a diagnosis (rce_gtsam.kappa_report; None: no diagnosis ran)
+    kappa_choice: object | None = None
 
     @property
     def kappa(self) -> dict[tuple[int, int], float]:

@@ -76,7 +76,11 @@ def compliance_summary(result) -> pd.DataFrame:
                 quality=quality[e].quality,
             )
         records.append(rec)
-    return pd.DataFrame.from_records(records)
+    df = pd.DataFrame.from_records(records)
+    if getattr(result, "kappa_choice", None) is not None:
+        from .kappa_report import add_to_summary
+        df = add_to_summary(df, result.kappa_choice)
+    return df
 
 
 def excitation_table(result) -> pd.DataFrame:
@@ -134,6 +138,8 @@ def report_dict(result) -> dict:
         "timings_s": result.timings_s,
         "quality": quality_report(result),
         **({"effects": result.effects_report()} if getattr(result, "effects", None) else {}),
+        **({"kappa_to_report": result.kappa_choice.as_dict()}
+           if getattr(result, "kappa_choice", None) is not None else {}),
     })
 
 

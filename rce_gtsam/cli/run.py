@@ -51,6 +51,9 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
     import shutil
     import tempfile
 
+    import dataclasses
+
+    from ..kappa_report import kappa_after_verdict
     from ..diagnosis.io import diagnose_result, diagnosis_for_viz, diagnosis_json, parse_effect_names
     from ..graph import load_graph
     from ..pipeline import ANALYSIS_STEPS, analyze
@@ -108,6 +111,7 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
             bar.start("diagnosis")
             diagnosis = diagnose_result(result, effects=candidates,
                                         seed=args.seed if args.seed is not None else 0)
+            result = dataclasses.replace(result, kappa_choice=kappa_after_verdict(result, diagnosis))
             view = cli_wording_json(diagnosis_for_viz(diagnosis, result))
             if live:
                 live.diagnosis(view)
@@ -137,6 +141,7 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
     print(format_summary(result))
     print()
     print(cli_wording(diagnosis.report()))
+    print(cli_wording(result.kappa_choice.line()))
     if args.rerun is not None:
         from ..viewer import open_command
         print(f"\nwrote Rerun recording {args.rerun} (open it with: {open_command(args.rerun)})")

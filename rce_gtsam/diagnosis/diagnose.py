@@ -95,6 +95,7 @@ from .heldout import fold_blocks, frame_loss, heldout_errors, paired_t
 from .heldout_null import heldout_gain_null_test
 from .maxt import sign_flip_max_t
 from .noise_floor import NoiseFloor
+from .plausibility import PlausibilityContext, implausibility
 from .score_test import (effect_score_test, half_fits, is_significant, score_is_significant,
                          shared_time_course_test)
 from .settings import BLOCK_LENGTH, FULL_ITER, N_FOLDS, CV_ITER, RESOLUTION
@@ -381,6 +382,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     hfits = half_fits(base_model, Y, W, s, halves) if node_disjoint else None
     ess = effective_sample(base)
     base_ic = effective_ic(base, ess)
+    plausibility = PlausibilityContext.from_fit(base)
+    t_support = float(stats.t.ppf(1 - alpha, max(int(used.sum()) - 1, 1)))
     results = []
     shared_p = None  # the baseline's shared-time-course test: a second excitation's score, or run for the drift check
     for eff, model, full, starts in fulls:
@@ -414,7 +417,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                           "score_excitation": eff.score_excitation})
             if score.peak is not None:
                 extra["score_peak"] = eff.scan_label(score.peak)
-            significant = is_significant(ev, t_crit_split, score.p, p_crit_score)
+            significant = is_significant(ev, t_crit_split, score.p, p_crit_score, t_support)
             if eff.score_excitation == "between_rows":  # the very test the drift check below asks (same seed)
                 shared_p = score.p
         basis = eff.heldout_time_basis(T)
@@ -441,7 +444,11 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
             extra["start_chosen"] = starts["chosen"]
             extra["start_lowest_in_sample"] = starts["lowest_in_sample"]
         calibrated = score_is_significant(None if score is None else score.p, p_crit_score)
-        supported = bool(significant and earns_its_place(rmse, b_rmse, daic, gain_share, resolution, calibrated))
+        state = next((st for e, st in zip(full.model.effects, full.states) if e.name == eff.name), {})
+        reasons = implausibility(eff, state, E, plausibility)
+        extra["implausible"] = list(reasons)
+        supported = bool(significant and not reasons
+                         and earns_its_place(rmse, b_rmse, daic, gain_share, resolution, calibrated))
         results.append(CandidateResult(effect=eff.name, fit=full, heldout_rmse=rmse, fold_mse=mse, evidence=ev,
                                        improvement_pct=imp, delta_aic=daic, delta_bic=dbic, supported=supported,
                                        statistics=stats_all.get(eff.name, {}), extra=extra,
@@ -466,6 +473,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     worst_e, worst_f, summary = worst_edges_and_frames(base, labels, block_length, frames)
     settings = {"n_folds": len(blocks), "fold_blocks": blocks, "buffer_frames": gap, "block_length": block_length,
                 "seed": seed, "alpha": alpha, "evidence_threshold_t": t_crit, "resolution": resolution,
+                "support_threshold_t": t_support, "plausibility": _jsonable(plausibility.__dict__),
                 "evidence_threshold_t_split": t_crit_split, "score_threshold_p": p_crit_score,
                 "heldout_total_variance": total_var, "maxt_critical_t": mt.critical_t, "maxt_flips": mt.n_flips,
                 "prior_strength": prior_strength,

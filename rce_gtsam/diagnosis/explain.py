@@ -30,7 +30,9 @@ def significant_but_not_named(diag: Diagnosis) -> str:
         sp = c.extra.get("score_p")
         calibrated = score_is_significant(sp, c.extra.get("score_threshold_p", 0.0))
         test = f"full-data score test p = {sp:.2g}" if calibrated else f"evidence t = {c.evidence:.2f}"
-        if c.heldout_rmse >= diag.baseline_heldout_rmse:
+        if c.extra.get("implausible"):
+            lacks = "its fit is not plausible physics: " + "; ".join(c.extra["implausible"])
+        elif c.heldout_rmse >= diag.baseline_heldout_rmse:
             lacks = f"held-out RMSE {-c.improvement_pct:+.1f}%"
         elif c.delta_aic >= 0 and not calibrated:
             lacks = f"held-out RMSE {-c.improvement_pct:+.1f}% but AIC {c.delta_aic:+.1f} on the effective sample"
@@ -231,7 +233,11 @@ def _support_label(c) -> str:
     """The report's "supported" cell: yes / no, or the lag it is the richer form of
     (:func:`~rce_gtsam.diagnosis.verdict.support_a_richer_form`)."""
     form_of = c.extra.get("supported_as_form_of")
-    return f"yes, as the richer form of {form_of}" if form_of else ("yes" if c.supported else "no")
+    if form_of:
+        return f"yes, as the richer form of {form_of}"
+    if c.supported:
+        return "yes"
+    return "no (implausible fit)" if c.extra.get("significant") and c.extra.get("implausible") else "no"
 
 
 def render_diagnosis_report(diag: Diagnosis) -> str:
@@ -291,9 +297,10 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
         methods = "; ".join(f"{c.effect}: {how.get(c.extra.get('score_excitation'), 'phase-randomised null')}"
                             for c in diag.candidates if c.extra.get("score_p") is not None)
         out.append(f"    score p: full-data score test where an effect has one ({methods}); "
-                   f"such an effect is significant when t > {st['evidence_threshold_t_split']:.2f} or p <= "
-                   f"{st['score_threshold_p']:.3g} (each test at half its alpha), and supported only if the "
-                   f"held-out RMSE also falls")
+                   f"such an effect is significant when t > {st['evidence_threshold_t_split']:.2f}, or p <= "
+                   f"{st['score_threshold_p']:.3g} with t > {st.get('support_threshold_t', float('-inf')):.2f} "
+                   f"(a full-data test alone names nothing), and supported only if the held-out RMSE also falls "
+                   f"and the fit is plausible physics")
     enc = (st.get("parsimony") or {}).get("encompassing_p") or {}
     if enc:
         lo = st["parsimony"].get("leading", st["parsimony"]["lowest_heldout"])

@@ -182,7 +182,7 @@ def support_a_richer_form(results: list, Y, W, s, halves, seed: int, b_rmse: flo
     for b in [c for c in results if c.supported]:
         for i, c in enumerate(out):
             if (c is b or effect_kind(c) is None or effect_kind(c) != effect_kind(b)
-                    or not complexity(b) < complexity(c)
+                    or not complexity(b) < complexity(c) or c.extra.get("implausible")
                     or not earns_its_place(c.heldout_rmse, b_rmse, c.delta_aic,
                                            c.extra.get("heldout_gain_share", 0.0), resolution, calibrated=True)):
                 continue

@@ -85,6 +85,10 @@ class Effect:
     #: Fewest bend rows (segments) a recording needs before the diagnosis tries this effect (SecondMode needs
     #: two per node-disjoint half to tell a second shared course from the first).
     min_rows: ClassVar[int] = 1
+    #: Bounds of a shared parameter that are a physical limit rather than the edge of the form, {name: ("lower"
+    #: and/or "upper")}: a fit there is plausible (:mod:`rce_gtsam.diagnosis.plausibility`; e.g. a natural
+    #: frequency at its top bound is a quasi-static joint).
+    natural_limits: ClassVar[dict] = {}
 
     @property
     def verdict_name(self) -> str:
@@ -222,6 +226,14 @@ class Effect:
         whose tangent the tests know how to remove: the diagnosis then asks with
         :mod:`rce_gtsam.diagnosis.encompassing` whether a richer candidate explains what this one leaves."""
         return None
+
+    def implausible(self, state: dict, ctx) -> list[str]:
+        """Why this fitted state is not plausible physics on the recording (one sentence each; default none).
+        ``ctx``: the recording's scales (:class:`~rce_gtsam.diagnosis.plausibility.PlausibilityContext`:
+        the largest deflection in deg, the excitation's correlation time in frames). A parameter at a bound of
+        its range is checked for every effect already (:func:`~rce_gtsam.diagnosis.plausibility.implausibility`);
+        an implausible fit is never named."""
+        return []
 
     def explain(self, summary: dict, statistics: dict) -> str:
         """One or two sentences with the fitted numbers behind a verdict for this effect. ``summary``: the

@@ -213,6 +213,15 @@ class Delay(Effect):
         return {"lag_per_edge_frames": lag, "lag_slope_frames": slope, "lag_slope_t": t,
                 "lag_vs_root_distance_r": r, "residual_xcorr_with_kappa_z_lag_m5_to_p5": xc}
 
+    def implausible(self, state, ctx):
+        """A tip lag longer than the excitation's correlation time: the lagged excitation is then another signal,
+        not the same one later, and a lag fitted there matches noise."""
+        tau = abs(scalar(state["params"]["tau"]))
+        if np.isfinite(ctx.correlation_time_frames) and tau > ctx.correlation_time_frames:
+            return [f"its tip lag {tau:.3g} frames is longer than the excitation's correlation time "
+                    f"({ctx.correlation_time_frames:.3g} frames)"]
+        return []
+
     def explain(self, summary: dict, statistics: dict) -> str:
         tau = (summary.get("tau") or {}).get("value", float("nan"))
         return (f"Fitted tip lag {tau:.2f} frames relative to the root; in the baseline residuals the per-edge lag "

@@ -102,6 +102,9 @@ class Dynamics(Effect):
     # pipeline seeds significant at p = 0.005; each row set's directions from the other set's z: 0/40
     score_excitation = "other_rows"
 
+    #: a natural frequency at its top bound (a period of ~1 frame) is a quasi-static joint, not an edge case
+    natural_limits = {"omega_root": ("upper",), "omega_tip": ("upper",)}
+
     def parameters(self, n_edges: int):
         return (Parameter("omega_root", "rad/frame", OMEGA_MIN, OMEGA_MAX, description="natural frequency at the root"),
                 Parameter("omega_tip", "rad/frame", OMEGA_MIN, OMEGA_MAX, description="natural frequency at the tip"),
@@ -234,6 +237,17 @@ class Dynamics(Effect):
         return {"accel_coef_per_edge_frames2": acc, "accel_slope_frames2": aslope, "accel_slope_t": at,
                 "accel_vs_root_distance_r": ar, "residual_to_signal_spectrum_peak_cycles_per_frame": peak_f,
                 "residual_to_signal_spectrum_peak_over_median": peak_ratio}
+
+    def implausible(self, state, ctx):
+        """Every natural period under ``ctx.shortest_period_frames``: an oscillator the video cannot resolve (it
+        fits frame-to-frame tracker jitter). A root or tip at the top frequency bound alone is quasi-static,
+        a physical limit (:attr:`natural_limits`)."""
+        d = self.describe(state)
+        longest = max(d["period_root_frames"], d["period_tip_frames"])
+        if longest < ctx.shortest_period_frames:
+            return [f"its longest natural period, {longest:.3g} frames, is under {ctx.shortest_period_frames:g} "
+                    f"frames: the video cannot resolve such an oscillation"]
+        return []
 
     def explain(self, summary: dict, statistics: dict) -> str:
         zeta = (summary.get("zeta") or {}).get("value") or float("nan")

@@ -240,6 +240,17 @@ class Nonlinear(Effect):
         return {"cubic_residual_at_q99_deg": c3, "cubic_t": c3 / max(float(se3), 1e-300),
                 "quadratic_residual_at_q99_deg": c2, "q99_deflection_deg": float(q)}
 
+    def implausible(self, state, ctx):
+        """A saturation angle beyond ``ctx.saturation_reach`` times the largest deflection seen: the curve is
+        straight over every deflection the record holds, so no saturation was observed."""
+        sat = self.describe(state)["saturation_deg"]
+        q = ctx.q99_deflection_deg
+        if self.form == "saturation" and np.isfinite(q) and q > 0 and sat > ctx.saturation_reach * q:
+            return [f"its saturation angle {sat:.3g} deg lies beyond {ctx.saturation_reach:g} x the largest "
+                    f"deflection seen ({q:.3g} deg, 99th percentile): the response is straight over every "
+                    f"deflection the record holds"]
+        return []
+
     def explain(self, summary: dict, statistics: dict) -> str:
         sat = summary.get("saturation_deg", float("nan"))
         return (f"Saturation angle {sat:.2f} deg (99th percentile of the linear deflection "

@@ -1,0 +1,96 @@
+"""Which κ to report after the diagnosis: the loop closes in one command.
+
+Where the diagnosis names an effect, the rank-1 κ is fitted by a model the data reject: a lag, inertia or a
+second excitation leaves part of each segment's response out of kappa_e z_t, and the rank-1 κ absorbs what it
+can of it (a tip that lags reads as less compliant than it is). The extended model (rank-1 + the named effect)
+then describes the branch, and its κ is the one to report. Without a verdict the rank-1 κ is reported.
+
+:func:`kappa_after_verdict` fits the extended model's κ intervals from the diagnosis' own fit of the named
+candidate (the same fit the held-out comparison scored) with the extended bootstrap
+(:func:`rce_gtsam.extended_fit.bootstrap_extended`); ``rce run`` and ``rce diagnose --out`` put both κ side by
+side in ``compliance_summary.csv`` and say once in ``report.json`` and the printed report which one to read.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .extended_fit import ExtendedFit, bootstrap_extended
+
+
+@dataclass(frozen=True)
+class KappaChoice:
+    """The κ to report and why.
+
+    effect: the named effect's candidate (e.g. ``"delay"``; None: the rank-1 κ is the one to report);
+    model: the model that κ comes from ("rank-1" or "rank-1 + delay"); reason: one sentence;
+    kappa, ci_low, ci_high: (E,) the extended model's κ and its 95 % interval (relative, geometric mean 1;
+    None without an effect); edges: the response rows' (joint, child) edges."""
+
+    effect: str | None
+    model: str
+    reason: str
+    edges: tuple = ()
+    kappa: np.ndarray | None = None
+    ci_low: np.ndarray | None = None
+    ci_high: np.ndarray | None = None
+
+    @property
+    def column(self) -> str:
+        """The compliance_summary.csv column to read: ``kappa`` (rank-1) or ``kappa_<effect>``."""
+        return "kappa" if self.effect is None else f"kappa_{self.effect}"
+
+    def as_dict(self) -> dict:
+        out = {"model": self.model, "column": self.column, "reason": self.reason, "effect": self.effect}
+        if self.kappa is not None:
+            out["kappa"] = {f"{p}->{c}": float(k) for (p, c), k in zip(self.edges, self.kappa)}
+        return out
+
+    def line(self) -> str:
+        """The printed line: which κ to report, and why."""
+        return f"kappa to report: {self.column} ({self.model}). {self.reason}"
+
+
+def kappa_after_verdict(result, diagnosis) -> KappaChoice:
+    """The κ to report after ``diagnosis`` (:class:`~rce_gtsam.diagnosis.diagnose.Diagnosis`) of an analysis
+    ``result`` (:class:`~rce_gtsam.pipeline.AnalysisResult`, rank-1). With a verdict, the named candidate's fit
+    gets bootstrap intervals under the analysis preset's bootstrap settings (none where the preset runs none)."""
+    cand = diagnosis.verdict_candidate
+    if cand is None:
+        why = ("No effect is named, so the rank-1 model is the description the data support"
+               + ("" if diagnosis.status != "misses" else
+                  "; the diagnosis found more than noise left over that no effect in the library explains, so "
+                  "read kappa as the best one-excitation summary, not a full description") + ".")
+        return KappaChoice(effect=None, model="rank-1", reason=why)
+    fit = ExtendedFit(model_fit=cand.fit, baseline_rmse_deg=float(diagnosis.baseline.rmse))
+    ci, _ = bootstrap_extended(fit, result.preset.compliance)
+    name = cand.effect
+    why = (f"The diagnosis names {diagnosis.verdict}: the rank-1 model leaves part of each segment's response out "
+           f"of kappa_e z_t and its kappa absorbs it, so report kappa of the model with {name} "
+           f"(held-out RMSE {diagnosis.baseline_heldout_rmse:.3g} -> {cand.heldout_rmse:.3g} deg).")
+    return KappaChoice(effect=name, model=f"rank-1 + {name}", reason=why, edges=tuple(result.response.edges),
+                       kappa=np.asarray(fit.kappa, float),
+                       ci_low=None if ci is None else np.asarray(ci.low, float),
+                       ci_high=None if ci is None else np.asarray(ci.high, float))
+
+
+def add_to_summary(df, choice: KappaChoice):
+    """``compliance_summary`` with the extended model's κ columns (``kappa_<effect>``, ``..._ci_low``,
+    ``..._ci_high``) beside the rank-1 ``kappa`` and a ``report`` column naming the κ column to read."""
+    df = df.copy()
+    if choice.kappa is not None:
+        col = choice.column
+        by_edge = {e: i for i, e in enumerate(choice.edges)}
+        rows = [by_edge.get((int(p), int(c))) for p, c in zip(df["parent"], df["child"])]
+
+        def pick(a):
+            return [np.nan if i is None or a is None else float(a[i]) for i in rows]
+
+        at = list(df.columns).index("kappa_ci_high") + 1 if "kappa_ci_high" in df.columns else len(df.columns)
+        for j, (name, values) in enumerate(((col, pick(choice.kappa)), (f"{col}_ci_low", pick(choice.ci_low)),
+                                            (f"{col}_ci_high", pick(choice.ci_high)))):
+            df.insert(at + j, name, values)
+    df["report"] = choice.column
+    return df
