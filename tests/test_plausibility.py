@@ -1,0 +1,104 @@
+"""An implausible fit is never named, and a full-data test alone names nothing (rce_gtsam.diagnosis.plausibility,
+score_test.is_significant); after a verdict the extended model's kappa is reported beside the rank-1 kappa
+(rce_gtsam.kappa_report)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from rce_gtsam import effects
+from rce_gtsam.diagnosis.plausibility import PlausibilityContext, at_bound, correlation_time, implausibility
+from rce_gtsam.diagnosis.score_test import is_significant
+
+CTX = PlausibilityContext(q99_deflection_deg=6.0, correlation_time_frames=30.0, n_frames=450)
+
+
+def test_at_bound_measures_closeness_on_the_ranges_scale():
+    assert at_bound(0.031, 0.03, 2.0) == "lower"  # log range: 0.03..2
+    assert at_bound(1.99, 0.03, 2.0) == "upper"
+    assert at_bound(0.3, 0.03, 2.0) is None
+    # a range open on one side has no scale: only the bound itself counts
+    assert at_bound(0.0, 0.0, np.inf) == "lower"
+    assert at_bound(0.0017, 0.0, np.inf) is None
+    assert at_bound(float("nan"), 0.0, 1.0) is None
+
+
+def test_correlation_time_of_smoothed_noise_grows_with_the_smoothing():
+    rng = np.random.default_rng(0)
+    w = rng.standard_normal(5000)
+    short = correlation_time(np.convolve(w, np.ones(5) / 5, "same"))
+    long = correlation_time(np.convolve(w, np.ones(40) / 40, "same"))
+    assert 2 < short < 5 and 15 < long < 30  # a box of width L: about L / 2
+
+
+def _state(effect, n_edges=6, **params):
+    return {"params": {k: np.asarray(v, float) if np.ndim(v) else float(v) for k, v in params.items()},
+            "latents": {}}
+
+
+def test_a_saturation_beyond_twice_the_deflections_seen_is_implausible():
+    nl = effects.make("nonlinear")
+    far = _state(nl, c=1 / 24.0 ** 2, z0=1.0)  # saturation 24 deg, deflections up to 6 deg
+    near = _state(nl, c=1 / 5.0 ** 2, z0=1.0)
+    assert any("saturation angle" in r for r in implausibility(nl, far, 6, CTX))
+    assert implausibility(nl, near, 6, CTX) == ()
+
+
+def test_an_oscillator_at_the_frame_rate_is_implausible_a_quasi_static_root_is_not():
+    dyn = effects.make("dynamics")
+    jitter = _state(dyn, omega_root=2 * np.pi, omega_tip=2 * np.pi * 0.95, zeta=0.03)
+    reasons = implausibility(dyn, jitter, 6, CTX)
+    assert any("natural period" in r for r in reasons) and any("zeta" in r for r in reasons)
+    # root at the top bound (quasi-static: a physical limit), tip period 30 frames, damping inside its range
+    real = _state(dyn, omega_root=2 * np.pi, omega_tip=2 * np.pi / 30, zeta=0.2)
+    assert implausibility(dyn, real, 6, CTX) == ()
+
+
+def test_a_lag_longer_than_the_excitations_memory_is_implausible():
+    d = effects.make("delay")
+    assert implausibility(d, _state(d, tau=15.0), 6, CTX) == ()
+    assert any("correlation time" in r for r in implausibility(d, _state(d, tau=45.0), 6, CTX))
+    assert any("bound" in r for r in implausibility(d, _state(d, tau=60.0), 6, CTX))
+
+
+def test_a_full_data_test_alone_names_nothing():
+    # the case measured on the user's path: score p 0.0005, fold t 0.8 (a 0.2 % held-out gain)
+    assert not is_significant(0.8, 2.95, 0.0005, 0.005, support_t=1.75)
+    assert is_significant(2.0, 2.95, 0.0005, 0.005, support_t=1.75)  # the held-out frames agree
+    assert is_significant(3.1, 2.95, None, 0.005, support_t=1.75)  # the fold t alone, as before
+    assert not is_significant(2.0, 2.95, 0.2, 0.005, support_t=1.75)
+
+
+@pytest.mark.slow
+def test_run_reports_the_extended_kappa_beside_the_rank1_kappa(tmp_path):
+    from rce_gtsam import analyze, load_graph, load_tracks
+    from rce_gtsam.diagnosis.io import diagnose_result
+    from rce_gtsam.kappa_report import kappa_after_verdict
+    from pathlib import Path
+
+    sample = Path(__file__).resolve().parents[1] / "data" / "sample_delay"  # a hidden delay, default strength
+    graph = load_graph(sample / "graph.json")
+    result = analyze(load_tracks(sample / "tracks.csv", graph), graph, seed=0, n_boot=40)
+    diag = diagnose_result(result, effects=("delay",))
+    assert diag.verdict == "delay"
+    choice = kappa_after_verdict(result, diag)
+    assert choice.column == "kappa_delay" and "delay" in choice.reason
+    with_choice = dataclasses.replace(result, kappa_choice=choice)
+    with_choice.write(tmp_path / "out")
+    import pandas as pd
+    df = pd.read_csv(tmp_path / "out" / "compliance_summary.csv")
+    assert {"kappa", "kappa_delay", "kappa_delay_ci_low", "kappa_delay_ci_high", "report"} <= set(df.columns)
+    ok = df["kappa_delay"].notna()
+    assert ok.sum() >= 8 and (df.loc[ok, "kappa_delay_ci_low"] <= df.loc[ok, "kappa_delay"]).all()
+    assert set(df["report"]) == {"kappa_delay"}
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["kappa_to_report"]["column"] == "kappa_delay"
+    # the extended kappa is closer to the truth than the rank-1 kappa the lag biases
+    truth = json.loads((sample / "truth.json").read_text())["kappa_true"]
+    k_true = np.array([truth[f"{int(p)}->{int(c)}"] for p, c in zip(df.loc[ok, "parent"], df.loc[ok, "child"])])
+    err = lambda k: float(np.sqrt(np.mean(np.log(np.abs(k) / k_true) ** 2)))  # noqa: E731
+    assert err(df.loc[ok, "kappa_delay"].to_numpy()) <= err(df.loc[ok, "kappa"].to_numpy()) + 0.02
