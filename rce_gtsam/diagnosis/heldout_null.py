@@ -86,20 +86,20 @@ def heldout_gain_null_test(fit, blocks, gap: int, basis: np.ndarray, n_surrogate
     weighted deg^2; n_directions: K)."""
     R = robust_residuals(fit.residuals)
     M = np.where(np.isfinite(R), fit.weights, 0.0)
-    X = np.where(M > 0, R, 0.0)
+    # each segment's constant over its observed frames is taken out first, as the surrogates have none: the rest
+    # pose a bend is measured from is an estimate over the frames the segment was seen in, and where nodes are
+    # lost in gusts (missing not at random) it leaves the segment a constant of its own, which a term with a
+    # constant column predicts in every fold. That constant is the reference's, not physics; only a course
+    # beyond it counts (effect-free videos through our tracker: offset named at p 0.003 with the constants in)
+    obs = M > 0
+    R = R - (np.sum(np.where(obs, R, 0.0), axis=1) / np.maximum(obs.sum(axis=1), 1))[:, None]
+    X = np.where(obs, R, 0.0)
     T = X.shape[1]
     q = float(heldout_gain(X[None], M, blocks, gap, basis)[0])
     spectrum = residual_spectrum(np.where(M > 0, R, np.nan))
-    # each segment's constant over its observed frames goes into the null as it is: the rest pose a bend is
-    # measured from is an estimate over the frames the segment was seen in, and where nodes are lost in gusts
-    # (missing not at random) that estimate leaves the segment a constant of its own, which a term with a
-    # constant column predicts in every fold. It is the reference's, not physics: only a course beyond it counts
-    # (effect-free videos through our tracker: offset named at p 0.003 with the constants in the statistic only)
-    obs = M > 0
-    const = np.where(obs, (np.sum(np.where(obs, R, 0.0), axis=1) / np.maximum(obs.sum(axis=1), 1))[:, None], 0.0)
     draws = draw_phases(np.random.default_rng(seed), n_surrogates, T)
-    qs = np.concatenate([heldout_gain((surrogate_slice(spectrum, T, draws, slice(i, i + SURROGATE_BATCH)) + const)
-                                      * obs, M, blocks, gap, basis)
+    qs = np.concatenate([heldout_gain(surrogate_slice(spectrum, T, draws, slice(i, i + SURROGATE_BATCH)) * (M > 0),
+                                      M, blocks, gap, basis)
                          for i in range(0, n_surrogates, SURROGATE_BATCH)])
     p = float((1 + np.sum(qs >= q)) / (n_surrogates + 1))
     return ScoreTest(p=p, q=q, n_directions=int(basis.shape[0]), n_surrogates=n_surrogates,
