@@ -11,7 +11,8 @@ folder); :func:`make_server` serves it on ``127.0.0.1`` with the standard librar
   and writes ``annotations.json`` and ``graph.json``; answers the paths and the ``rce run`` command to run next;
 * ``POST /api/quit`` -- ends the session (the CLI returns).
 
-Only requests whose ``Host`` is this server's own loopback address are answered.
+Only requests whose ``Host`` is this server's own loopback address are answered. ``rce review`` serves its own
+session (:mod:`.review`: another page, ``get``/``post`` answers) through this same server.
 """
 
 from __future__ import annotations

@@ -92,7 +92,7 @@ def _video_frames(video: Path) -> int | None:
 
 def run(args: argparse.Namespace) -> int:
     from ..annotate_web import make_server
-    from .annotate import _open_browser
+    from .annotate import open_browser
 
     session = build_session(args)
 
@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"(Save writes {session.corrections_path} and {args.tracks}; Finish or Ctrl+C ends the session)",
           flush=True)
     if not args.no_browser:
-        _open_browser(server.url)
+        open_browser(server.url)
     try:
         session.finished.wait()
     except KeyboardInterrupt:

@@ -132,9 +132,9 @@
         ctx.beginPath(); ctx.moveTo(cx - 3, cy - 3); ctx.lineTo(cx + 3, cy + 3); ctx.moveTo(cx + 3, cy - 3);
         ctx.lineTo(cx - 3, cy + 3); ctx.stroke();
       } else {
-        if (s) {  // 2 sigma, at least visible as a ring around the dot
-          ctx.strokeStyle = col; ctx.globalAlpha = 0.85; ctx.lineWidth = 1.5;
-          ctx.beginPath(); ctx.arc(cx, cy, Math.max(2 * s * view.scale, 5), 0, 2 * Math.PI); ctx.stroke();
+        if (s && 2 * s * view.scale > 4) {  // the 2-sigma circle, where it is larger than the dot
+          ctx.strokeStyle = col; ctx.globalAlpha = 0.9; ctx.lineWidth = 1.5;
+          ctx.beginPath(); ctx.arc(cx, cy, 2 * s * view.scale, 0, 2 * Math.PI); ctx.stroke();
           ctx.globalAlpha = 1;
         }
         ctx.fillStyle = col; ctx.strokeStyle = "#000"; ctx.lineWidth = 1;
@@ -318,7 +318,12 @@
       changed(`node ${c.node} corrected in frame ${frame} to (${c.x.toFixed(1)}, ${c.y.toFixed(1)})`);
     } else if (!p.moved) {
       selected = p.node; draw();
-      if (p.node !== null) say(`node ${info.nodes[p.node]} selected (its path ±${TRAIL} frames is dotted); drag it to correct it`);
+      if (p.node !== null) {
+        const q = position(p.node, frame), sg = tracks.sigma && tracks.sigma[p.node][frame];
+        say(`node ${info.nodes[p.node]} in frame ${frame}: (${q[0].toFixed(1)}, ${q[1].toFixed(1)}) px` +
+            (q[2] === "corr" ? ", your correction" : q[2] === "lost" ? ", lost (the tracker's guess)" : "") +
+            (sg && q[2] !== "corr" ? `, σ ${sg.toFixed(2)} px` : "") + ` — its path ±${TRAIL} frames is dotted; drag it to correct it`);
+      }
     }
   });
   canvas.addEventListener("wheel", ev => {
@@ -357,8 +362,6 @@
 
   // ---------------------------------------------------------------- buttons
   $("undo").onclick = undo;
-  $("zoom-in").onclick = () => zoomAt(1.25, canvas.width / 2, canvas.height / 2);
-  $("zoom-out").onclick = () => zoomAt(0.8, canvas.width / 2, canvas.height / 2);
   $("zoom-fit").onclick = fit;
   $("step-back").onclick = () => showFrame(frame - 1);
   $("step-fwd").onclick = () => showFrame(frame + 1);
@@ -381,7 +384,8 @@
     try {
       info = await (await fetch("/api/info")).json();
       const t = await (await fetch("/api/tracks")).json();
-      $("title").textContent = `rce review — ${info.video} (${info.width}×${info.height}, ${info.n_frames} frames)`;
+      $("title").textContent = "rce review";
+      $("subtitle").textContent = `${info.video} · ${info.width}×${info.height} · ${info.n_frames} frames`;
       document.title = `rce review — ${info.video}`;
       slider.max = String(Math.max(0, info.n_frames - 1));
       const r = info.rules;
