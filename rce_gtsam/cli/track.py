@@ -45,6 +45,8 @@ def run_track(args: argparse.Namespace) -> int:
     if args.max_frames is not None and args.max_frames < 1:
         raise InputError("--max-frames", f"must be >= 1, got {args.max_frames}")
     check_output_file(args.out, "--out")
+    if args.corrections is not None and Path(args.corrections).resolve() == Path(args.out).resolve():
+        raise InputError("--corrections", f"{args.corrections} is also --out: the tracks would overwrite it")
     graph = load_graph(args.graph) if args.graph else None
     tracker = make_tracker(args.model)
     live = live_from_args(args, f"tracking {args.video}")  # a bad address or no display: before any work

@@ -50,12 +50,18 @@
   const corrKey = () => JSON.stringify(corrList());
   const stale = () => corrKey() !== retrackedKey;
   const nodeIndex = n => info.nodes.indexOf(n);
-  function position(i, f) {   // [x, y, kind]: kind "corr" | "vis" | "lost" | null (no row)
+  function position(i, f) {
+    // [x, y, kind]: kind "corr" (a correction here), "vis", "lost" (the tracker's guess), "missing" (no row in this
+    // frame: drawn where the nearest frame with a row has it, so that it can be dragged into place); null: no row at all
     const c = corrections.get(key(f, info.nodes[i]));
     if (c) return [c.x, c.y, "corr"];
     const p = tracks.xy[i][f];
-    if (!p) return null;
-    return [p[0], p[1], tracks.visible[i][f] ? "vis" : "lost"];
+    if (p) return [p[0], p[1], tracks.visible[i][f] ? "vis" : "lost"];
+    for (let d = 1; d < info.n_frames; d++) {
+      const q = tracks.xy[i][f - d] || tracks.xy[i][f + d];
+      if (q) return [q[0], q[1], "missing"];
+    }
+    return null;
   }
   function say(text, cls = "") { statusEl.textContent = text; statusEl.className = cls; }
   function pushUndo() { undoStack.push(JSON.stringify(corrList())); }
@@ -97,7 +103,7 @@
     for (const [a, b] of info.edges) {
       const pa = pos[nodeIndex(a)], pb = pos[nodeIndex(b)];
       if (!pa || !pb) continue;
-      ctx.setLineDash(pa[2] === "lost" || pb[2] === "lost" ? [5, 4] : []);
+      ctx.setLineDash(pa[2] === "lost" || pb[2] === "lost" || pa[2] === "missing" || pb[2] === "missing" ? [5, 4] : []);
       ctx.beginPath(); ctx.moveTo(...toCanvas(pa[0], pa[1])); ctx.lineTo(...toCanvas(pb[0], pb[1])); ctx.stroke();
     }
     ctx.setLineDash([]);
@@ -125,7 +131,7 @@
         ctx.fillStyle = "#ff4fd8"; ctx.strokeStyle = "#fff"; ctx.lineWidth = 1.5;
         ctx.beginPath(); ctx.moveTo(cx, cy - 7); ctx.lineTo(cx + 7, cy); ctx.lineTo(cx, cy + 7); ctx.lineTo(cx - 7, cy);
         ctx.closePath(); ctx.fill(); ctx.stroke();
-      } else if (p[2] === "lost") {
+      } else if (p[2] === "lost" || p[2] === "missing") {
         ctx.strokeStyle = "#bdc1c6"; ctx.lineWidth = 1.5; ctx.setLineDash([3, 3]);
         ctx.beginPath(); ctx.arc(cx, cy, Math.max(6, s ? 2 * s * view.scale : 0), 0, 2 * Math.PI); ctx.stroke();
         ctx.setLineDash([]);
@@ -321,7 +327,8 @@
       if (p.node !== null) {
         const q = position(p.node, frame), sg = tracks.sigma && tracks.sigma[p.node][frame];
         say(`node ${info.nodes[p.node]} in frame ${frame}: (${q[0].toFixed(1)}, ${q[1].toFixed(1)}) px` +
-            (q[2] === "corr" ? ", your correction" : q[2] === "lost" ? ", lost (the tracker's guess)" : "") +
+            (q[2] === "corr" ? ", your correction" : q[2] === "lost" ? ", lost (the tracker's guess)" :
+             q[2] === "missing" ? ", no row in this frame (drawn where the nearest frame has it)" : "") +
             (sg && q[2] !== "corr" ? `, σ ${sg.toFixed(2)} px` : "") + ` — its path ±${TRAIL} frames is dotted; drag it to correct it`);
       }
     }
