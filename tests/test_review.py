@@ -74,6 +74,7 @@ def test_retrack_follows_a_correction_and_is_idempotent(scene):
     moved = np.hypot(*(out.xy[NODE] - base.xy[NODE]).T)
     assert moved[K - 1] > 0.8 * SHIFT_PX and moved[K - 1] > moved[K // 2] > moved[1] and moved[0] < 1e-9
     assert np.array_equal(out.xy[:NODE], base.xy[:NODE]) and np.array_equal(out.sigma_px[:NODE], base.sigma_px[:NODE])
+    assert (out.visible | ~base.visible).all()                  # re-tracking drops no point-frame that was seen
     assert np.array_equal(again.xy, out.xy) and np.array_equal(again.sigma_px, out.sigma_px)
 
 

@@ -14,7 +14,9 @@ other node's track as it was:
 * between two anchors ``a < b`` of a node, its position is the blend of the forward run from ``a`` and the
   backward run from ``b``, weighted by distance in frames: ``w_b = (f - a) / (b - a)``, ``w_a = 1 - w_b``; where
   only one of the two runs sees the node, that one is used alone. After the last anchor the forward run from it is
-  used alone. So the corrected frame equals the correction, and its neighbours move toward it;
+  used alone. So the corrected frame equals the correction, and its neighbours move toward it. Where none of the
+  anchored runs sees the node but the frame-0 run does, the frame-0 run's position is kept (a run started at a
+  corrected frame -- often mid-gust, with a blurred template -- can lose a node the frame-0 run holds);
 * the blend's 1-sigma (px, per axis) is the two-run mixture's: ``sqrt(w_a s_a^2 + w_b s_b^2 + w_a w_b d^2 / 2)``
   with ``d`` the distance between the runs (where the two disagree, the position is uncertain); at an anchor it is
   :data:`CORRECTION_SIGMA_PX`.
@@ -287,6 +289,11 @@ def retrack(store: FrameStore, base: DenseTracks, corrections: list[Correction],
             wb = np.arange(m) / (m - 1)
             xy[a:b + 1], vis[a:b + 1], sig[a:b + 1] = _blend(ra.xy[n, :m], ra.visible[n, :m], ra.sigma_px[n, :m],
                                                              xb, vb, sb, wb)
+        # where no run from an anchor sees the node but the frame-0 run does, that one is the measurement: a run
+        # started at a corrected frame (often mid-gust, its template blurred, its neighbours' query positions
+        # guesses) loses nodes the frame-0 run holds, and re-tracking must not drop what was seen
+        fb = ~vis & f0.visible[n]
+        xy[fb], vis[fb], sig[fb] = f0.xy[n, fb], True, f0.sigma_px[n, fb]
         for a in ank:
             c = next((c for c in by_frame.get(a, []) if c.node == n), None)
             if c is not None:
