@@ -59,8 +59,8 @@ def main() -> int:
     tracks = a.tracks
     if tracks is None:
         tracks = Path(tempfile.mkdtemp()) / "lk.csv"
-        subprocess.run([sys.executable, "-m", "rce_gtsam.cli", "track", str(video), str(DATA / "annotation_points.json"),
-                        "--graph", str(graph_path), "--out", str(tracks), "--no-progress"], check=True,
+        subprocess.run([sys.executable, "-m", "rce_gtsam.cli", "track", str(video),
+                        str(DATA / "annotation_points.json"), "--graph", str(graph_path), "--out", str(tracks), "--no-progress"], check=True,
                        stdout=subprocess.DEVNULL)
     base = DenseTracks.from_table(read_tracks_table(tracks))
     tap = DenseTracks.from_table(read_tracks_table(DATA / "tapir_tracks.csv"))

@@ -133,7 +133,18 @@ class ReviewSession:
             write_table_atomic(self.shown.to_frame(), self.tracks_path)
             self.saves += 1
         return {"corrections": str(self.corrections_path), "tracks": str(self.tracks_path),
-                "backup": str(self.backup_path), "n_corrections": len(corrections), "command": self.command}
+                "backup": str(self.backup_path), "n_corrections": len(corrections), "command": self.command,
+                "reproducible": self.reproducible()}
+
+    def reproducible(self) -> bool:
+        """Whether the printed ``rce track`` command gives the saved file: the uncorrected nodes' rows must be what
+        the tracker gives from frame 0 (not so for tracks made by TAPIR or with other options)."""
+        run = self._first_run
+        if run is None or run.n_frames != self.base.n_frames:
+            return False
+        keep = np.setdiff1d(np.arange(len(self.base.point_ids)), [c.node for c in self.corrections])
+        xy, vis = self.base.xy[keep], self.base.visible[keep]
+        return bool(np.isfinite(xy).all() and np.array_equal(xy, run.xy[keep]) and np.array_equal(vis, run.visible[keep]))
 
     def post(self, path: str, payload: dict):
         if path == "/api/retrack":

@@ -97,9 +97,16 @@ def run(args: argparse.Namespace) -> int:
     session = build_session(args)
 
     def on_save(res: dict) -> None:
-        print(f"wrote {res['corrections']} ({res['n_corrections']} corrections) and {res['tracks']} "
+        n = res["n_corrections"]
+        print(f"wrote {res['corrections']} ({n} correction{'' if n == 1 else 's'}) and {res['tracks']} "
               f"(the tracks before: {res['backup']})")
-        print(f"reproduce: {res['command']}", flush=True)
+        if res["reproducible"]:
+            print(f"reproduce: {res['command']}", flush=True)
+        else:
+            print(f"not reproducible by `{res['command']}`: the uncorrected nodes' rows in {res['tracks']} are not what "
+                  "rce track's default tracker gives with these options (other tracker, options or edits); that command "
+                  "re-tracks the same corrections over the tracker's own rows",
+                  flush=True)
 
     server = make_server(session, args.port, on_save=on_save)
     thread = threading.Thread(target=server.serve_forever, daemon=True)

@@ -284,8 +284,13 @@
     try {
       const out = await post("/api/save", { corrections: corrList() });
       if (k !== retrackedKey) { retrackedKey = k; setTracks(await (await fetch("/api/tracks")).json()); }
-      say(`wrote ${out.corrections} (${out.n_corrections} corrections) and ${out.tracks} (before: ${out.backup})`);
-      nextEl.hidden = false; nextEl.textContent = `Reproduce:\n${out.command}`;
+      say(`wrote ${out.corrections} (${out.n_corrections} correction${out.n_corrections === 1 ? "" : "s"}) and ` +
+          `${out.tracks} (the tracks before: ${out.backup})`);
+      nextEl.hidden = false;
+      nextEl.textContent = out.reproducible ? `Reproduce:\n${out.command}` :
+        `Not reproducible from the video alone: the other nodes' rows are not what rce track's tracker gives with these ` +
+        `options (another tracker, other options, or edits). This command re-tracks the same corrections over the ` +
+        `tracker's own rows:\n${out.command}`;
       return true;
     } catch (e) { say(`not saved: ${e.message}`, "error"); return false; }
     finally { pending--; changed(); }
