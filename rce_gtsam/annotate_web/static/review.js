@@ -209,7 +209,8 @@
       };
       ol.append(li);
     }
-    if (!corrections.size) ol.innerHTML = `<li class="muted">drag a node to where it really is</li>`;
+    if (!corrections.size) ol.innerHTML = `<li class="muted">drag a node to where it really is; in a frame you ` +
+      `correct, correct every wrong node: the re-track starts from all nodes' positions there</li>`;
     highlight();
   }
   function highlight() {
