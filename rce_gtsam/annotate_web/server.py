@@ -11,7 +11,8 @@ folder); :func:`make_server` serves it on ``127.0.0.1`` with the standard librar
   and writes ``annotations.json`` and ``graph.json``; answers the paths and the ``rce run`` command to run next;
 * ``POST /api/quit`` -- ends the session (the CLI returns).
 
-Only requests whose ``Host`` is this server's own loopback address are answered.
+Only requests whose ``Host`` is this server's own loopback address are answered. ``rce review`` serves its own
+session (:mod:`.review`: another page, ``get``/``post`` answers) through this same server.
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ from .snap import RidgeSnapper
 #: Fewest nodes a branch needs: a bend is measured at a node with a parent and a child.
 MIN_NODES = 3
 STATIC_FILES = {"index.html": "text/html; charset=utf-8", "annotate.js": "text/javascript; charset=utf-8",
-                "annotate.css": "text/css; charset=utf-8"}
+                "annotate.css": "text/css; charset=utf-8", "review.html": "text/html; charset=utf-8",
+                "review.js": "text/javascript; charset=utf-8", "review.css": "text/css; charset=utf-8"}
 
 
 class FrameCache:
@@ -95,6 +97,9 @@ class AnnotationSession:
     ``snap_radius_px``: how far a click may move onto a stem. ``max_frames``: frames the slider can show.
     """
 
+    #: the page ``GET /`` serves (a session behind another page, such as ``rce review``'s, names its own)
+    page = "index.html"
+
     def __init__(self, video: str | Path, out_dir: str | Path, snap_radius_px: float = 6.0, max_frames: int = 900):
         self.video = Path(video)
         self.out_dir = Path(out_dir)
@@ -152,6 +157,18 @@ class AnnotationSession:
         return {"annotations": str(self.annotations_path), "graph": str(self.graph_path), "n_nodes": len(points),
                 "n_edges": len(graph.edges), "n_bends": len(graph.bends), "next": nxt}
 
+    def get(self, path: str):
+        """The JSON answer to ``GET path`` (besides the page, static files and frames), or None (not found)."""
+        return self.info() if path == "/api/info" else None
+
+    def post(self, path: str, payload: dict):
+        """The JSON answer to ``POST path``, or None (not found). Raises RceError/KeyError/... on a bad request."""
+        if path == "/api/snap":
+            return self.snap(payload["x"], payload["y"])
+        if path == "/api/save":
+            return self.save(payload)
+        return None
+
     def close(self) -> None:
         self.frames.close()
 
@@ -188,11 +205,13 @@ class _Handler(BaseHTTPRequestHandler):
         s = self.server.session
         path = self.path.split("?", 1)[0]
         if path in ("/", "/index.html"):
-            return self._send(200, _static("index.html"), STATIC_FILES["index.html"])
+            return self._send(200, _static(s.page), STATIC_FILES[s.page])
         if path.startswith("/static/") and path[8:] in STATIC_FILES:
             return self._send(200, _static(path[8:]), STATIC_FILES[path[8:]])
-        if path == "/api/info":
-            return self._json(s.info())
+        if path.startswith("/api/"):
+            out = s.get(path)
+            if out is not None:
+                return self._json(out)
         if path.startswith("/frame/") and path.endswith(".jpg") and path[7:-4].isdigit():
             k, data = s.frames.get(int(path[7:-4]))
             self.send_response(200)
@@ -214,23 +233,24 @@ class _Handler(BaseHTTPRequestHandler):
         except (ValueError, json.JSONDecodeError):
             return self._json({"error": "the request is not JSON"}, HTTPStatus.BAD_REQUEST)
         try:
-            if self.path == "/api/snap":
-                return self._json(s.snap(payload["x"], payload["y"]))
-            if self.path == "/api/save":
-                out = s.save(payload)
-                self.server.on_save(out)
-                return self._json(out)
             if self.path == "/api/quit":
                 self._json({"ok": True})
                 s.finished.set()
                 return None
+            out = s.post(self.path, payload)
+            if out is not None:
+                if self.path == "/api/save":
+                    self.server.on_save(out)
+                return self._json(out)
         except (RceError, KeyError, TypeError, ValueError) as exc:
             return self._json({"error": str(exc)}, HTTPStatus.BAD_REQUEST)
         return self._send(HTTPStatus.NOT_FOUND, b"not found", "text/plain")
 
 
 class AnnotationServer(ThreadingHTTPServer):
-    """``ThreadingHTTPServer`` on 127.0.0.1 carrying an :class:`AnnotationSession`."""
+    """``ThreadingHTTPServer`` on 127.0.0.1 carrying a session: an :class:`AnnotationSession` or any object with its
+    ``page``, ``frames`` (a :class:`FrameCache`), ``get(path)``, ``post(path, payload)`` and ``finished``
+    (``rce review``'s :class:`~rce_gtsam.annotate_web.review.ReviewSession`)."""
 
     daemon_threads = True
 

@@ -113,7 +113,7 @@ def _run_browser(args: argparse.Namespace) -> int:
     print(f"annotate {args.video} in your browser: {server.url}", flush=True)
     print(f"(writes {out}/annotations.json and graph.json; press Save & finish or Ctrl+C when done)", flush=True)
     if not args.no_browser:
-        _open_browser(server.url)
+        open_browser(server.url)
     try:
         session.finished.wait()
     except KeyboardInterrupt:
@@ -128,7 +128,7 @@ def _run_browser(args: argparse.Namespace) -> int:
     return 0
 
 
-def _open_browser(url: str) -> None:
+def open_browser(url: str) -> None:
     """Open ``url`` in a graphical browser if this session has a display (never a terminal browser)."""
     import webbrowser
     if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):

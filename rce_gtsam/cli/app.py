@@ -20,6 +20,7 @@ COMMAND_MODULES = (
     "rce_gtsam.cli.diagnose",
     "rce_gtsam.cli.track",
     "rce_gtsam.cli.annotate",
+    "rce_gtsam.cli.review",
     "rce_gtsam.cli.simulate",
     "rce_gtsam.cli.run",
     "rce_gtsam.cli.view",

@@ -26,6 +26,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="TAPIR ONNX export: folder with tapir.onnx + tapir_pointencoder.onnx "
                         "(see tools/export_tapir_onnx.py); default: the OpenCV tracker")
     p.add_argument("--max-frames", type=int, default=None, metavar="N", help="track only the first N frames")
+    p.add_argument("--corrections", type=Path, default=None, metavar="C.json",
+                   help="corrections saved by `rce review` ({\"corrections\": [{\"frame\", \"node\", \"x\", \"y\"}]}, "
+                        "pixels): each is an anchor, and the corrected nodes are re-tracked between them, as the "
+                        "review page's Re-track does (see rce_gtsam/track/anchors.py)")
     add_quiet_argument(p, "--no-progress")
     add_live_arguments(p)
     p.set_defaults(func=run_track)
@@ -41,16 +45,32 @@ def run_track(args: argparse.Namespace) -> int:
     if args.max_frames is not None and args.max_frames < 1:
         raise InputError("--max-frames", f"must be >= 1, got {args.max_frames}")
     check_output_file(args.out, "--out")
+    if args.corrections is not None and Path(args.corrections).resolve() == Path(args.out).resolve():
+        raise InputError("--corrections", f"{args.corrections} is also --out: the tracks would overwrite it")
     graph = load_graph(args.graph) if args.graph else None
     tracker = make_tracker(args.model)
     live = live_from_args(args, f"tracking {args.video}")  # a bad address or no display: before any work
+    corrections = None
     with open_video(args.video) as src:
         points = load_annotations(args.annotations, image_size=src.size)
+        if args.corrections is not None:  # checked before any work: node ids, frames, inside the image
+            corrections = load_corrections_for(args.corrections, len(points), src, args.max_frames)
         warn_annotations(args.video, points, graph)
         send_live_video(live, src)
         result = track_with_progress(tracker, src, points, graph, args.max_frames, show=progress_enabled(args.quiet),
                                      on_frame=live.frame if live else None)
-    result.write_csv(args.out)
+    if corrections is None:
+        result.write_csv(args.out)
+    else:
+        from ..track.anchors import DenseTracks, FrameStore, retrack
+        from ..tracks import write_table_atomic
+        if corrections and max(c.frame for c in corrections) >= result.n_frames:
+            c = max(corrections, key=lambda c: c.frame)
+            raise InputError(args.corrections, f"frame {c.frame} is beyond the video: it has {result.n_frames} "
+                                               "frames", f"node {c.node}")
+        with FrameStore(args.video, result.n_frames) as store:
+            fixed, _ = retrack(store, DenseTracks.from_result(result), corrections, tracker, graph, points, result)
+        write_table_atomic(fixed.to_frame(), args.out)
     if live:
         live.close()
     vis = result.visible
@@ -58,8 +78,19 @@ def run_track(args: argparse.Namespace) -> int:
           f"visible {100 * vis.mean():.1f}% of point-frames, median sigma "
           f"{float(_median(result.sigma_px[vis])):.2f} px")
     print_visibility(vis)
+    if corrections is not None:
+        print(f"then re-tracked {len({c.node for c in corrections})} node(s) between {len(corrections)} correction(s) "
+              f"from {args.corrections} (the lines above describe the tracks before)")
     print(f"wrote {args.out}")
     return 0
+
+
+def load_corrections_for(path, n_points: int, src, max_frames: int | None):
+    """The corrections of ``path`` checked against the annotation's point ids and the video's frames and size."""
+    from ..track.anchors import load_corrections
+
+    n = src.n_frames if max_frames is None else min(max_frames, src.n_frames or max_frames)
+    return load_corrections(path, range(n_points), n if n else 10 ** 9, src.size)
 
 
 def send_live_video(live, src) -> None:
