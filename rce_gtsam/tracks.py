@@ -88,15 +88,49 @@ def _fail(path, msg, row=None):
     raise InputError(path, msg, None if row is None else f"line {int(row) + 2}")
 
 
+#: Leading bytes of files users mistake for a tracks CSV (the video, a figure, an archive), and what they are.
+_MAGIC = ((b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"GIF8", "a GIF image"),
+          (b"RIFF", "a RIFF file (AVI video or WAV audio)"), (b"\x1aE\xdf\xa3", "a Matroska/WebM video"),
+          (b"PK\x03\x04", "a ZIP archive"), (b"%PDF", "a PDF document"), (b"#ROSBAG", "a ROS bag recording"),
+          (b"SQLite format 3", "an SQLite database (ROS 2 .db3 recording?)"), (b"\x1f\x8b", "a gzip archive"))
+
+
+def _not_text(path: Path) -> str | None:
+    """What ``path`` is when it is plainly not a text CSV (an image, a video, an archive, or binary or non-UTF-8
+    bytes), else None. Reads the first 4 KiB."""
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    for magic, what in _MAGIC:
+        if head.startswith(magic):
+            return what
+    if head[4:8] == b"ftyp":
+        return "an MP4/MOV video"
+    if b"\x00" in head:
+        return "a binary file"
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        if exc.start < len(head) - 4:  # not merely a multi-byte character cut at 4 KiB
+            return f"not UTF-8 text (byte {exc.start})"
+    return None
+
+
 def read_tracks_table(path: str | Path) -> pd.DataFrame:
     """Read and validate a tracks CSV into a table (no graph needed). Raises :class:`InputError`."""
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "tracks file not found")
+        raise InputError(path, "tracks file not found" + (" (it is a folder)" if path.is_dir() else ""))
     if path.stat().st_size == 0:
         raise InputError(path, "the tracks file is empty; expected a header 'point_id,frame,x,y' and one row per observation")
+    what = _not_text(path)
+    if what is not None:
+        raise InputError(path, f"this is {what}, not a tracks CSV; expected a text table with the header "
+                               "'point_id,frame,x,y' (as `rce track` writes it)")
     try:
         df = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
+    except UnicodeDecodeError as exc:
+        raise InputError(path, f"not a UTF-8 text CSV (byte {exc.start}); expected a tracks CSV with the header "
+                               "'point_id,frame,x,y'") from None
     except pd.errors.EmptyDataError:
         raise InputError(path, "the tracks file is empty; expected a header 'point_id,frame,x,y'") from None
     except pd.errors.ParserError as exc:
