@@ -209,7 +209,7 @@ def format_summary(result) -> str:
         f"{len(result.bending.bends)} bends",
         f"smoother: {result.smoothed.report.iterations} LM iterations, final error "
         f"{result.smoothed.report.final_error:.4g}; bending RMS {sm['mean_bend_rms_raw_deg']:.2f} -> "
-        f"{sm['mean_bend_rms_smoothed_deg']:.2f} deg ({sm['bend_rms_reduction_pct']:.1f}% lower), edge-length CV "
+        f"{sm['mean_bend_rms_smoothed_deg']:.2f} deg ({lower_or_higher(sm['bend_rms_reduction_pct'])}), edge-length CV "
         f"{sm['mean_edge_length_cv_raw']:.3f} -> {sm['mean_edge_length_cv_smoothed']:.3f}",
         _fit_line(result),
         *_effects_lines(result),
@@ -230,6 +230,13 @@ def format_summary(result) -> str:
     lines.append(f"\ntotal {tot:.2f} s{waited} (" + ", ".join(f"{k} {v:.2f}" for k, v in result.timings_s.items()
                                                               if k != "total") + ")")
     return "\n".join(lines)
+
+
+def lower_or_higher(reduction_pct: float) -> str:
+    """A reduction in percent as read: "45.3% lower", or "0.3% higher" for a rise (a negative reduction)."""
+    if reduction_pct != reduction_pct:
+        return "change undefined"
+    return f"{abs(reduction_pct):.1f}% {'lower' if reduction_pct >= 0 else 'higher'}"
 
 
 def _fit_line(result) -> str:

@@ -151,7 +151,8 @@ def explain(diag: Diagnosis) -> str:
         o = diag.candidate(form_of)
         osp = o.extra.get("score_p")
         lines.append(f"Its own tests fall short; it is named as the richer form of the lag that {form_of} finds "
-                     f"({form_of}: held-out RMSE {o.improvement_pct:.1f}% lower, evidence t = {o.evidence:.1f}"
+                     f"({form_of}: held-out RMSE {abs(o.improvement_pct):.1f}% "
+                     f"{'lower' if o.improvement_pct >= 0 else 'higher'}, evidence t = {o.evidence:.1f}"
                      + ("" if osp is None else f", full-data score test p = {osp:.2g}")
                      + f"): {c.effect} predicts what {form_of} leaves in the residuals "
                      f"({form_p_text(c, form_of, thr)}).")

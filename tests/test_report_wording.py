@@ -1,0 +1,45 @@
+"""The printed report says what its numbers mean: a rise is "higher", kappa's unit is relative, the
+diagnosis is timed as its own stage."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from rce_gtsam.cli.analyze import format_summary, lower_or_higher
+
+
+@pytest.fixture(scope="module")
+def result(tmp_path_factory):
+    from conftest import make_chain
+
+    from rce_gtsam import analyze
+    tracks, graph, _, _ = make_chain(tmp_path_factory.mktemp("chain"))
+    return analyze(tracks, graph, n_boot=0)
+
+
+def test_a_rise_is_called_higher():
+    assert lower_or_higher(45.3) == "45.3% lower"
+    assert lower_or_higher(-0.3) == "0.3% higher"
+
+
+def test_summary_says_higher_when_smoothing_raised_the_bending_rms(result):
+    sm = result.smoothing
+    raised = dataclasses.replace(sm, bend_rms_raw_deg=np.full_like(sm.bend_rms_raw_deg, 1.83),
+                                 bend_rms_smoothed_deg=np.full_like(sm.bend_rms_smoothed_deg, 1.84))
+    text = format_summary(dataclasses.replace(result, smoothing=raised))
+    assert "bending RMS 1.83 -> 1.84 deg (0.5% higher)" in text, text
+    assert "-0." not in text.split("bending RMS")[1].split(")")[0]
+
+
+def test_kappa_unit_is_relative_in_the_variables_table():
+    from rce_gtsam.model import ResponseModel
+    rng = np.random.default_rng(0)
+    z = np.sin(np.arange(200) / 9.0)
+    Y = np.outer([0.5, 1.0, 2.0], z) + rng.normal(0, 0.05, (3, 200))
+    rep = ResponseModel().fit(Y).report()
+    rows = [r for r in rep.splitlines() if r.strip().startswith("kappa[")]
+    assert rows and all("(relative)" in r for r in rows), rep
+    assert not any(" 1 (" in r or r.rstrip().endswith(" 1") for r in rows), rep
