@@ -38,7 +38,8 @@ def _static(n_nodes=6, n_frames=120, noise=0.0, seed=0):
 
 def _analyze(tmp_path, tracks, graph, *extra):
     out = tmp_path / "out"
-    code = main(["analyze", str(tracks), str(graph), "--out", str(out), "--bootstrap", "30", "--no-figures", *extra])
+    code = main(["analyze", str(tracks), str(graph), "--out", str(out), "--bootstrap", "30", "--no-figures", "--quiet",
+                 *extra])
     return code, pd.read_csv(out / "compliance_summary.csv").dropna(subset=["kappa"])
 
 

@@ -72,7 +72,7 @@ def save_recording(args, result, video=None, diagnosis=None, announce: bool = Tr
 
 def run(args: argparse.Namespace) -> int:
     from .figure_worker import FigureWorker
-    from .progress import Steps, process_seconds, progress_enabled
+    from .progress import Steps, process_seconds, progress_mode
 
     # the figure worker forks at its first job, once the inputs are checked (see figure_worker)
     worker = None if args.no_figures else FigureWorker()
@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         graph, _, tracks = check_analysis_inputs(args.tracks, args.graph, preset)  # the CSV is read once
         t_start = process_seconds()
         steps = [*ANALYSIS_STEPS, "write"] + (["figures"] if worker else []) + (["recording"] if args.rerun else [])
-        with Steps("analyze", steps, enabled=progress_enabled(args.quiet)) as bar:
+        with Steps("analyze", steps, enabled=progress_mode(args.quiet)) as bar:
             figures = FiguresInBackground(worker) if worker else None
             result = analyze(tracks, graph, preset=preset, seed=args.seed, n_boot=args.bootstrap,
                              effects=effects, progress=bar.callback,
@@ -130,15 +130,18 @@ def quality_exit_code(result, command: str) -> int:
     return 3
 
 
-def record_wall_time(result, t_start: float) -> None:
-    """Put the time before the analysis started (Python start-up and imports) and after it (writing files,
-    waiting for figures) into ``result.timings_s``, whose ``total`` becomes the wall time since the process
-    started: what the user waited."""
+def record_wall_time(result, t_start: float, stages: dict[str, float] | None = None) -> None:
+    """Put the time before the analysis started (Python start-up and imports) and after it into
+    ``result.timings_s``, whose ``total`` becomes the wall time since the process started: what the user
+    waited. ``stages``: named stages that ran after the analysis (``{"diagnosis": s}``), each timed on its own;
+    the rest of the time after the analysis (writing files, waiting for figures) is ``write``."""
     from .progress import process_seconds
     t = dict(result.timings_s)
-    after = process_seconds() - t_start - t.pop("total", 0.0)
+    stages = dict(stages or {})
+    after = process_seconds() - t_start - t.pop("total", 0.0) - sum(stages.values())
     result.timings_s.clear()
-    result.timings_s.update({"imports": t_start, **t, "write": after, "total": process_seconds()})
+    result.timings_s.update({"imports": t_start, **t, **stages, "write": max(after, 0.0),
+                             "total": process_seconds()})
 
 
 class FiguresInBackground:

@@ -37,17 +37,17 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .figure_worker import FigureWorker
-    from .progress import Steps, process_seconds, progress_enabled
+    from .progress import Steps, process_seconds, progress_mode
 
     worker = None if args.no_figures else FigureWorker()  # forks just before the analysis (FiguresInBackground)
     try:
-        return _run(args, worker, Steps, process_seconds, progress_enabled(args.quiet))
+        return _run(args, worker, Steps, process_seconds, progress_mode(args.quiet))
     finally:
         if worker:
             worker.close()
 
 
-def _run(args, worker, Steps, process_seconds, show: bool) -> int:
+def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
     import shutil
     import tempfile
 
@@ -79,7 +79,7 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
         check_clip_length(n_clip, args.video, preset.compliance.block_length)
         off_structure = warn_annotations(args.video, points, graph)
         send_live_video(live, src)
-        tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=show,
+        tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=show, command="run",
                                       on_frame=live.frame if live else None)
     t_track = time.perf_counter() - t0
     print_visibility(tracked.visible)
@@ -106,8 +106,10 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
             if live:
                 live.analysis(result)
             bar.start("diagnosis")
+            t_diag = time.perf_counter()
             diagnosis = diagnose_result(result, effects=candidates,
                                         seed=args.seed if args.seed is not None else 0)
+            t_diag = time.perf_counter() - t_diag
             view = cli_wording_json(diagnosis_for_viz(diagnosis, result))
             if live:
                 live.diagnosis(view)
@@ -131,7 +133,7 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
         shutil.rmtree(scratch, ignore_errors=True)
         if figures:
             figures.discard()
-    record_wall_time(result, t_start)
+    record_wall_time(result, t_start, {"diagnosis": t_diag})
     t = result.timings_s  # the time before the analysis was imports and tracking: split it
     t.update({"imports": t["imports"] - t_track, "track": t_track, **{k: t.pop(k) for k in list(t)[1:]}})
     print(format_summary(result))
