@@ -43,3 +43,20 @@ def test_kappa_unit_is_relative_in_the_variables_table():
     rows = [r for r in rep.splitlines() if r.strip().startswith("kappa[")]
     assert rows and all("(relative)" in r for r in rows), rep
     assert not any(" 1 (" in r or r.rstrip().endswith(" 1") for r in rows), rep
+
+
+def test_flagged_segments_are_dashed_and_labelled_on_the_overlay(result):
+    from rce_gtsam.viz.overlays import fig_overlay
+    edges = list(result.response.edges)
+    flags = {edges[0]: "poor_fit+wide_ci", edges[2]: "uninformative"}
+    fig = fig_overlay(result, result.kappa, "kappa", "RdYlBu_r", log=True, flags=flags)
+    ax = fig.axes[0]
+    dashed = [c for c in ax.collections if c.get_gid() == "flagged"]
+    assert len(dashed) == 1 and len(dashed[0].get_segments()) == 2
+    texts = {t.get_text() for t in ax.texts}
+    assert {"poor_fit", "uninformative"} <= texts
+    assert "flagged" in ax.get_legend().get_texts()[0].get_text()
+    plain = fig_overlay(result, result.kappa, "kappa", "RdYlBu_r", log=True, flags={})
+    assert not [c for c in plain.axes[0].collections if c.get_gid() == "flagged"]
+    import matplotlib.pyplot as plt
+    plt.close("all")
