@@ -54,7 +54,7 @@ def compliance_summary(result) -> pd.DataFrame:
         if i is None:
             rec.update(kappa=np.nan, kappa_ci_low=np.nan, kappa_ci_high=np.nan, uncertainty=np.nan,
                        direction=np.nan, relative_stiffness=np.nan, n_frames=0, fit_rmse_deg=np.nan,
-                       fit_r2=np.nan, bend_rms_deg=np.nan, bend_snr=np.nan, quality="")
+                       fit_r2=np.nan, bend_rms_deg=np.nan, bend_snr=np.nan, z_var_seen=np.nan, quality="")
         else:
             y = resp.Y[i]
             ok = np.isfinite(y)
@@ -73,6 +73,7 @@ def compliance_summary(result) -> pd.DataFrame:
                 fit_r2=float(1 - np.sum(res**2) / ss_tot) if ss_tot > 1e-6 else np.nan,
                 bend_rms_deg=float(bend_rms[e]),
                 bend_snr=quality[e].snr,
+                z_var_seen=quality[e].z_var_seen,
                 quality=quality[e].quality,
             )
         records.append(rec)

@@ -217,17 +217,23 @@ def format_summary(result) -> str:
         _fit_line(result),
         *_effects_lines(result),
         "",
-        f"{'edge':>10} {'zone':>8} {'kappa':>7} {'95% CI':>17} {'U_e':>6} {'R2':>6}  quality",
+        f"{'edge':>10} {'zone':>8} {'kappa':>7} {'95% CI':>17} {'U_e':>6} {'R2':>6} {'z seen':>6}  quality",
     ]
     for r in df.itertuples():
         if r.kappa != r.kappa:  # NaN: the root edge
             lines.append(f"{r.parent:>4}->{r.child:<5} {r.zone:>8} {'(root edge: no bend)':>31}")
             continue
+        seen = f"{100 * r.z_var_seen:5.0f}%" if r.z_var_seen == r.z_var_seen else f"{'-':>6}"
         lines.append(f"{r.parent:>4}->{r.child:<5} {r.zone:>8} {r.kappa:7.3f} [{r.kappa_ci_low:6.3f}, "
-                     f"{r.kappa_ci_high:6.3f}] {r.uncertainty:6.3f} {r.fit_r2:6.2f}  {r.quality}")
+                     f"{r.kappa_ci_high:6.3f}] {r.uncertainty:6.3f} {r.fit_r2:6.2f} {seen}  {r.quality}")
     n_ok = int((df["quality"] == "ok").sum())
     lines.append(f"quality: {n_ok} of {int(df['kappa'].notna().sum())} segments ok (reasons: see README, "
-                 "'Quality of each kappa')")
+                 "'Quality of each kappa'; z seen: the share of the excitation's variance in the frames where "
+                 "the segment's nodes were all tracked, what its kappa rests on)")
+    from ..quality import assess_quality, informative_line
+    info = informative_line(assess_quality(result))
+    if info:
+        lines.append(info)
     tot = result.timings_s.get("total", float("nan"))
     waited = " wall, from the command's start" if "imports" in result.timings_s else ""
     lines.append(f"\ntotal {tot:.2f} s{waited} (" + ", ".join(f"{k} {v:.2f}" for k, v in result.timings_s.items()
