@@ -22,6 +22,9 @@ from .fileio import temp_file_beside
 from .graph import BranchGraph
 
 REQUIRED_COLUMNS = ("point_id", "frame", "x", "y")
+#: A node observed in fewer frames than this cannot be smoothed (its course between observations is free) and
+#: gives no bending series: its bends are dropped (``Tracks.lost_nodes``), the rest of the branch goes on.
+MIN_OBSERVED = 2
 OPTIONAL_COLUMNS = ("visible", "sigma_px")
 
 
@@ -35,12 +38,16 @@ class Tracks:
     xy: (N, F, 2) float — pixel positions (x right, y down); NaN where not observed.
     sigma_px: (N, F) float or None — per-observation 1-sigma noise in pixels (NaN where not observed).
     source: where the tracks came from (file path or description), for error messages.
+    lost_nodes: nodes observed in fewer than :data:`MIN_OBSERVED` frames (e.g. only in the annotated first
+    frame): kept for the geometry (their observed frame gives the rest lengths), but every bend through them
+    is dropped from the fit and reported as ``tracking_lost`` (:func:`rce_gtsam.pipeline.analyze`).
     """
 
     node_ids: np.ndarray
     xy: np.ndarray
     sigma_px: np.ndarray | None = None
     source: str = field(default="<tracks>")
+    lost_nodes: tuple[int, ...] = ()
 
     def __post_init__(self):
         xy = np.asarray(self.xy, dtype=float)
@@ -192,7 +199,9 @@ def read_tracks_table(path: str | Path) -> pd.DataFrame:
 def tracks_from_table(table: pd.DataFrame, graph: BranchGraph, source: str = "<tracks>") -> Tracks:
     """Turn a validated long table into dense :class:`Tracks` for the graph's nodes.
 
-    Points not in the graph are ignored. Every graph node must be observed in at least two frames.
+    Points not in the graph are ignored. A graph node without any visible row is an error (the tracks and the
+    graph do not belong together); one observed in fewer than :data:`MIN_OBSERVED` frames is kept as a lost
+    node (``Tracks.lost_nodes``): its bends are dropped from the fit, not the whole run.
     """
     if "visible" in table.columns:
         table = table[table["visible"] == 1]
@@ -204,9 +213,7 @@ def tracks_from_table(table: pd.DataFrame, graph: BranchGraph, source: str = "<t
         if c == 0:
             raise InputError(source, f"graph node {n} has no tracks (no visible rows with point_id {n}); "
                                      f"graph file: {graph.source}", f"node {n}")
-        if c < 2:
-            raise InputError(source, f"graph node {n} is observed in only {c} frame; at least 2 are needed",
-                             f"node {n}")
+    lost = tuple(int(n) for n in nodes if int(counts.get(n, 0)) < MIN_OBSERVED)
     n_frames = int(table["frame"].max()) + 1
     row = {n: i for i, n in enumerate(nodes)}
     xy = np.full((len(nodes), n_frames, 2), np.nan)
@@ -218,7 +225,7 @@ def tracks_from_table(table: pd.DataFrame, graph: BranchGraph, source: str = "<t
     if "sigma_px" in table.columns:
         sigma = np.full((len(nodes), n_frames), np.nan)
         sigma[ii, ff] = table["sigma_px"].to_numpy()
-    return Tracks(node_ids=np.array(nodes), xy=xy, sigma_px=sigma, source=source)
+    return Tracks(node_ids=np.array(nodes), xy=xy, sigma_px=sigma, source=source, lost_nodes=lost)
 
 
 def load_tracks(path: str | Path, graph: BranchGraph) -> Tracks:

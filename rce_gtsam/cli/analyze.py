@@ -87,6 +87,7 @@ def run(args: argparse.Namespace) -> int:
         effects = parse_effect_names(args.effects) or ()  # fail on a bad name before the (slow) analysis
         preset = preset_from_args(args)
         graph, _, tracks = check_analysis_inputs(args.tracks, args.graph, preset)  # the CSV is read once
+        print_lost_nodes("analyze", tracks, graph)
         t_start = process_seconds()
         steps = [*ANALYSIS_STEPS, "write"] + (["figures"] if worker else []) + (["recording"] if args.rerun else [])
         with Steps("analyze", steps, enabled=progress_mode(args.quiet)) as bar:
@@ -115,6 +116,19 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote Rerun recording {args.rerun} (open it with: {open_command(args.rerun)})")
     print(f"wrote {len(files)} files to {args.out}/: {', '.join(sorted(files))}")
     return quality_exit_code(result, "analyze")
+
+
+def print_lost_nodes(command: str, tracks, graph) -> None:
+    """One warning line on stderr per lost node (observed in fewer than 2 frames) naming it, the file and the
+    segments dropped with it; the analysis goes on without them."""
+    import sys
+
+    from ..pipeline import dropped_edges, lost_nodes
+    for n in lost_nodes(tracks):
+        seen = int(tracks.observed[tracks.index(n)].sum())
+        segs = ", ".join(f"{j}->{c}" for j, c in dropped_edges(graph, [n]))
+        print(f"rce {command}: warning: {tracks.source}: node {n} is observed in {seen} of {tracks.n_frames} frames "
+              f"(2 are needed); its segments {segs} are dropped (tracking_lost), the rest go on", file=sys.stderr)
 
 
 def quality_exit_code(result, command: str) -> int:
@@ -220,14 +234,19 @@ def format_summary(result) -> str:
         f"{'edge':>10} {'zone':>8} {'kappa':>7} {'95% CI':>17} {'U_e':>6} {'R2':>6} {'z seen':>6}  quality",
     ]
     for r in df.itertuples():
-        if r.kappa != r.kappa:  # NaN: the root edge
-            lines.append(f"{r.parent:>4}->{r.child:<5} {r.zone:>8} {'(root edge: no bend)':>31}")
+        if r.kappa != r.kappa:  # NaN: the root edge, or a segment dropped with a lost node
+            what = "(dropped: a node lost)" if r.quality == "tracking_lost" else "(root edge: no bend)"
+            lines.append(f"{r.parent:>4}->{r.child:<5} {r.zone:>8} {what:>31}"
+                         + (f"{'':>22}{r.quality}" if r.quality else ""))
             continue
         seen = f"{100 * r.z_var_seen:5.0f}%" if r.z_var_seen == r.z_var_seen else f"{'-':>6}"
         lines.append(f"{r.parent:>4}->{r.child:<5} {r.zone:>8} {r.kappa:7.3f} [{r.kappa_ci_low:6.3f}, "
                      f"{r.kappa_ci_high:6.3f}] {r.uncertainty:6.3f} {r.fit_r2:6.2f} {seen}  {r.quality}")
     n_ok = int((df["quality"] == "ok").sum())
-    lines.append(f"quality: {n_ok} of {int(df['kappa'].notna().sum())} segments ok (reasons: see README, "
+    n_dropped = int((df["kappa"].isna() & (df["quality"] == "tracking_lost")).sum())
+    dropped = f", {n_dropped} dropped with a lost node" if n_dropped else ""
+    lines.append(f"quality: {n_ok} of {int(df['kappa'].notna().sum()) + n_dropped} segments ok{dropped} "
+                 "(reasons: see README, "
                  "'Quality of each kappa'; z seen: the share of the excitation's variance in the frames where "
                  "the segment's nodes were all tracked, what its kappa rests on)")
     from ..quality import assess_quality, informative_line

@@ -51,6 +51,8 @@ def run(args: argparse.Namespace) -> int:
     if args.folds is not None and args.folds < 2:
         raise InputError("--folds", f"need at least 2 cross-validation blocks, got {args.folds}")
     graph, table, tracks = check_analysis_inputs(args.tracks, args.graph, preset)  # the CSV is read once
+    from .analyze import print_lost_nodes
+    print_lost_nodes("diagnose", tracks, graph)
     if args.folds is not None:  # an explicit value is checked; the default adapts to a short clip
         check_folds(args.folds, int(table["frame"].max()) + 1, preset.compliance.block_length)
     steps = ["load", "smooth", "bending", "fit", "diagnosis"] + (["figures"] if args.figures else []) \

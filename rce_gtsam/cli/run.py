@@ -58,8 +58,8 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
     from ..quality import OFF_STRUCTURE_KEY
     from ..tracks import load_tracks
     from ..validate import check_bends_observed, check_clip_length, check_command_options, check_graph_has_bend
-    from .analyze import (FiguresInBackground, first_video_frame, format_summary, quality_exit_code,
-                          record_wall_time, save_recording)
+    from .analyze import (FiguresInBackground, first_video_frame, format_summary, print_lost_nodes,
+                          quality_exit_code, record_wall_time, save_recording)
     from .live_args import live_from_args
     from .track import print_visibility, send_live_video, track_with_progress, warn_annotations
 
@@ -90,6 +90,7 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
         # analyse the tracks exactly as `rce track` writes them, so track + analyze + diagnose == run
         tracks_csv = tracked.write_csv(scratch / "tracks.csv")
         tracks = load_tracks(tracks_csv, graph)
+        print_lost_nodes("run", tracks, graph)
         t_start = process_seconds()
         steps = [*ANALYSIS_STEPS, "diagnosis", "write"] + (["figures"] if worker else []) \
             + (["recording"] if args.rerun else [])
@@ -139,11 +140,41 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
     print(format_summary(result))
     print()
     print(cli_wording(diagnosis.report()))
+    print("\n" + read_together(result, diagnosis))
     if args.rerun is not None:
         from ..viewer import open_command
         print(f"\nwrote Rerun recording {args.rerun} (open it with: {open_command(args.rerun)})")
     print(f"\nwrote {len(files)} files to {args.out}/")
     return quality_exit_code(result, "run")
+
+
+def read_together(result, diagnosis) -> str:
+    """One paragraph that reads the verdict, the variance budget and the quality flags together, so that
+    none of them reads as contradicting another: which kappa to report, and how far to trust it."""
+    from ..diagnosis.explain import remainder_text
+    from ..quality import assess_quality
+    q = assess_quality(result)
+    n, n_ok = len(q), sum(v.ok for v in q.values())
+    n_inf = sum(v.informative is True for v in q.values())
+    counts = f"{n_ok} of {n} rank-1 segments ok, {n_inf} of {n} informative"
+    status = diagnosis.status
+    if diagnosis.verdict is not None:
+        eff = diagnosis.verdict_effect or diagnosis.verdict
+        return (f"Read together: the diagnosis names {diagnosis.verdict}, an effect the rank-1 model leaves out, so "
+                f"its kappa above is not the one to report ({counts}; poor_fit marks the segments it fits worst); "
+                f"report kappa from `rce analyze TRACKS GRAPH --effects {eff}`, whose quality column judges them "
+                f"again. {remainder_text(diagnosis.budget, eff).capitalize()}.")
+    if status == "adequate":
+        advice = "the rank-1 model is adequate: report the kappa above whose quality is ok"
+    elif status == "misses":
+        advice = ("the rank-1 model leaves more than noise and no candidate effect explains it: report the ok "
+                  "kappa with that caveat, and look at the residual figures for what is left")
+    elif status == "inconclusive":
+        advice = ("no candidate effect is named, and whether the rest is noise cannot be decided here: report "
+                  "the ok kappa with that caveat")
+    else:
+        advice = "no effect is named (see the verdict): report the ok kappa"
+    return f"Read together: {advice} ({counts}). {remainder_text(diagnosis.budget).capitalize()}."
 
 
 def _check_graph_matches_points(graph, points, args) -> None:
