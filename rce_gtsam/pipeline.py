@@ -25,7 +25,7 @@ from .model.time_split import TimeSplitCheck, time_split_check, widen
 from .smoothing.marginals import single_threaded_blas
 from .presets import Preset, get_preset
 from .smoothing.smoother import SmoothedTracks, smooth_tracks
-from .tracks import Tracks, load_tracks
+from .tracks import Tracks, dropped_edges, load_tracks, lost_nodes  # noqa: F401 (re-exported)
 
 
 @dataclass(frozen=True, eq=False)
@@ -152,20 +152,6 @@ def length_cv(xy: np.ndarray, node_ids, graph: BranchGraph) -> np.ndarray:
         L = L[np.isfinite(L)]
         out.append(float(L.std() / L.mean()) if L.size and L.mean() > 0 else float("nan"))
     return np.array(out)
-
-
-def lost_nodes(tracks: Tracks) -> tuple[int, ...]:
-    """Nodes observed in fewer than :data:`~rce_gtsam.tracks.MIN_OBSERVED` frames (``Tracks.lost_nodes``, and
-    any such node of tracks made in code): their bends are dropped from the fit."""
-    from .tracks import MIN_OBSERVED
-    few = {int(n) for n, c in zip(tracks.node_ids, tracks.observed.sum(axis=1)) if c < MIN_OBSERVED}
-    return tuple(sorted(set(tracks.lost_nodes) | few))
-
-
-def dropped_edges(graph: BranchGraph, lost) -> list[tuple[int, int]]:
-    """The segments (the downstream edge of each bend) whose bend runs through a lost node."""
-    lost = set(lost)
-    return [b.edge for b in graph.bends if lost & set(b.nodes)]
 
 
 def _smoother_input(tracks: Tracks, lost) -> Tracks:

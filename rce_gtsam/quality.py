@@ -325,7 +325,7 @@ def quality_report(result, qualities: dict | None = None) -> dict:
 
 def _dropped(result) -> dict:
     """The lost nodes (observed in fewer than 2 frames) and the segments dropped with them, for report.json."""
-    from .pipeline import dropped_edges, lost_nodes
+    from .tracks import dropped_edges, lost_nodes
     lost = lost_nodes(result.tracks)
     return {"lost_nodes": list(lost),
             "dropped_segments": {f"{j}->{c}": "tracking_lost" for j, c in dropped_edges(result.graph, lost)}}

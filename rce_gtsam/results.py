@@ -45,7 +45,7 @@ def compliance_summary(result) -> pd.DataFrame:
     bend_rms = dict(zip([b.edge for b in result.bending.bends], result.smoothing.bend_rms_smoothed_deg))
     U = result.uncertainty
     quality = assess_quality(result)
-    from .pipeline import dropped_edges, lost_nodes
+    from .tracks import dropped_edges, lost_nodes
     dropped = set(dropped_edges(g, lost_nodes(result.tracks)))
     records = []
     for e in sorted(g.edges, key=lambda e: (geo.root_distance_px[e[1]], e[0], e[1])):

@@ -228,6 +228,19 @@ def tracks_from_table(table: pd.DataFrame, graph: BranchGraph, source: str = "<t
     return Tracks(node_ids=np.array(nodes), xy=xy, sigma_px=sigma, source=source, lost_nodes=lost)
 
 
+def lost_nodes(tracks: Tracks) -> tuple[int, ...]:
+    """Nodes observed in fewer than :data:`~rce_gtsam.tracks.MIN_OBSERVED` frames (``Tracks.lost_nodes``, and
+    any such node of tracks made in code): their bends are dropped from the fit."""
+    few = {int(n) for n, c in zip(tracks.node_ids, tracks.observed.sum(axis=1)) if c < MIN_OBSERVED}
+    return tuple(sorted(set(tracks.lost_nodes) | few))
+
+
+def dropped_edges(graph: BranchGraph, lost) -> list[tuple[int, int]]:
+    """The segments (the downstream edge of each bend) whose bend runs through a lost node."""
+    lost = set(lost)
+    return [b.edge for b in graph.bends if lost & set(b.nodes)]
+
+
 def load_tracks(path: str | Path, graph: BranchGraph) -> Tracks:
     """Read, validate and densify a tracks CSV for the nodes of ``graph``."""
     return tracks_from_table(read_tracks_table(path), graph, source=str(path))

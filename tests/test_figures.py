@@ -101,7 +101,7 @@ def test_variance_budget_figure(tmp_path):
              "noise_floor_is_lower_bound": False, "unexplained": -0.3, "unexplained_se": 0.4}]
     fig = fig_variance_budget(budget, rows)
     ax = fig.axes[0]
-    assert "inconclusive (floor bounded)" in ax.get_title(loc="left")
+    assert "with delay, the rest is inconclusive (floor bounded)" in ax.get_title(loc="left")
     assert [t.get_text() for t in ax.get_yticklabels()] == ["whole branch *", "1->2 *", "2->3"]
     assert ax.get_xlim()[0] < -19  # the R^2 < 0 row is drawn left of zero
     _png_ok(save_png(fig, tmp_path / "variance_budget.png"), min_bytes=5_000)

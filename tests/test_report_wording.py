@@ -60,3 +60,20 @@ def test_flagged_segments_are_dashed_and_labelled_on_the_overlay(result):
     assert not [c for c in plain.axes[0].collections if c.get_gid() == "flagged"]
     import matplotlib.pyplot as plt
     plt.close("all")
+
+
+@pytest.mark.parametrize("status,reason,words", [
+    ("noise", None, "at the noise floor"), ("misses", None, "more than noise"),
+    ("inconclusive", "too_uncertain", "too short"), ("inconclusive", "floor_bounded", "only bounded")])
+def test_the_budget_status_is_worded_as_what_the_model_leaves(status, reason, words):
+    """One vocabulary: the budget's status is about the rest the fitted model leaves; beside a verdict it names
+    the model with the verdict's effect, so "delay" and "inconclusive" cannot read as a contradiction."""
+    from types import SimpleNamespace
+
+    from rce_gtsam.diagnosis.explain import remainder_text
+    b = SimpleNamespace(status=status, reason=reason)
+    plain, named = remainder_text(b), remainder_text(b, "delay")
+    assert plain.startswith("what the rank-1 model leaves: ") and words in plain
+    assert named.startswith("what the model with delay leaves: ") and words in named
+    assert "inconclusive" not in named and "delay" not in named.split(": ", 1)[1]
+    assert remainder_text(None).endswith("not scored (no noise floor)")

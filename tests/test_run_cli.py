@@ -61,6 +61,8 @@ def test_run_to_a_log_prints_plain_progress_lines_and_times_the_diagnosis(sim, t
     assert any(ln.startswith("rce run: tracking ") and "/200 frames" in ln for ln in lines), cap.err
     for stage in ("smooth", "bootstrap", "diagnosis", "write"):
         assert any(ln.startswith("rce run: [") and f"] {stage} (" in ln for ln in lines), cap.err
+    together = next(ln for ln in cap.out.splitlines() if ln.startswith("Read together: "))
+    assert "segments ok" in together and "informative" in together and "leaves: " in together, together
     timing = next(ln for ln in cap.out.splitlines() if ln.startswith("total "))
     parts = dict(p.rsplit(" ", 1) for p in timing.split("(", 1)[1].rstrip(")").split(", "))
     assert {"track", "diagnosis", "write"} <= set(parts), timing

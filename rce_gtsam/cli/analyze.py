@@ -123,7 +123,7 @@ def print_lost_nodes(command: str, tracks, graph) -> None:
     segments dropped with it; the analysis goes on without them."""
     import sys
 
-    from ..pipeline import dropped_edges, lost_nodes
+    from ..tracks import dropped_edges, lost_nodes
     for n in lost_nodes(tracks):
         seen = int(tracks.observed[tracks.index(n)].sum())
         segs = ", ".join(f"{j}->{c}" for j, c in dropped_edges(graph, [n]))
