@@ -160,10 +160,13 @@ def read_together(result, diagnosis) -> str:
     status = diagnosis.status
     if diagnosis.verdict is not None:
         eff = diagnosis.verdict_effect or diagnosis.verdict
+        n_poor = sum("poor_fit" in v.reasons for v in q.values())
+        poor = (f"; poor_fit marks the {n_poor} it fits worst" if n_poor else
+                "; ok there means the rank-1 checks pass, not that the effect is absent")
         return (f"Read together: the diagnosis names {diagnosis.verdict}, an effect the rank-1 model leaves out, so "
-                f"its kappa above is not the one to report ({counts}; poor_fit marks the segments it fits worst); "
-                f"report kappa from `rce analyze TRACKS GRAPH --effects {eff}`, whose quality column judges them "
-                f"again. {remainder_text(diagnosis.budget, eff).capitalize()}.")
+                f"its kappa above is not the one to report ({counts}{poor}); report kappa from "
+                f"`rce analyze TRACKS GRAPH --effects {eff}`, whose quality column judges them again. "
+                f"{remainder_text(diagnosis.budget, eff).capitalize()}.")
     if status == "adequate":
         advice = "the rank-1 model is adequate: report the kappa above whose quality is ok"
     elif status == "misses":

@@ -324,6 +324,7 @@ def fig_heldout(diagnosis):
     b = _get(base, "heldout_rmse")
     cands = list(_get(diagnosis, "candidates", []) or [])
     verdict = _get(diagnosis, "verdict")
+    import matplotlib.patheffects as pe
     names = ["rank-1 baseline"] + [f"+ {str(_get(c, 'effect')).replace('_', ' ')}" for c in cands]
     vals = np.array([b] + [_get(c, "heldout_rmse") for c in cands], dtype=float)
     colors = ["0.55"] + ["#d95f02" if _get(c, "effect") == verdict else "#7fa7c9" for c in cands]
@@ -335,14 +336,16 @@ def fig_heldout(diagnosis):
         hi = np.nanmax(vals) if np.isfinite(vals).any() else 1
         for yi, v in zip(y[1:], vals[1:]):
             if np.isfinite(v) and b:
-                ax.text(v, yi, f" {100 * (v / b - 1):+.0f} %", ha="left", va="center", fontsize=6.5)
+                # right of the bar, and never on the dashed baseline: a column of labels right of both
+                ax.text(max(v, b), yi, f"  {100 * (v / b - 1):+.0f} %", ha="left", va="center", fontsize=6.5,
+                        zorder=4, path_effects=[pe.withStroke(linewidth=2.2, foreground="white")])
         if np.isfinite(b):
             ax.axvline(b, color="0.3", lw=0.7, ls="--")
         ax.set_yticks(y, names, fontsize=7)
         ax.invert_yaxis()  # the baseline on top, then the candidates best first
         ax.set_xlabel("held-out RMSE (deg)")
         ax.grid(axis="y", visible=False)
-        ax.set_xlim(max(0.0, lo * 0.8), hi * 1.12)
+        ax.set_xlim(max(0.0, lo * 0.8), hi * 1.15)
         # over the whole figure (the names on the left take width from the axes)
         fig.suptitle(f"Held-out error per candidate effect — verdict: {verdict or 'none'}",
                      fontsize=ax.title.get_fontsize(), fontweight=ax.title.get_fontweight())
