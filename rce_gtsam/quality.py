@@ -5,7 +5,11 @@ Each segment (bend row of the response) gets the reasons that apply, in this ord
 * ``off_structure`` — (``rce run``) one of the bend's nodes was annotated where the first frames show no
   image structure or no change (:mod:`rce_gtsam.track.checks`): it is probably not on the branch.
 * ``tracking_lost`` — one of the bend's three nodes was observed in fewer than ``1 - LOST_SHARE`` (half)
-  of the frames: the smoother interpolated it for most of the clip.
+  of the frames: the smoother interpolated it for most of the clip. A node observed in fewer than 2 frames
+  (e.g. only in the annotated first frame) is lost altogether: its bends are dropped from the fit (the run goes
+  on, with one warning line naming the node; :func:`rce_gtsam.tracks.lost_nodes`), and their segments appear
+  in compliance_summary.csv without a kappa, quality ``tracking_lost``, and in report.json's
+  ``quality.dropped_segments``.
 * ``calm_support`` — most of the excitation's variance lies in frames where one of the bend's nodes was lost:
   the share of sum_t (z_t - mean z)^2 over the frames where all three nodes were observed
   (``z_var_seen``) is below ``1 - CALM_SHARE`` (half). kappa is the ratio of the bend's motion to z's, so it
