@@ -13,7 +13,9 @@ from .version import __version__
 #: public name -> module that defines it
 _LAZY = {"InputError": "errors", "RceError": "errors", "Bend": "graph", "BranchGraph": "graph",
          "load_graph": "graph", "PRESETS": "presets", "Preset": "presets", "get_preset": "presets",
-         "Tracks": "tracks", "load_tracks": "tracks"}
+         "Tracks": "tracks", "load_tracks": "tracks",
+         # the real function (its signature and docstring for help()), imported when first named
+         "analyze": "pipeline"}
 
 
 def __getattr__(name: str):
@@ -28,12 +30,6 @@ def __getattr__(name: str):
 
 def __dir__():
     return sorted(set(globals()) | set(_LAZY) | {"batch"})
-
-
-def analyze(*args, **kwargs):
-    """See :func:`rce_gtsam.pipeline.analyze`."""
-    from .pipeline import analyze as _analyze
-    return _analyze(*args, **kwargs)
 
 
 __all__ = ["InputError", "RceError", "Bend", "BranchGraph", "load_graph", "Tracks", "load_tracks",

@@ -7,6 +7,7 @@ Which numbers and switches each stage uses comes from a :class:`~rce_gtsam.prese
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -24,7 +25,7 @@ from .model.time_split import TimeSplitCheck, time_split_check, widen
 from .smoothing.marginals import single_threaded_blas
 from .presets import Preset, get_preset
 from .smoothing.smoother import SmoothedTracks, smooth_tracks
-from .tracks import Tracks, load_tracks
+from .tracks import Tracks, dropped_edges, load_tracks, lost_nodes  # noqa: F401 (re-exported)
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,10 +154,39 @@ def length_cv(xy: np.ndarray, node_ids, graph: BranchGraph) -> np.ndarray:
     return np.array(out)
 
 
-def build_response(bending: BendingResult, geometry: Geometry, preset: Preset) -> Response:
-    """Arrange the bends as the (edges x frames) matrix the compliance model fits."""
-    keys = [(geometry.root_distance_px[b.child], b.joint, b.child) for b in bending.bends]
-    order = np.array(sorted(range(len(keys)), key=lambda k: keys[k]), dtype=int)
+def _smoother_input(tracks: Tracks, lost) -> Tracks:
+    """``tracks`` with each lost node held still at its observed position(s) in every frame: the smoother
+    needs two observations per node, and a node that stands still beside its neighbours pulls on nothing
+    (no edge factor is strained by it). Only its really observed frames are used downstream
+    (``SmoothedTracks.observed`` is the input's mask), and every bend through it is dropped."""
+    if not lost:
+        return tracks
+    xy = tracks.xy.copy()
+    sigma = None if tracks.sigma_px is None else tracks.sigma_px.copy()
+    obs = tracks.observed
+    for n in lost:
+        i = tracks.index(n)
+        if not obs[i].any():
+            continue  # never observed: nothing to hold it at (the smoother says so, naming the node)
+        xy[i] = np.nanmean(xy[i][obs[i]], axis=0)
+        if sigma is not None:
+            sigma[i] = np.nanmean(sigma[i][obs[i]])
+    return Tracks(node_ids=tracks.node_ids, xy=xy, sigma_px=sigma, source=tracks.source,
+                  lost_nodes=tracks.lost_nodes)
+
+
+def build_response(bending: BendingResult, geometry: Geometry, preset: Preset, skip_nodes=()) -> Response:
+    """Arrange the bends as the (edges x frames) matrix the compliance model fits; bends through
+    ``skip_nodes`` (lost nodes) are left out."""
+    skip = set(int(n) for n in skip_nodes)
+    keep = [k for k, b in enumerate(bending.bends) if not skip & set(b.nodes)]
+    if not keep:
+        from .errors import InputError
+        raise InputError("tracks", f"every bend runs through a lost node ({', '.join(map(str, sorted(skip)))}: observed in "
+                         "fewer than 2 frames); nothing usable is left to fit")
+    keys = {k: (geometry.root_distance_px[bending.bends[k].child], bending.bends[k].joint, bending.bends[k].child)
+            for k in keep}
+    order = np.array(sorted(keep, key=lambda k: keys[k]), dtype=int)
     frames = np.flatnonzero(np.isfinite(bending.delta_deg).any(axis=0))
     delta = bending.delta_deg[order][:, frames]
     inlier = bending.inlier[order][:, frames]
@@ -276,7 +306,13 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
 
     t = time.perf_counter()
     step("smooth")
-    smoothed = smooth_tracks(tracks, graph, preset.smoother)
+    lost = lost_nodes(tracks)
+    smoothed = smooth_tracks(_smoother_input(tracks, lost), graph, preset.smoother)
+    if lost:  # downstream sees only what was observed: the lost nodes' stand-in positions are not data
+        pre = smoothed.presmoothed
+        pre_xy = np.where(tracks.observed[:, :, None], pre.xy, np.nan)
+        smoothed = dataclasses.replace(smoothed, observed=tracks.observed.copy(), presmoothed=Tracks(
+            node_ids=pre.node_ids, xy=pre_xy, sigma_px=pre.sigma_px, source=pre.source))
     timings["smooth"] = time.perf_counter() - t
 
     t = time.perf_counter()
@@ -289,7 +325,7 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     smoothing = SmoothingMetrics(
         bend_rms_raw_deg=filtered_rms(raw_bending), bend_rms_smoothed_deg=filtered_rms(bending),
         edge_cv_raw=length_cv(raw_xy, tracks.node_ids, graph), edge_cv_smoothed=length_cv(xy, tracks.node_ids, graph))
-    response = build_response(bending, geometry, preset)
+    response = build_response(bending, geometry, preset, skip_nodes=lost)
     timings["bending"] = time.perf_counter() - t
 
     t = time.perf_counter()

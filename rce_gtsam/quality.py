@@ -5,7 +5,16 @@ Each segment (bend row of the response) gets the reasons that apply, in this ord
 * ``off_structure`` — (``rce run``) one of the bend's nodes was annotated where the first frames show no
   image structure or no change (:mod:`rce_gtsam.track.checks`): it is probably not on the branch.
 * ``tracking_lost`` — one of the bend's three nodes was observed in fewer than ``1 - LOST_SHARE`` (half)
-  of the frames: the smoother interpolated it for most of the clip.
+  of the frames: the smoother interpolated it for most of the clip. A node observed in fewer than 2 frames
+  (e.g. only in the annotated first frame) is lost altogether: its bends are dropped from the fit (the run goes
+  on, with one warning line naming the node; :func:`rce_gtsam.tracks.lost_nodes`), and their segments appear
+  in compliance_summary.csv without a kappa, quality ``tracking_lost``, and in report.json's
+  ``quality.dropped_segments``.
+* ``calm_support`` — most of the excitation's variance lies in frames where one of the bend's nodes was lost:
+  the share of sum_t (z_t - mean z)^2 over the frames where all three nodes were observed
+  (``z_var_seen``) is below ``1 - CALM_SHARE`` (half). kappa is the ratio of the bend's motion to z's, so it
+  then rests on the calm frames and says nothing about how the segment took the strong motion (a tracker
+  that loses nodes in gusts gives exactly this). ``z_var_seen`` is reported for every segment.
 * ``low_support`` — fewer usable (inlier, finite) frames than ``MIN_BLOCKS`` block lengths
   (2 x 25 = 50 frames at the presets' ``compliance.block_length``) or than ``SUPPORT_SHARE`` (half) of
   the clip: an all-outlier bend lands here.
@@ -19,9 +28,25 @@ Each segment (bend row of the response) gets the reasons that apply, in this ord
   an F test, since the floor is estimated too: variance / noise floor > F.ppf(1 - ALPHA, n_eff, dof) with
   n_eff = usable frames x the smoother's variance reduction (x (1 - rho1) / (1 + rho1) for AR(1) noise) and
   dof the floor's own degrees of freedom (:func:`_raw_noise`), ALPHA = 0.01.
-* ``poor_fit`` — R^2 < 0: the fitted kappa * z describes the segment's bending worse than its own mean.
+* ``poor_fit`` — the fitted kappa * z explains less of the segment's bending than its noise allows: R^2 below
+  half of the share that is signal, R^2 < ``POOR_FIT_SHARE`` x (1 - 1 / snr) (snr = bending variance /
+  noise floor, see ``no_signal``), and always when R^2 < 0 (worse than the segment's own mean). Were the
+  rank-1 model right, R^2 would approach 1 - 1/snr (only the noise left over); below half of that, the
+  shared excitation explains less of the segment's signal than it leaves unexplained, and kappa summarises
+  the minority of what the segment does (a missing effect: read the diagnosis, and kappa from the extended
+  model it names). A noisy segment with a low R^2 is not flagged for it: its noise explains the low R^2.
 * ``wide_ci`` — the 95 % interval is at least as wide (in log kappa) as the shrinkage prior's own 95 %
   interval, 2 x 1.96 x ``compliance.prior_sd_log``, or is not finite: the data did not narrow kappa.
+* ``uninformative`` — the 95 % interval reaches below ``STIFF_BELOW`` = 2^-1/2 = 0.71 AND above
+  ``COMPLIANT_ABOVE`` = 2^1/2 = 1.41: it cannot tell a stiff segment from a compliant one. kappa is relative
+  to the branch's geometric mean, 1 by normalisation; "stiffer" and "more compliant than the branch" are the
+  two sides of 1, and the cutoffs put a factor sqrt(2) on either side, so an interval that holds both holds
+  segments a factor 2 apart in compliance with the branch's mean between them. A factor 2 is the smallest
+  contrast worth a map: the geometric SD of kappa over the segments of the two real plants is 1.73 and 1.70
+  (TAPIR tracks, default preset), so a factor 2 spans about one SD of what the segments of a branch differ
+  by. An interval entirely on one side (e.g. [0.40, 0.80], or [1.2, 3.0]) is informative however wide; one
+  inside [0.71, 1.41] says "about average", which is information too. The cutoffs are fixed numbers of the
+  method (the normalisation's), not fitted to a plant; the run prints how many segments are informative.
 
 Slow tracker drift is not in the noise floor (it looks like slow sway); ``wide_ci`` and the residual
 figures are where it shows.
@@ -43,6 +68,16 @@ MIN_BLOCKS = 2
 SUPPORT_SHARE = 0.5
 #: One-sided level of the no-signal chi-square test.
 ALPHA = 0.01
+#: calm_support: flagged when more than this share of the excitation's variance lies in frames where one of the
+#: bend's nodes was lost (most of it: kappa then rests on the calm frames).
+CALM_SHARE = 0.5
+#: poor_fit: R^2 must reach this share of what the noise allows, 1 - 1/snr (half: kappa z explains at least
+#: as much of the segment's signal as it leaves).
+POOR_FIT_SHARE = 0.5
+#: uninformative: an interval reaching below STIFF_BELOW and above COMPLIANT_ABOVE (a factor sqrt(2) either
+#: side of the branch's geometric mean, 1) cannot tell a stiff segment from a compliant one.
+STIFF_BELOW = 2.0 ** -0.5
+COMPLIANT_ABOVE = 2.0 ** 0.5
 #: z of the prior's two-sided 95 % interval (wide_ci).
 Z95 = 1.959964
 
@@ -50,7 +85,8 @@ Z95 = 1.959964
 #: moving structure (``rce run``'s check before tracking, :mod:`rce_gtsam.track.checks`).
 OFF_STRUCTURE_KEY = "off_structure_nodes"
 
-REASONS = ("off_structure", "tracking_lost", "low_support", "single_bend", "no_signal", "poor_fit", "wide_ci")
+REASONS = ("off_structure", "tracking_lost", "calm_support", "low_support", "single_bend", "no_signal", "poor_fit",
+           "wide_ci", "uninformative")
 
 
 @dataclass(frozen=True)
@@ -70,6 +106,10 @@ class SegmentQuality:
     snr_threshold: float
     n_frames: int
     min_node_visible: float
+    z_var_seen: float = float("nan")
+    r2: float = float("nan")
+    r2_needed: float = 0.0
+    informative: bool | None = None
 
     @property
     def quality(self) -> str:
@@ -140,6 +180,10 @@ def assess_quality(result) -> dict[tuple[int, int], SegmentQuality]:
     pred = result.fit.predict()
     off = {int(n) for n in str(result.inputs.get(OFF_STRUCTURE_KEY, "")).split(",") if n.strip()}
     n_segments = len(resp.edges)
+    zc = np.asarray(result.fit.z, dtype=float)
+    zc = np.where(np.isfinite(zc), zc - np.nanmean(zc) if np.isfinite(zc).any() else 0.0, 0.0)
+    z_power = zc**2
+    seen_frames = tracks.observed[:, resp.frames]  # (N, T): each node observed at the response's frames
     out = {}
     for i, edge in enumerate(resp.edges):
         k = int(resp.bend_rows[i])
@@ -178,18 +222,28 @@ def assess_quality(result) -> dict[tuple[int, int], SegmentQuality]:
         node_vis = float(min(visible[r] for r in rows))
         if node_vis < 1 - LOST_SHARE:
             reasons.append("tracking_lost")
+        seen = seen_frames[rows].all(axis=0)
+        z_seen = float(z_power[seen].sum() / z_power.sum()) if z_power.sum() > 0 else float("nan")
+        if z_seen < 1 - CALM_SHARE:
+            reasons.append("calm_support")
         if n < MIN_BLOCKS * cfg.block_length or n < SUPPORT_SHARE * n_clip:
             reasons.append("low_support")
         if n_segments == 1:
             reasons.append("single_bend")
         if not snr > threshold:
             reasons.append("no_signal")
-        if not _r2(resp.Y[i], pred[i]) >= 0:
+        r2 = _r2(resp.Y[i], pred[i])
+        r2_needed = POOR_FIT_SHARE * (1.0 - 1.0 / snr) if np.isfinite(snr) and snr > 1 else 0.0
+        if not r2 >= r2_needed:
             reasons.append("poor_fit")
         if _wide(result, i, cfg):
             reasons.append("wide_ci")
+        informative = _informative(result, i)
+        if informative is False:
+            reasons.append("uninformative")
         out[edge] = SegmentQuality(edge=edge, reasons=tuple(reasons), bend_var_deg2=var, noise_var_deg2=noise,
-                                   snr=snr, snr_threshold=threshold, n_frames=n, min_node_visible=node_vis)
+                                   snr=snr, snr_threshold=threshold, n_frames=n, min_node_visible=node_vis,
+                                   z_var_seen=z_seen, r2=r2, r2_needed=r2_needed, informative=informative)
     return out
 
 
@@ -206,6 +260,28 @@ def _wide(result, i: int, cfg) -> bool:
     if not (np.isfinite(lo) and np.isfinite(hi)) or lo <= 0:
         return True
     return bool(np.log(hi / lo) >= 2 * Z95 * cfg.prior_sd_log)
+
+
+def _informative(result, i: int) -> bool | None:
+    """Whether segment ``i``'s 95 % interval tells stiff from compliant (see ``uninformative``); None without
+    an interval (no bootstrap)."""
+    ci = result.ci
+    if ci is None:
+        return None
+    lo, hi = float(ci.low[i]), float(ci.high[i])
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return False
+    return not (lo < STIFF_BELOW and hi > COMPLIANT_ABOVE)
+
+
+def informative_line(qualities: dict) -> str | None:
+    """"14 of 23 segments informative (95 % CI not reaching both below 0.71 and above 1.41)", or None
+    without intervals."""
+    judged = [q.informative for q in qualities.values() if q.informative is not None]
+    if not judged:
+        return None
+    return (f"{sum(judged)} of {len(qualities)} segments informative (95 % CI does not reach both below "
+            f"{STIFF_BELOW:.2f} and above {COMPLIANT_ABOVE:.2f}: it tells stiff from compliant)")
 
 
 def verdict_line(qualities: dict) -> str | None:
@@ -233,12 +309,27 @@ def quality_report(result, qualities: dict | None = None) -> dict:
     return {
         "rules": {"lost_share": LOST_SHARE, "min_frames": MIN_BLOCKS * cfg.block_length,
                   "support_share": SUPPORT_SHARE, "no_signal_alpha": ALPHA,
-                  "wide_ci_log_width": 2 * Z95 * cfg.prior_sd_log, "poor_fit_r2_below": 0.0},
+                  "wide_ci_log_width": 2 * Z95 * cfg.prior_sd_log,
+                  "poor_fit_r2_below": f"max(0, {POOR_FIT_SHARE} x (1 - 1/snr))",
+                  "calm_support_z_var_seen_below": 1 - CALM_SHARE,
+                  "uninformative_ci_below_and_above": [STIFF_BELOW, COMPLIANT_ABOVE]},
         "n_ok": sum(q.ok for q in qualities.values()),
+        "n_informative": sum(q.informative is True for q in qualities.values()),
+        "n_segments": len(qualities),
         "segments": {f"{j}->{c}": {"quality": q.quality, "bend_var_deg2": q.bend_var_deg2,
                                    "noise_var_deg2": q.noise_var_deg2, "snr": q.snr,
                                    "snr_threshold": q.snr_threshold, "n_frames": q.n_frames,
-                                   "min_node_visible": q.min_node_visible}
+                                   "min_node_visible": q.min_node_visible, "z_var_seen": q.z_var_seen,
+                                   "r2": q.r2, "r2_needed": q.r2_needed, "informative": q.informative}
                      for (j, c), q in qualities.items()},
         "verdict": verdict_line(qualities),
+        **_dropped(result),
     }
+
+
+def _dropped(result) -> dict:
+    """The lost nodes (observed in fewer than 2 frames) and the segments dropped with them, for report.json."""
+    from .tracks import dropped_edges, lost_nodes
+    lost = lost_nodes(result.tracks)
+    return {"lost_nodes": list(lost),
+            "dropped_segments": {f"{j}->{c}": "tracking_lost" for j, c in dropped_edges(result.graph, lost)}}

@@ -45,6 +45,8 @@ def compliance_summary(result) -> pd.DataFrame:
     bend_rms = dict(zip([b.edge for b in result.bending.bends], result.smoothing.bend_rms_smoothed_deg))
     U = result.uncertainty
     quality = assess_quality(result)
+    from .tracks import dropped_edges, lost_nodes
+    dropped = set(dropped_edges(g, lost_nodes(result.tracks)))
     records = []
     for e in sorted(g.edges, key=lambda e: (geo.root_distance_px[e[1]], e[0], e[1])):
         p, c = e
@@ -54,7 +56,8 @@ def compliance_summary(result) -> pd.DataFrame:
         if i is None:
             rec.update(kappa=np.nan, kappa_ci_low=np.nan, kappa_ci_high=np.nan, uncertainty=np.nan,
                        direction=np.nan, relative_stiffness=np.nan, n_frames=0, fit_rmse_deg=np.nan,
-                       fit_r2=np.nan, bend_rms_deg=np.nan, bend_snr=np.nan, quality="")
+                       fit_r2=np.nan, bend_rms_deg=np.nan, bend_snr=np.nan, z_var_seen=np.nan,
+                       quality="tracking_lost" if e in dropped else "")
         else:
             y = resp.Y[i]
             ok = np.isfinite(y)
@@ -73,6 +76,7 @@ def compliance_summary(result) -> pd.DataFrame:
                 fit_r2=float(1 - np.sum(res**2) / ss_tot) if ss_tot > 1e-6 else np.nan,
                 bend_rms_deg=float(bend_rms[e]),
                 bend_snr=quality[e].snr,
+                z_var_seen=quality[e].z_var_seen,
                 quality=quality[e].quality,
             )
         records.append(rec)

@@ -22,6 +22,9 @@ from .fileio import temp_file_beside
 from .graph import BranchGraph
 
 REQUIRED_COLUMNS = ("point_id", "frame", "x", "y")
+#: A node observed in fewer frames than this cannot be smoothed (its course between observations is free) and
+#: gives no bending series: its bends are dropped (``Tracks.lost_nodes``), the rest of the branch goes on.
+MIN_OBSERVED = 2
 OPTIONAL_COLUMNS = ("visible", "sigma_px")
 
 
@@ -35,12 +38,16 @@ class Tracks:
     xy: (N, F, 2) float — pixel positions (x right, y down); NaN where not observed.
     sigma_px: (N, F) float or None — per-observation 1-sigma noise in pixels (NaN where not observed).
     source: where the tracks came from (file path or description), for error messages.
+    lost_nodes: nodes observed in fewer than :data:`MIN_OBSERVED` frames (e.g. only in the annotated first
+    frame): kept for the geometry (their observed frame gives the rest lengths), but every bend through them
+    is dropped from the fit and reported as ``tracking_lost`` (:func:`rce_gtsam.pipeline.analyze`).
     """
 
     node_ids: np.ndarray
     xy: np.ndarray
     sigma_px: np.ndarray | None = None
     source: str = field(default="<tracks>")
+    lost_nodes: tuple[int, ...] = ()
 
     def __post_init__(self):
         xy = np.asarray(self.xy, dtype=float)
@@ -88,15 +95,49 @@ def _fail(path, msg, row=None):
     raise InputError(path, msg, None if row is None else f"line {int(row) + 2}")
 
 
+#: Leading bytes of files users mistake for a tracks CSV (the video, a figure, an archive), and what they are.
+_MAGIC = ((b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"GIF8", "a GIF image"),
+          (b"RIFF", "a RIFF file (AVI video or WAV audio)"), (b"\x1aE\xdf\xa3", "a Matroska/WebM video"),
+          (b"PK\x03\x04", "a ZIP archive"), (b"%PDF", "a PDF document"), (b"#ROSBAG", "a ROS bag recording"),
+          (b"SQLite format 3", "an SQLite database (ROS 2 .db3 recording?)"), (b"\x1f\x8b", "a gzip archive"))
+
+
+def _not_text(path: Path) -> str | None:
+    """What ``path`` is when it is plainly not a text CSV (an image, a video, an archive, or binary or non-UTF-8
+    bytes), else None. Reads the first 4 KiB."""
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    for magic, what in _MAGIC:
+        if head.startswith(magic):
+            return what
+    if head[4:8] == b"ftyp":
+        return "an MP4/MOV video"
+    if b"\x00" in head:
+        return "a binary file"
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        if exc.start < len(head) - 4:  # not merely a multi-byte character cut at 4 KiB
+            return f"not UTF-8 text (byte {exc.start})"
+    return None
+
+
 def read_tracks_table(path: str | Path) -> pd.DataFrame:
     """Read and validate a tracks CSV into a table (no graph needed). Raises :class:`InputError`."""
     path = Path(path)
     if not path.is_file():
-        raise InputError(path, "tracks file not found")
+        raise InputError(path, "tracks file not found" + (" (it is a folder)" if path.is_dir() else ""))
     if path.stat().st_size == 0:
         raise InputError(path, "the tracks file is empty; expected a header 'point_id,frame,x,y' and one row per observation")
+    what = _not_text(path)
+    if what is not None:
+        raise InputError(path, f"this is {what}, not a tracks CSV; expected a text table with the header "
+                               "'point_id,frame,x,y' (as `rce track` writes it)")
     try:
         df = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
+    except UnicodeDecodeError as exc:
+        raise InputError(path, f"not a UTF-8 text CSV (byte {exc.start}); expected a tracks CSV with the header "
+                               "'point_id,frame,x,y'") from None
     except pd.errors.EmptyDataError:
         raise InputError(path, "the tracks file is empty; expected a header 'point_id,frame,x,y'") from None
     except pd.errors.ParserError as exc:
@@ -158,7 +199,9 @@ def read_tracks_table(path: str | Path) -> pd.DataFrame:
 def tracks_from_table(table: pd.DataFrame, graph: BranchGraph, source: str = "<tracks>") -> Tracks:
     """Turn a validated long table into dense :class:`Tracks` for the graph's nodes.
 
-    Points not in the graph are ignored. Every graph node must be observed in at least two frames.
+    Points not in the graph are ignored. A graph node without any visible row is an error (the tracks and the
+    graph do not belong together); one observed in fewer than :data:`MIN_OBSERVED` frames is kept as a lost
+    node (``Tracks.lost_nodes``): its bends are dropped from the fit, not the whole run.
     """
     if "visible" in table.columns:
         table = table[table["visible"] == 1]
@@ -170,9 +213,7 @@ def tracks_from_table(table: pd.DataFrame, graph: BranchGraph, source: str = "<t
         if c == 0:
             raise InputError(source, f"graph node {n} has no tracks (no visible rows with point_id {n}); "
                                      f"graph file: {graph.source}", f"node {n}")
-        if c < 2:
-            raise InputError(source, f"graph node {n} is observed in only {c} frame; at least 2 are needed",
-                             f"node {n}")
+    lost = tuple(int(n) for n in nodes if int(counts.get(n, 0)) < MIN_OBSERVED)
     n_frames = int(table["frame"].max()) + 1
     row = {n: i for i, n in enumerate(nodes)}
     xy = np.full((len(nodes), n_frames, 2), np.nan)
@@ -184,7 +225,20 @@ def tracks_from_table(table: pd.DataFrame, graph: BranchGraph, source: str = "<t
     if "sigma_px" in table.columns:
         sigma = np.full((len(nodes), n_frames), np.nan)
         sigma[ii, ff] = table["sigma_px"].to_numpy()
-    return Tracks(node_ids=np.array(nodes), xy=xy, sigma_px=sigma, source=source)
+    return Tracks(node_ids=np.array(nodes), xy=xy, sigma_px=sigma, source=source, lost_nodes=lost)
+
+
+def lost_nodes(tracks: Tracks) -> tuple[int, ...]:
+    """Nodes observed in fewer than :data:`~rce_gtsam.tracks.MIN_OBSERVED` frames (``Tracks.lost_nodes``, and
+    any such node of tracks made in code): their bends are dropped from the fit."""
+    few = {int(n) for n, c in zip(tracks.node_ids, tracks.observed.sum(axis=1)) if c < MIN_OBSERVED}
+    return tuple(sorted(set(tracks.lost_nodes) | few))
+
+
+def dropped_edges(graph: BranchGraph, lost) -> list[tuple[int, int]]:
+    """The segments (the downstream edge of each bend) whose bend runs through a lost node."""
+    lost = set(lost)
+    return [b.edge for b in graph.bends if lost & set(b.nodes)]
 
 
 def load_tracks(path: str | Path, graph: BranchGraph) -> Tracks:

@@ -40,7 +40,12 @@ def video(tmp_path):
     return path
 
 
-def test_save_writes_a_tree_and_the_next_command_and_a_new_session_resumes_it(video, tmp_path):
+def test_save_writes_a_tree_and_the_next_command_and_a_new_session_resumes_it(video, tmp_path, monkeypatch):
+    fake_bin = tmp_path / "bin"  # rce on PATH (an activated environment): the next command says plain rce
+    fake_bin.mkdir()
+    (fake_bin / "rce").write_text("#!/bin/sh\n")
+    (fake_bin / "rce").chmod(0o755)
+    monkeypatch.setenv("PATH", str(fake_bin))
     s = AnnotationSession(video, tmp_path / "ann")
     pts = [[15.0, 30.0], [50.0, 30.0], [90.0, 30.0], [70.0, 40.0]]
     out = s.save({"points": pts, "edges": [[0, 1], [1, 2], [1, 3]], "root": 0})
@@ -68,3 +73,20 @@ def test_save_refuses_what_the_tracker_cannot_use(video, tmp_path, payload, mess
         s.save(payload)
     assert not (tmp_path / "ann").exists()
     s.close()
+
+
+def test_the_next_command_names_the_running_executable_when_rce_is_not_on_path(video, tmp_path, monkeypatch):
+    """Without an activated environment ``rce`` is not on PATH: the printed next command must still run, so it
+    starts with the path of what is running (this interpreter with -m rce_gtsam.cli, or .venv/bin/rce)."""
+    import os
+    import shlex
+    import sys
+    monkeypatch.setenv("PATH", str(tmp_path / "empty"))
+    s = AnnotationSession(video, tmp_path / "ann")
+    pts = [[15.0, 30.0], [50.0, 30.0], [90.0, 30.0], [70.0, 40.0]]
+    argv = shlex.split(s.save({"points": pts, "edges": [[0, 1], [1, 2], [1, 3]], "root": 0})["next"])
+    s.close()
+    assert argv[0] != "rce" and os.path.isabs(argv[0]) and os.access(argv[0], os.X_OK), argv
+    if argv[0] == sys.executable:
+        assert argv[1:4] == ["-m", "rce_gtsam.cli", "run"], argv
+    assert argv[argv.index("run") + 1] == str(video)

@@ -101,7 +101,7 @@ def test_variance_budget_figure(tmp_path):
              "noise_floor_is_lower_bound": False, "unexplained": -0.3, "unexplained_se": 0.4}]
     fig = fig_variance_budget(budget, rows)
     ax = fig.axes[0]
-    assert "inconclusive (floor bounded)" in ax.get_title(loc="left")
+    assert "with delay, the rest is inconclusive (floor bounded)" in ax.get_title(loc="left")
     assert [t.get_text() for t in ax.get_yticklabels()] == ["whole branch *", "1->2 *", "2->3"]
     assert ax.get_xlim()[0] < -19  # the R^2 < 0 row is drawn left of zero
     _png_ok(save_png(fig, tmp_path / "variance_budget.png"), min_bytes=5_000)
@@ -132,3 +132,31 @@ def test_figures_split_between_two_processes(analysis, tmp_path):
         _png_ok(Path(p), min_bytes=5_000)
     with pytest.raises(Exception):
         draw_analysis_figures(None, tmp_path / "bad", FIGURE_FILES, OVERLAY_FILES, processes=2)
+
+
+def test_heldout_figure_labels_do_not_overlap_and_stay_inside():
+    """With all six candidates the model names ("resonances", "dynamics", ...) must not run into each other,
+    and no label or title may be cut at the figure's edge."""
+    from rce_gtsam.viz.figures import fig_heldout
+    d = {"baseline": {"heldout_rmse": 1.0}, "verdict": "delay",
+         "candidates": [{"effect": e, "heldout_rmse": v} for e, v in
+                        [("delay", 0.9), ("resonances", 0.93), ("dynamics", 0.95), ("second_mode", 0.97),
+                         ("offset", 0.99), ("nonlinear", 1.01)]]}
+    fig = fig_heldout(d)
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    r = canvas.get_renderer()
+    ax = fig.axes[0]
+    boxes = [t.get_window_extent(r) for t in ax.get_yticklabels() + ax.get_xticklabels() if t.get_text()]
+    assert len(boxes) >= 7
+    for i, a in enumerate(boxes):
+        for b in boxes[i + 1:]:
+            assert not a.overlaps(b), (a, b)
+    page = fig.bbox
+    for t in [*ax.get_yticklabels(), *fig.texts, ax.title]:
+        if t.get_text():
+            bb = t.get_window_extent(r)
+            assert bb.x0 >= page.x0 - 1 and bb.x1 <= page.x1 + 1, t.get_text()
+    import matplotlib.pyplot as plt
+    plt.close(fig)

@@ -111,3 +111,17 @@ def test_the_diagnosis_machinery_names_no_effect():
             if isinstance(node, ast.Constant) and node.value in names:
                 hits.append(f"{path.name}:{node.lineno} {node.value!r}")
     assert not hits, hits
+
+
+def test_help_of_analyze_shows_its_real_signature_and_docstring():
+    """``help(rce_gtsam.analyze)`` shows the parameters and the docstring, not ``(*args, **kwargs)``."""
+    import inspect
+    import pydoc
+
+    import rce_gtsam
+    from rce_gtsam.pipeline import analyze
+    assert rce_gtsam.analyze is analyze
+    params = inspect.signature(rce_gtsam.analyze).parameters
+    assert list(params)[:3] == ["tracks", "graph", "preset"] and "effects" in params
+    text = pydoc.render_doc(rce_gtsam.analyze, renderer=pydoc.plaintext)
+    assert "*args" not in text and "Run the whole analysis on saved tracks" in text

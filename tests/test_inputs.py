@@ -47,8 +47,7 @@ CASES = {
     "header only": (dict(raw_tracks="point_id,frame,x,y\n"), "tracks", "no rows"),
     "missing column": (dict(header="point_id,frame,x", rows=[r.rsplit(",", 1)[0] for r in good_rows()]),
                        "tracks", "missing column"),
-    "single-frame track": (dict(rows=[r for r in good_rows() if not r.startswith("3,") or r.startswith("3,0,")]),
-                           "tracks", "only 1 frame"),
+    # a node seen in one frame is no longer an input error: its segments are dropped (test_quality_support.py)
     "bad visible flag": (dict(header="point_id,frame,x,y,visible", rows=[r + ",2" for r in good_rows()]),
                          "tracks", "'visible' must be 0 or 1"),
     "frames not starting at 0": (dict(rows=good_rows(frames=range(1000, 1005))), "tracks", "the first frame is 1000"),
@@ -99,3 +98,51 @@ def test_invisible_rows_are_unobserved(tmp_path):
     tracks, graph = write_case(tmp_path, header="point_id,frame,x,y,visible", rows=rows)
     t = load_tracks(tracks, load_graph(graph))
     assert not t.observed[t.index(2), 3] and t.observed.sum() == 19
+
+
+#: the first bytes of files a user passes as the tracks CSV by mistake (the video, a figure)
+NOT_A_CSV = {"png": b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR" + bytes(range(256)),
+             "mp4": b"\x00\x00\x00\x20ftypisom\x00\x00\x02\x00isomiso2avc1mp41" + bytes(range(256)),
+             "latin1": "point_id,frame,x,y\n0,0,1.0,2.0 caf\xe9\n".encode("latin-1") * 3}
+
+
+@pytest.fixture(scope="module")
+def analysis_folder(tmp_path_factory):
+    """A real analysis output folder (the sample, no CIs, no figures) for ``rce view``."""
+    from pathlib import Path
+    sample = Path(__file__).resolve().parents[1] / "data" / "sample"
+    out = tmp_path_factory.mktemp("view") / "out"
+    assert main(["analyze", str(sample / "tracks.csv"), str(sample / "graph.json"), "--out", str(out),
+                 "--bootstrap", "0", "--no-figures", "--quiet"]) == 0
+    return out
+
+
+@pytest.mark.parametrize("kind", list(NOT_A_CSV))
+@pytest.mark.parametrize("command", ["analyze", "diagnose", "view"])
+def test_a_video_or_image_given_as_the_tracks_csv_is_one_line_exit_2(tmp_path, capsys, kind, command,
+                                                                      analysis_folder):
+    """Every command that reads a tracks CSV names the file in one line (exit 2), not a pandas
+    UnicodeDecodeError traceback."""
+    _, graph = write_case(tmp_path)
+    bad = tmp_path / f"clip.{kind}"
+    bad.write_bytes(NOT_A_CSV[kind])
+    argv = {"analyze": ["analyze", str(bad), str(graph), "--out", str(tmp_path / "o")],
+            "diagnose": ["diagnose", str(bad), str(graph), "--json", str(tmp_path / "d.json")],
+            "view": ["view", str(analysis_folder), "--tracks", str(bad), "--rrd", str(tmp_path / "v.rrd")]}[command]
+    capsys.readouterr()
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "Traceback" not in err and "UnicodeDecodeError" not in err
+    assert len(err.strip().splitlines()) == 1, err
+    assert bad.name in err and ("not a tracks CSV" in err or "UTF-8" in err), err
+    assert not (tmp_path / "o").exists() and not (tmp_path / "v.rrd").exists()
+
+
+def test_a_batch_row_with_a_video_as_tracks_fails_naming_the_file(tmp_path):
+    from rce_gtsam.tracks import read_tracks_table
+    from rce_gtsam.errors import InputError
+    bad = tmp_path / "clip.mp4"
+    bad.write_bytes(NOT_A_CSV["mp4"])
+    with pytest.raises(InputError, match="clip.mp4: this is an MP4/MOV video, not a tracks CSV"):
+        read_tracks_table(bad)  # the batch worker reads a row's tracks through this (batch/process.py)

@@ -92,7 +92,8 @@ def test_malformed_or_static_input_never_crashes_or_claims_a_trustworthy_kappa(c
         buf = io.StringIO()
         with contextlib.redirect_stderr(buf), contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
             warnings.simplefilter("error")  # a leaked numpy warning is a failure too
-            code = main(["analyze", str(tracks), str(graph), "--out", str(out), "--no-figures", *case["options"]])
+            code = main(["analyze", str(tracks), str(graph), "--out", str(out), "--no-figures", "--quiet",
+                         *case["options"]])
         err = buf.getvalue()
         event(f"exit {code}")
         assert code in (0, 2, 3), err

@@ -46,3 +46,27 @@ def test_run_bad_effect_fails_before_tracking(sim, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "offsett" in err and "second_mode" in err and "Traceback" not in err
     assert not out.exists()
+
+
+def test_run_to_a_log_prints_plain_progress_lines_and_times_the_diagnosis(sim, tmp_path, capsys, monkeypatch):
+    """stderr captured (not a terminal, as in a log file): one flushed line per stage and per tenth of the
+    tracking, no carriage returns; the timing line names the diagnosis as its own stage, apart from write."""
+    monkeypatch.delenv("RCE_PROGRESS", raising=False)
+    out = tmp_path / "run"
+    assert main(["run", *_args(sim), "--out", str(out), "--candidates", "offset", "--bootstrap", "10",
+                 "--no-figures"]) == 0
+    cap = capsys.readouterr()
+    assert "\r" not in cap.err
+    lines = cap.err.strip().splitlines()
+    assert any(ln.startswith("rce run: tracking ") and "/200 frames" in ln for ln in lines), cap.err
+    for stage in ("smooth", "bootstrap", "diagnosis", "write"):
+        assert any(ln.startswith("rce run: [") and f"] {stage} (" in ln for ln in lines), cap.err
+    together = next(ln for ln in cap.out.splitlines() if ln.startswith("Read together: "))
+    assert "segments ok" in together and "informative" in together and "leaves: " in together, together
+    timing = next(ln for ln in cap.out.splitlines() if ln.startswith("total "))
+    parts = dict(p.rsplit(" ", 1) for p in timing.split("(", 1)[1].rstrip(")").split(", "))
+    assert {"track", "diagnosis", "write"} <= set(parts), timing
+    assert float(parts["diagnosis"]) > 0 and float(parts["write"]) < float(parts["diagnosis"]) + 5, timing
+    quiet = main(["run", *_args(sim), "--out", str(tmp_path / "q"), "--candidates", "offset", "--bootstrap", "0",
+                  "--no-figures", "--quiet"])
+    assert quiet == 0 and capsys.readouterr().err == ""

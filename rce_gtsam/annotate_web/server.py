@@ -151,8 +151,9 @@ class AnnotationSession:
         write_annotation_files(points, graph, self.annotations_path, self.graph_path)
         self.saves += 1
         run_dir = self.out_dir / "run"
+        from ..cli.wording import rce_invocation  # "rce", or its path where rce is not on PATH
         nxt = " ".join(shlex.quote(str(a)) for a in (
-            "rce", "run", self.video, self.annotations_path, self.graph_path, "--out", run_dir,
+            *rce_invocation(), "run", self.video, self.annotations_path, self.graph_path, "--out", run_dir,
             "--rerun", run_dir / "recording.rrd"))
         return {"annotations": str(self.annotations_path), "graph": str(self.graph_path), "n_nodes": len(points),
                 "n_edges": len(graph.edges), "n_bends": len(graph.bends), "next": nxt}

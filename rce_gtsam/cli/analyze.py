@@ -72,7 +72,7 @@ def save_recording(args, result, video=None, diagnosis=None, announce: bool = Tr
 
 def run(args: argparse.Namespace) -> int:
     from .figure_worker import FigureWorker
-    from .progress import Steps, process_seconds, progress_enabled
+    from .progress import Steps, process_seconds, progress_mode
 
     # the figure worker forks at its first job, once the inputs are checked (see figure_worker)
     worker = None if args.no_figures else FigureWorker()
@@ -87,9 +87,10 @@ def run(args: argparse.Namespace) -> int:
         effects = parse_effect_names(args.effects) or ()  # fail on a bad name before the (slow) analysis
         preset = preset_from_args(args)
         graph, _, tracks = check_analysis_inputs(args.tracks, args.graph, preset)  # the CSV is read once
+        print_lost_nodes("analyze", tracks, graph)
         t_start = process_seconds()
         steps = [*ANALYSIS_STEPS, "write"] + (["figures"] if worker else []) + (["recording"] if args.rerun else [])
-        with Steps("analyze", steps, enabled=progress_enabled(args.quiet)) as bar:
+        with Steps("analyze", steps, enabled=progress_mode(args.quiet)) as bar:
             figures = FiguresInBackground(worker) if worker else None
             result = analyze(tracks, graph, preset=preset, seed=args.seed, n_boot=args.bootstrap,
                              effects=effects, progress=bar.callback,
@@ -117,6 +118,19 @@ def run(args: argparse.Namespace) -> int:
     return quality_exit_code(result, "analyze")
 
 
+def print_lost_nodes(command: str, tracks, graph) -> None:
+    """One warning line on stderr per lost node (observed in fewer than 2 frames) naming it, the file and the
+    segments dropped with it; the analysis goes on without them."""
+    import sys
+
+    from ..tracks import dropped_edges, lost_nodes
+    for n in lost_nodes(tracks):
+        seen = int(tracks.observed[tracks.index(n)].sum())
+        segs = ", ".join(f"{j}->{c}" for j, c in dropped_edges(graph, [n]))
+        print(f"rce {command}: warning: {tracks.source}: node {n} is observed in {seen} of {tracks.n_frames} frames "
+              f"(2 are needed); its segments {segs} are dropped (tracking_lost), the rest go on", file=sys.stderr)
+
+
 def quality_exit_code(result, command: str) -> int:
     """0, or 3 with one line on stderr when no segment's kappa passes the quality checks."""
     import sys
@@ -130,15 +144,18 @@ def quality_exit_code(result, command: str) -> int:
     return 3
 
 
-def record_wall_time(result, t_start: float) -> None:
-    """Put the time before the analysis started (Python start-up and imports) and after it (writing files,
-    waiting for figures) into ``result.timings_s``, whose ``total`` becomes the wall time since the process
-    started: what the user waited."""
+def record_wall_time(result, t_start: float, stages: dict[str, float] | None = None) -> None:
+    """Put the time before the analysis started (Python start-up and imports) and after it into
+    ``result.timings_s``, whose ``total`` becomes the wall time since the process started: what the user
+    waited. ``stages``: named stages that ran after the analysis (``{"diagnosis": s}``), each timed on its own;
+    the rest of the time after the analysis (writing files, waiting for figures) is ``write``."""
     from .progress import process_seconds
     t = dict(result.timings_s)
-    after = process_seconds() - t_start - t.pop("total", 0.0)
+    stages = dict(stages or {})
+    after = process_seconds() - t_start - t.pop("total", 0.0) - sum(stages.values())
     result.timings_s.clear()
-    result.timings_s.update({"imports": t_start, **t, "write": after, "total": process_seconds()})
+    result.timings_s.update({"imports": t_start, **t, **stages, "write": max(after, 0.0),
+                             "total": process_seconds()})
 
 
 class FiguresInBackground:
@@ -209,27 +226,45 @@ def format_summary(result) -> str:
         f"{len(result.bending.bends)} bends",
         f"smoother: {result.smoothed.report.iterations} LM iterations, final error "
         f"{result.smoothed.report.final_error:.4g}; bending RMS {sm['mean_bend_rms_raw_deg']:.2f} -> "
-        f"{sm['mean_bend_rms_smoothed_deg']:.2f} deg ({sm['bend_rms_reduction_pct']:.1f}% lower), edge-length CV "
+        f"{sm['mean_bend_rms_smoothed_deg']:.2f} deg ({lower_or_higher(sm['bend_rms_reduction_pct'])}), edge-length CV "
         f"{sm['mean_edge_length_cv_raw']:.3f} -> {sm['mean_edge_length_cv_smoothed']:.3f}",
         _fit_line(result),
         *_effects_lines(result),
         "",
-        f"{'edge':>10} {'zone':>8} {'kappa':>7} {'95% CI':>17} {'U_e':>6} {'R2':>6}  quality",
+        f"{'edge':>10} {'zone':>8} {'kappa':>7} {'95% CI':>17} {'U_e':>6} {'R2':>6} {'z seen':>6}  quality",
     ]
     for r in df.itertuples():
-        if r.kappa != r.kappa:  # NaN: the root edge
-            lines.append(f"{r.parent:>4}->{r.child:<5} {r.zone:>8} {'(root edge: no bend)':>31}")
+        if r.kappa != r.kappa:  # NaN: the root edge, or a segment dropped with a lost node
+            what = "(dropped: a node lost)" if r.quality == "tracking_lost" else "(root edge: no bend)"
+            lines.append(f"{r.parent:>4}->{r.child:<5} {r.zone:>8} {what:>31}"
+                         + (f"{'':>22}{r.quality}" if r.quality else ""))
             continue
+        seen = f"{100 * r.z_var_seen:5.0f}%" if r.z_var_seen == r.z_var_seen else f"{'-':>6}"
         lines.append(f"{r.parent:>4}->{r.child:<5} {r.zone:>8} {r.kappa:7.3f} [{r.kappa_ci_low:6.3f}, "
-                     f"{r.kappa_ci_high:6.3f}] {r.uncertainty:6.3f} {r.fit_r2:6.2f}  {r.quality}")
+                     f"{r.kappa_ci_high:6.3f}] {r.uncertainty:6.3f} {r.fit_r2:6.2f} {seen}  {r.quality}")
     n_ok = int((df["quality"] == "ok").sum())
-    lines.append(f"quality: {n_ok} of {int(df['kappa'].notna().sum())} segments ok (reasons: see README, "
-                 "'Quality of each kappa')")
+    n_dropped = int((df["kappa"].isna() & (df["quality"] == "tracking_lost")).sum())
+    dropped = f", {n_dropped} dropped with a lost node" if n_dropped else ""
+    lines.append(f"quality: {n_ok} of {int(df['kappa'].notna().sum()) + n_dropped} segments ok{dropped} "
+                 "(reasons: see README, "
+                 "'Quality of each kappa'; z seen: the share of the excitation's variance in the frames where "
+                 "the segment's nodes were all tracked, what its kappa rests on)")
+    from ..quality import assess_quality, informative_line
+    info = informative_line(assess_quality(result))
+    if info:
+        lines.append(info)
     tot = result.timings_s.get("total", float("nan"))
     waited = " wall, from the command's start" if "imports" in result.timings_s else ""
     lines.append(f"\ntotal {tot:.2f} s{waited} (" + ", ".join(f"{k} {v:.2f}" for k, v in result.timings_s.items()
                                                               if k != "total") + ")")
     return "\n".join(lines)
+
+
+def lower_or_higher(reduction_pct: float) -> str:
+    """A reduction in percent as read: "45.3% lower", or "0.3% higher" for a rise (a negative reduction)."""
+    if reduction_pct != reduction_pct:
+        return "change undefined"
+    return f"{abs(reduction_pct):.1f}% {'lower' if reduction_pct >= 0 else 'higher'}"
 
 
 def _fit_line(result) -> str:

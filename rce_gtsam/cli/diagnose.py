@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     from ..errors import InputError
     from ..pipeline import analyze
 
-    from .progress import Steps, process_seconds, progress_enabled
+    from .progress import Steps, process_seconds, progress_mode
 
     from ..validate import check_analysis_inputs, check_command_options, check_folds
 
@@ -51,11 +51,13 @@ def run(args: argparse.Namespace) -> int:
     if args.folds is not None and args.folds < 2:
         raise InputError("--folds", f"need at least 2 cross-validation blocks, got {args.folds}")
     graph, table, tracks = check_analysis_inputs(args.tracks, args.graph, preset)  # the CSV is read once
+    from .analyze import print_lost_nodes
+    print_lost_nodes("diagnose", tracks, graph)
     if args.folds is not None:  # an explicit value is checked; the default adapts to a short clip
         check_folds(args.folds, int(table["frame"].max()) + 1, preset.compliance.block_length)
     steps = ["load", "smooth", "bending", "fit", "diagnosis"] + (["figures"] if args.figures else []) \
         + (["recording"] if args.rerun else [])
-    with Steps("diagnose", steps, enabled=progress_enabled(args.quiet)) as bar:
+    with Steps("diagnose", steps, enabled=progress_mode(args.quiet)) as bar:
         result = analyze(tracks, graph, preset=preset, n_boot=0, inputs={"graph": str(args.graph),
                                                                          "tracks": str(args.tracks)},
                          progress=lambda s: s != "bootstrap" and bar.start(s))

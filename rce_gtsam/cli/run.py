@@ -37,17 +37,17 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from .figure_worker import FigureWorker
-    from .progress import Steps, process_seconds, progress_enabled
+    from .progress import Steps, process_seconds, progress_mode
 
     worker = None if args.no_figures else FigureWorker()  # forks just before the analysis (FiguresInBackground)
     try:
-        return _run(args, worker, Steps, process_seconds, progress_enabled(args.quiet))
+        return _run(args, worker, Steps, process_seconds, progress_mode(args.quiet))
     finally:
         if worker:
             worker.close()
 
 
-def _run(args, worker, Steps, process_seconds, show: bool) -> int:
+def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
     import shutil
     import tempfile
 
@@ -61,8 +61,8 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
     from ..quality import OFF_STRUCTURE_KEY
     from ..tracks import load_tracks
     from ..validate import check_bends_observed, check_clip_length, check_command_options, check_graph_has_bend
-    from .analyze import (FiguresInBackground, first_video_frame, format_summary, quality_exit_code,
-                          record_wall_time, save_recording)
+    from .analyze import (FiguresInBackground, first_video_frame, format_summary, print_lost_nodes,
+                          quality_exit_code, record_wall_time, save_recording)
     from .live_args import live_from_args
     from .track import print_visibility, send_live_video, track_with_progress, warn_annotations
 
@@ -82,7 +82,7 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
         check_clip_length(n_clip, args.video, preset.compliance.block_length)
         off_structure = warn_annotations(args.video, points, graph)
         send_live_video(live, src)
-        tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=show,
+        tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=show, command="run",
                                       on_frame=live.frame if live else None)
     t_track = time.perf_counter() - t0
     print_visibility(tracked.visible)
@@ -93,6 +93,7 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
         # analyse the tracks exactly as `rce track` writes them, so track + analyze + diagnose == run
         tracks_csv = tracked.write_csv(scratch / "tracks.csv")
         tracks = load_tracks(tracks_csv, graph)
+        print_lost_nodes("run", tracks, graph)
         t_start = process_seconds()
         steps = [*ANALYSIS_STEPS, "diagnosis", "write"] + (["figures"] if worker else []) \
             + (["recording"] if args.rerun else [])
@@ -109,8 +110,10 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
             if live:
                 live.analysis(result)
             bar.start("diagnosis")
+            t_diag = time.perf_counter()
             diagnosis = diagnose_result(result, effects=candidates,
                                         seed=args.seed if args.seed is not None else 0)
+            t_diag = time.perf_counter() - t_diag
             result = dataclasses.replace(result, kappa_choice=kappa_after_verdict(result, diagnosis))
             view = cli_wording_json(diagnosis_for_viz(diagnosis, result))
             if live:
@@ -135,18 +138,52 @@ def _run(args, worker, Steps, process_seconds, show: bool) -> int:
         shutil.rmtree(scratch, ignore_errors=True)
         if figures:
             figures.discard()
-    record_wall_time(result, t_start)
+    record_wall_time(result, t_start, {"diagnosis": t_diag})
     t = result.timings_s  # the time before the analysis was imports and tracking: split it
     t.update({"imports": t["imports"] - t_track, "track": t_track, **{k: t.pop(k) for k in list(t)[1:]}})
     print(format_summary(result))
     print()
     print(cli_wording(diagnosis.report()))
-    print(cli_wording(result.kappa_choice.line()))
+    print("\n" + read_together(result, diagnosis))
     if args.rerun is not None:
         from ..viewer import open_command
         print(f"\nwrote Rerun recording {args.rerun} (open it with: {open_command(args.rerun)})")
     print(f"\nwrote {len(files)} files to {args.out}/")
     return quality_exit_code(result, "run")
+
+
+def read_together(result, diagnosis) -> str:
+    """One paragraph that reads the verdict, the variance budget and the quality flags together, so that
+    none of them reads as contradicting another: which kappa to report, and how far to trust it."""
+    from ..diagnosis.explain import remainder_text
+    from ..quality import assess_quality
+    q = assess_quality(result)
+    n, n_ok = len(q), sum(v.ok for v in q.values())
+    n_inf = sum(v.informative is True for v in q.values())
+    counts = f"{n_ok} of {n} rank-1 segments ok, {n_inf} of {n} informative"
+    status = diagnosis.status
+    if diagnosis.verdict is not None:
+        eff = diagnosis.verdict_effect or diagnosis.verdict
+        n_poor = sum("poor_fit" in v.reasons for v in q.values())
+        poor = (f"; poor_fit marks the {n_poor} it fits worst" if n_poor else
+                "; ok there means the rank-1 checks pass, not that the effect is absent")
+        column = getattr(result.kappa_choice, "column", None) or f"kappa_{eff}"
+        return (f"Read together: the diagnosis names {diagnosis.verdict}, an effect the rank-1 model leaves out, so "
+                f"the rank-1 kappa above is not the one to report ({counts}{poor}); report {column} of "
+                f"compliance_summary.csv, the model with {eff} with its own intervals, written beside the rank-1 "
+                f"kappa by this run (report.json: kappa_to_report). "
+                f"{remainder_text(diagnosis.budget, eff).capitalize()}.")
+    if status == "adequate":
+        advice = "the rank-1 model is adequate: report the kappa above whose quality is ok"
+    elif status == "misses":
+        advice = ("the rank-1 model leaves more than noise and no candidate effect explains it: report the ok "
+                  "kappa with that caveat, and look at the residual figures for what is left")
+    elif status == "inconclusive":
+        advice = ("no candidate effect is named, and whether the rest is noise cannot be decided here: report "
+                  "the ok kappa with that caveat")
+    else:
+        advice = "no effect is named (see the verdict): report the ok kappa"
+    return f"Read together: {advice} ({counts}). {remainder_text(diagnosis.budget).capitalize()}."
 
 
 def _check_graph_matches_points(graph, points, args) -> None:

@@ -35,6 +35,21 @@ def cli_wording_json(data: dict) -> dict:
     return data
 
 
+def rce_invocation() -> list[str]:
+    """How to start ``rce`` again from a shell, for the commands a command prints for the user to run next:
+    ``["rce"]`` when ``rce`` is on PATH; otherwise the running executable by its absolute path (a virtual
+    environment's ``.venv/bin/rce`` used without activating it), or ``python -m rce_gtsam.cli`` with this
+    interpreter's path when the CLI was started that way."""
+    import os
+    import shutil
+    if shutil.which("rce"):
+        return ["rce"]
+    exe = sys.argv[0] if sys.argv and sys.argv[0] else ""
+    if os.path.basename(exe) == "rce" and os.path.isfile(exe):
+        return [os.path.abspath(exe)]
+    return [sys.executable, "-m", "rce_gtsam.cli"]
+
+
 def add_candidates_argument(p: argparse.ArgumentParser, command: str) -> None:
     """``--candidates A,B``: the effects the diagnosis tests (``--effects`` is the deprecated old name here;
     in ``rce analyze`` ``--effects`` adds terms to the fitted model)."""

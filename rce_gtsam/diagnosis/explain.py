@@ -73,6 +73,27 @@ def heldout_null_text(c) -> str:
                f"tracked node (p = {sp:.2g} > {sthr:.2g})"))
 
 
+def remainder_text(budget, effect: str | None = None) -> str:
+    """What the variance budget's status says, in words that cannot be read against a verdict: it is always
+    about what the fitted model *leaves* (the rank-1 model, or with ``effect`` the model the verdict names),
+    never about whether the named effect is there (the held-out test decides that).
+
+    "noise" -> at the noise floor; "misses" -> more than noise; "inconclusive" -> undecided, with its reason."""
+    model = "the rank-1 model" if effect is None else f"the model with {effect}"
+    if budget is None:
+        return f"what {model} leaves: not scored (no noise floor)"
+    if budget.status == "noise":
+        state = "at the noise floor (nothing more to find at this record's resolution)"
+    elif budget.status == "misses":
+        state = "more than noise (a further effect, outside the candidates, is missing)"
+    elif budget.reason == "too_uncertain":
+        state = "not decidable between noise and a further miss (the record is too short to tell)"
+    else:
+        state = ("not decidable between noise and a further miss (the noise floor is only bounded where "
+                 "segments stretch)")
+    return f"what {model} leaves: {state}"
+
+
 def outside_domain_text(diag: Diagnosis) -> str:
     """Why a diagnosis outside its calibrated domain names nothing (:mod:`rce_gtsam.diagnosis.domain`), and what it
     would have named."""
@@ -153,7 +174,8 @@ def explain(diag: Diagnosis) -> str:
         o = diag.candidate(form_of)
         osp = o.extra.get("score_p")
         lines.append(f"Its own tests fall short; it is named as the richer form of the lag that {form_of} finds "
-                     f"({form_of}: held-out RMSE {o.improvement_pct:.1f}% lower, evidence t = {o.evidence:.1f}"
+                     f"({form_of}: held-out RMSE {abs(o.improvement_pct):.1f}% "
+                     f"{'lower' if o.improvement_pct >= 0 else 'higher'}, evidence t = {o.evidence:.1f}"
                      + ("" if osp is None else f", full-data score test p = {osp:.2g}")
                      + f"): {c.effect} predicts what {form_of} leaves in the residuals "
                      f"({form_p_text(c, form_of, thr)}).")
@@ -214,6 +236,10 @@ def explain(diag: Diagnosis) -> str:
     if others:
         lines.append("Also supported (partly mimicking the same misfit, or further effects): " + ", ".join(others)
                      + "; refit with the verdict effect added and diagnose again to separate them.")
+    if diag.budget is not None:
+        lines.append(f"The variance budget is scored after adding {c.effect}: "
+                     f"{remainder_text(diag.budget, c.effect).split(': ', 1)[1]}. That is about the rest, not "
+                     f"about {c.effect}, which the held-out test above names.")
     return " ".join(lines)
 
 
@@ -272,12 +298,15 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
     if diag.budget is not None:
         bd = diag.budget
         pc = lambda v: 100.0 * bd.share(v)  # noqa: E731
-        out.append("[[Variance budget]]  (deg^2 over scored segment-frames; share of total)")
+        named = diag.verdict_effect or diag.verdict
+        out.append("[[Variance budget]]  (deg^2 over scored segment-frames; share of total"
+                   + (f"; scored for the model with {named}, the verdict" if named and bd.effects else "") + ")")
         out.append(f"    total {bd.total:.4g}   rank-1 {bd.rank1:.4g} ({pc(bd.rank1):.0f}%)   "
                    + "".join(f"{k} {v:.3g} ({pc(v):.0f}%)   " for k, v in bd.effects.items())
                    + f"noise floor {bd.noise_floor:.4g} ({pc(bd.noise_floor):.0f}%)   unexplained {bd.unexplained:.3g} "
-                   f"+/- {bd.unexplained_se:.2g} ({pc(bd.unexplained):+.0f}%): {bd.status}"
-                   + (f" ({bd.reason.replace('_', ' ')})" if bd.reason else ""))
+                   f"+/- {bd.unexplained_se:.2g} ({pc(bd.unexplained):+.0f}%)")
+        out.append(f"    status {bd.status}" + (f" ({bd.reason.replace('_', ' ')})" if bd.reason else "") + ": "
+                   + remainder_text(bd, named if named and bd.effects else None))
         nf = diag.noise_floor
         out.append("    noise floor from segment stretch (inextensibility) x across/along ratio "
                    f"{nf.across_over_along:.2f}; "

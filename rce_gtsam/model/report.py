@@ -33,7 +33,7 @@ def render_fit_report(fit: "ModelFit", edge_labels=None, max_rows: int = 40) -> 
             base, idx = key[:-1].split("[")
             name = f"{base}[{labels[int(idx)]}]"
         pct = f" ({100 * pv.stderr / abs(pv.value):.1f}%)" if pv.value and np.isfinite(pv.stderr) else ""
-        rows.append(f"    {name:<28} {pv.value: .5g} +/- {pv.stderr:.2g} {pv.unit}{pct}")
+        rows.append(f"    {name:<28} {pv.value: .5g} +/- {pv.stderr:.2g} {unit_text(key, pv.unit)}{pct}")
     eff_rows = [r for r in rows if not r.strip().startswith("kappa")]
     k_rows = [r for r in rows if r.strip().startswith("kappa")]
     shown = eff_rows[:max_rows] + k_rows[:max_rows]
@@ -44,6 +44,14 @@ def render_fit_report(fit: "ModelFit", edge_labels=None, max_rows: int = 40) -> 
         for k_, v in eff.describe(st).items():
             out.append(f"    {eff.name}.{k_:<20} = {v:.4g}")
     return "\n".join(out)
+
+
+def unit_text(key: str, unit: str) -> str:
+    """A parameter's unit as the report shows it: kappa is "(relative)" (a ratio to the branch's geometric mean,
+    which is 1), another unit-free number "(dimensionless)"; a physical unit as it is (frames, deg, ...)."""
+    if unit in ("1", "", None):
+        return "(relative)" if key.startswith("kappa[") else "(dimensionless)"
+    return unit
 
 
 def _count(k) -> str:

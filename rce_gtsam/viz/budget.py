@@ -17,9 +17,10 @@ RANK1_COLOR = "#4393c3"
 NOISE_COLOR = "#bdbdbd"
 UNEXPLAINED_COLOR = "#d6604d"
 EFFECT_COLORS = ("#1b9e77", "#d95f02", "#7570b3", "#e7298a", "#66a61e")
-#: the budget's status in the words of the verdict line
-STATUS_WORDS = {"noise": "the rest is at the noise floor", "misses": "the model misses more than noise",
-                "inconclusive": "inconclusive"}
+#: the budget's status in the words of the verdict line: always about what the model leaves (the rank-1 model, or
+#: the model with the named effect), never about the effect the verdict names
+STATUS_WORDS = {"noise": "the rest is at the noise floor", "misses": "the rest is more than noise",
+                "inconclusive": "the rest is inconclusive"}
 
 
 def budget_rows(budget, per_segment=None) -> tuple[dict, list[dict]]:
@@ -94,6 +95,8 @@ def fig_variance_budget(budget, per_segment=None, title: str | None = None):
                     Patch(color=UNEXPLAINED_COLOR, label="unexplained (±2 SE)")]
         fig.legend(handles=handles, loc="outside lower center", fontsize=6, ncol=len(handles))
         status = STATUS_WORDS.get(overall.get("status"), overall.get("status"))
+        if status and effects:  # scored after the verdict's effect: say so, lest it read against the verdict
+            status = f"with {' + '.join(effects)}, {status}"
         reason = overall.get("reason")
         ax.set_title(title or ("Variance budget" + (f": {status}" if status else "")
                                + (f" ({str(reason).replace('_', ' ')})" if reason else "")))

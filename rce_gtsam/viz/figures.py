@@ -317,31 +317,38 @@ def _get(obj, name, default=None):
 
 
 def fig_heldout(diagnosis):
-    """Held-out RMSE of the baseline and of the model extended by each candidate effect (best first),
-    with the relative change; the verdict is highlighted."""
+    """Held-out RMSE of the baseline and of the model extended by each candidate effect (best first), as
+    horizontal bars (one row per model, so the names never run into each other however many candidates there
+    are), with the relative change; the verdict is highlighted."""
     base = _get(diagnosis, "baseline", {}) or {}
     b = _get(base, "heldout_rmse")
     cands = list(_get(diagnosis, "candidates", []) or [])
     verdict = _get(diagnosis, "verdict")
-    # two-line labels ("+\nsecond mode") so long effect names never run into each other
-    names = ["rank-1\nbaseline"] + [f"+\n{str(_get(c, 'effect')).replace('_', ' ')}" for c in cands]
+    import matplotlib.patheffects as pe
+    names = ["rank-1 baseline"] + [f"+ {str(_get(c, 'effect')).replace('_', ' ')}" for c in cands]
     vals = np.array([b] + [_get(c, "heldout_rmse") for c in cands], dtype=float)
     colors = ["0.55"] + ["#d95f02" if _get(c, "effect") == verdict else "#7fa7c9" for c in cands]
     with _style() as plt:
-        fig, ax = plt.subplots(figsize=(FIG_WIDTH_IN * 0.62, 2.6), constrained_layout=True)
-        x = np.arange(len(vals))
-        ax.bar(x, np.nan_to_num(vals), color=colors, width=0.7)
-        for xi, v in zip(x[1:], vals[1:]):
-            if np.isfinite(v) and b:
-                ax.text(xi, v, f"{100 * (v / b - 1):+.0f} %", ha="center", va="bottom", fontsize=6.5)
-        if np.isfinite(b):
-            ax.axhline(b, color="0.3", lw=0.7, ls="--")
-        ax.set_xticks(x, names, fontsize=7)
-        ax.set_ylabel("held-out RMSE (deg)")
-        ax.grid(axis="x", visible=False)
+        fig, ax = plt.subplots(figsize=(FIG_WIDTH_IN * 0.62, 0.9 + 0.27 * len(vals)), constrained_layout=True)
+        y = np.arange(len(vals))
+        ax.barh(y, np.nan_to_num(vals), color=colors, height=0.7)
         lo = np.nanmin(vals) if np.isfinite(vals).any() else 0
-        ax.set_ylim(max(0.0, lo * 0.8), np.nanmax(vals) * 1.08 if np.isfinite(vals).any() else 1)
-        ax.set_title(f"Held-out error per candidate effect — verdict: {verdict or 'none'}")
+        hi = np.nanmax(vals) if np.isfinite(vals).any() else 1
+        for yi, v in zip(y[1:], vals[1:]):
+            if np.isfinite(v) and b:
+                # right of the bar, and never on the dashed baseline: a column of labels right of both
+                ax.text(max(v, b), yi, f"  {100 * (v / b - 1):+.0f} %", ha="left", va="center", fontsize=6.5,
+                        zorder=4, path_effects=[pe.withStroke(linewidth=2.2, foreground="white")])
+        if np.isfinite(b):
+            ax.axvline(b, color="0.3", lw=0.7, ls="--")
+        ax.set_yticks(y, names, fontsize=7)
+        ax.invert_yaxis()  # the baseline on top, then the candidates best first
+        ax.set_xlabel("held-out RMSE (deg)")
+        ax.grid(axis="y", visible=False)
+        ax.set_xlim(max(0.0, lo * 0.8), hi * 1.15)
+        # over the whole figure (the names on the left take width from the axes)
+        fig.suptitle(f"Held-out error per candidate effect — verdict: {verdict or 'none'}",
+                     fontsize=ax.title.get_fontsize(), fontweight=ax.title.get_fontweight())
     return fig
 
 

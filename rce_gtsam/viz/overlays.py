@@ -3,7 +3,10 @@
 Each segment of the first-frame skeleton (smoothed positions at frame 0, pixels) is drawn as a thick
 line coloured by its value: kappa (blue = stiff, red = compliant; log colour scale, since kappa is a
 ratio with geometric mean 1) or U_e = CI width / kappa (green = certain, red = uncertain). The root
-edge has no bend, hence no value, and is drawn grey. The view is cropped to the skeleton plus a margin.
+edge has no bend, hence no value, and is drawn grey. A segment whose kappa is not ``ok``
+(:mod:`rce_gtsam.quality`) is hatched with a black-and-white dashed line down its middle and labelled with its first
+flag (``poor_fit``, ``uninformative``, ...): its colour is a value not to be trusted. The view is cropped to
+the skeleton plus a margin.
 
 Files: ``kappa_overlay.png`` and ``uncertainty_overlay.png`` (PNG, 150 dpi).
 """
@@ -29,8 +32,9 @@ def first_frame_skeleton(result) -> tuple[np.ndarray, list[tuple[int, int]], np.
 
 
 def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.ndarray | None = None,
-                log: bool = False, title: str = ""):
-    """Draw the first-frame skeleton with each edge coloured by ``values[edge]`` (NaN/missing = grey)."""
+                log: bool = False, title: str = "", flags: dict | None = None):
+    """Draw the first-frame skeleton with each edge coloured by ``values[edge]`` (NaN/missing = grey);
+    ``flags``: {edge: quality string} of the segments whose kappa is not ``ok``, hatched and labelled."""
     from matplotlib.collections import LineCollection
     from matplotlib.colors import LogNorm, Normalize
     xy, edges, ids = first_frame_skeleton(result)
@@ -76,6 +80,7 @@ def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.nda
         lc = LineCollection(segs[ok], cmap=cmap, norm=norm, linewidths=6, capstyle="round", zorder=3)
         lc.set_array(v[ok])
         ax.add_collection(lc)
+        _mark_flagged(ax, segs, edges, flags or {})
         ax.scatter(xy[:, 0], xy[:, 1], s=9, c="white", edgecolors="k", linewidths=0.5, zorder=5)
         r = row[result.graph.root]
         ax.scatter([xy[r, 0]], [xy[r, 1]], s=40, facecolors="none", edgecolors="#1a9850", linewidths=1.5, zorder=6)
@@ -99,6 +104,35 @@ def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.nda
     return fig
 
 
+def _mark_flagged(ax, segs: np.ndarray, edges, flags: dict) -> None:
+    """A dashed line down the middle of each flagged segment, its first flag beside it (on the side
+    opposite the node labels), and a legend entry saying what the dashes mean."""
+    import matplotlib.patheffects as pe
+    from matplotlib.collections import LineCollection
+    from matplotlib.lines import Line2D
+    idx = [i for i, e in enumerate(edges) if flags.get(e, "ok") != "ok"]
+    if not idx:
+        return
+    # black dashes with a white rim read on every colour of the scale, pale or dark
+    dashes = LineCollection(segs[idx], colors="0.05", linewidths=1.4, linestyles=(0, (2.0, 1.6)), zorder=4,
+                            path_effects=[pe.withStroke(linewidth=2.6, foreground="white")])
+    dashes.set_gid("flagged")
+    ax.add_collection(dashes)
+    for i in idx:
+        (xa, ya), (xb, yb) = segs[i]
+        d = np.array([xb - xa, yb - ya])
+        n = np.array([d[1], -d[0]]) / (np.linalg.norm(d) or 1.0)  # the other side from _label_nodes' offset
+        ax.annotate(flags[edges[i]].split("+")[0], ((xa + xb) / 2, (ya + yb) / 2),
+                    xytext=(14 * n[0], -14 * n[1]), textcoords="offset points", ha="center", va="center",
+                    fontsize=5, color="0.35", style="italic", zorder=7,
+                    path_effects=[pe.withStroke(linewidth=1.8, foreground="white")])
+    ax.legend(handles=[Line2D([], [], color="0.4", lw=5, solid_capstyle="butt"),
+                       Line2D([], [], color="0.05", lw=1.4, ls=(0, (2.0, 1.6)),
+                              path_effects=[pe.withStroke(linewidth=2.6, foreground="white")])][1:],
+              labels=[f"flagged: κ not ok ({len(idx)} segments; quality column)"], loc="lower left", fontsize=6,
+              frameon=True, framealpha=0.85)
+
+
 def _label_nodes(ax, xy: np.ndarray, ids, edges, row) -> None:
     """Each node's id beside it (the ids the tables and the diagnosis name), 12 pt off the branch across
     the node's own segments, in dark text with a white halo that reads on any photo."""
@@ -120,9 +154,10 @@ def _label_nodes(ax, xy: np.ndarray, ids, edges, row) -> None:
                     path_effects=[pe.withStroke(linewidth=2, foreground="white")])
 
 
-#: Overlay files, and the one that needs kappa's confidence intervals.
+#: Overlay files, and those that need kappa's confidence intervals (both: the flags they mark include the
+#: interval's, wide_ci and uninformative).
 OVERLAY_FILES = ("kappa_overlay.png", "uncertainty_overlay.png")
-CI_OVERLAYS = ("uncertainty_overlay.png",)
+CI_OVERLAYS = ("kappa_overlay.png", "uncertainty_overlay.png")
 
 
 def write_overlays(result, out_dir: str | Path, first_frame: np.ndarray | None = None,
@@ -132,16 +167,20 @@ def write_overlays(result, out_dir: str | Path, first_frame: np.ndarray | None =
     ``first_frame``: (H, W, 3) uint8 RGB first video frame, or None for a neutral background.
     ``names``: only these files (default: both). Usable as an ``extra_writer`` through
     ``lambda r, d: write_overlays(r, d, frame)``."""
+    from ..quality import assess_quality
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    flags = {e: q.quality for e, q in assess_quality(result).items() if not q.ok}
     kappa = result.kappa
     U = result.uncertainty
     unc = {} if U is None else {e: float(u) for e, u in zip(result.response.edges, U)}
     where = "first video frame" if first_frame is not None else "first-frame skeleton"
     makers = {
         "kappa_overlay.png": lambda: fig_overlay(result, kappa, "relative compliance κ (log scale)", KAPPA_CMAP,
-                                                 first_frame, log=True, title=f"κ per segment on the {where}"),
+                                                 first_frame, log=True, title=f"κ per segment on the {where}",
+                                                 flags=flags),
         "uncertainty_overlay.png": lambda: fig_overlay(result, unc, "U_e = CI width / κ", UNCERTAINTY_CMAP,
-                                                       first_frame, title=f"Uncertainty U_e on the {where}"),
+                                                       first_frame, title=f"Uncertainty U_e on the {where}",
+                                                       flags=flags),
     }
     return {name: _save(make(), out / name) for name, make in makers.items() if names is None or name in names}
