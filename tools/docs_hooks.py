@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import html
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -152,6 +153,20 @@ def on_page_markdown(markdown, page, config, files):
         if marker in markdown:
             markdown = markdown.replace(marker, f"```text\n{text}\n```")
     return markdown
+
+
+_EXTERNAL_SCRIPTS = (
+    # nbconvert's templates: an empty MathJax <script src=""> (the notebooks hold no maths) and a module that
+    # would import mermaid from a CDN when a notebook holds a diagram (ours hold none); the site fetches nothing
+    re.compile(r'<script src="">\s*</script>'),
+    re.compile(r'<script type="module">(?:(?!</script>).)*?cdnjs\.cloudflare\.com(?:(?!</script>).)*</script>', re.S),
+)
+
+
+def on_post_page(output, page, config):
+    for pattern in _EXTERNAL_SCRIPTS:
+        output = pattern.sub("", output)
+    return output
 
 
 def on_post_build(config):
