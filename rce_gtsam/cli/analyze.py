@@ -223,8 +223,8 @@ def format_summary(result) -> str:
         lines.append(f"{r.parent:>4}->{r.child:<5} {r.zone:>8} {r.kappa:7.3f} [{r.kappa_ci_low:6.3f}, "
                      f"{r.kappa_ci_high:6.3f}] {r.uncertainty:6.3f} {r.fit_r2:6.2f}  {r.quality}")
     n_ok = int((df["quality"] == "ok").sum())
-    lines.append(f"quality: {n_ok} of {int(df['kappa'].notna().sum())} segments ok (reasons: see README, "
-                 "'Quality of each kappa')")
+    lines.append(f"quality: {n_ok} of {int(df['kappa'].notna().sum())} segments ok (flags: docs/results.md, "
+                 "'The quality flags')")
     tot = result.timings_s.get("total", float("nan"))
     waited = " wall, from the command's start" if "imports" in result.timings_s else ""
     lines.append(f"\ntotal {tot:.2f} s{waited} (" + ", ".join(f"{k} {v:.2f}" for k, v in result.timings_s.items()
