@@ -158,3 +158,18 @@ def test_readme_is_a_short_introduction():
     assert (REPO / "docs" / "img" / "kappa_overlay.png").is_file()
     found = [h for h in HISTORY if h in README]
     assert not found, f"development history in README.md: {found}"
+
+
+def test_the_readme_response_model_with_weights_is_the_command_line_fit():
+    """The README's ``ResponseModel().fit(resp.Y, weights=resp.weights, ...)`` gives rce analyze's kappa exactly
+    (without ``weights=`` it does not: the default preset's fit is variance-weighted)."""
+    import numpy as np
+
+    import rce_gtsam
+    from rce_gtsam.model import ResponseModel
+
+    assert "weights=resp.weights" in "\n".join(fenced("python"))
+    r = rce_gtsam.analyze(REPO / "data" / "sample" / "tracks.csv", REPO / "data" / "sample" / "graph.json", n_boot=0)
+    resp = r.response
+    fit = ResponseModel().fit(resp.Y, weights=resp.weights, root_distance=resp.root_distance)
+    assert np.array_equal(fit.kappa, r.fit.kappa * r.fit.direction)
