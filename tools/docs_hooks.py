@@ -7,6 +7,8 @@ Markers a page may hold (each on a line of its own):
   :func:`rce_gtsam.cli.app.build_parser`;
 * ``<!-- validation-records -->`` — one section per record in ``docs/validation/*.json`` (schema:
   ``benchmarks/record.py``): title, table, the command that re-measures it, its date;
+* ``<!-- validation-record: NAME -->`` — the table of the one record ``docs/validation/NAME.json``, with its
+  date and command (no heading);
 * ``<!-- output: NAME -->`` — what step NAME of :data:`STEPS` printed (an ``rce`` command run on the data the
   repository ships, in a scratch folder).
 
@@ -107,21 +109,30 @@ def _cell(v) -> str:
     return html.escape(str(v)).replace("|", "&#124;")
 
 
-def _validation_records(config) -> str:
+def _records(config) -> list[tuple[str, dict]]:
     sys.path.insert(0, str(Path(config.config_file_path).parent / "benchmarks"))
     try:
         from record import load_records
     finally:
         sys.path.pop(0)
+    return load_records(Path(config.docs_dir) / "validation")
+
+
+def _validation_records(config, only: str | None = None) -> str:
     parts = []
-    for stem, rec in load_records(Path(config.docs_dir) / "validation"):
-        parts += [f"## {rec['title']}", "", rec["description"], "",
-                  "| " + " | ".join(_cell(c) for c in rec["columns"]) + " |",
+    for stem, rec in _records(config):
+        if only is not None and stem != only:
+            continue
+        if only is None:
+            parts += [f"## {rec['title']}", "", rec["description"], ""]
+        parts += ["| " + " | ".join(_cell(c) for c in rec["columns"]) + " |",
                   "|" + "---|" * len(rec["columns"])]
         parts += ["| " + " | ".join(_cell(v) for v in row) + " |" for row in rec["rows"]]
         parts += [""] + [f"* {_cell(n)}" for n in rec.get("notes", [])]
         parts += ["", f"Measured on {rec['date']} (`docs/validation/{stem}.json`); re-measure with:", "",
                   "```bash", rec["command"], "```", ""]
+    if only is not None and not parts:
+        raise RuntimeError(f"no validation record docs/validation/{only}.json")
     return "\n".join(parts) if parts else "No records yet."
 
 
@@ -148,6 +159,8 @@ def on_page_markdown(markdown, page, config, files):
         markdown = markdown.replace("<!-- cli-reference -->", _cli_reference())
     if "<!-- validation-records -->" in markdown:
         markdown = markdown.replace("<!-- validation-records -->", _validation_records(config))
+    for name in re.findall(r"<!-- validation-record: ([\w-]+) -->", markdown):
+        markdown = markdown.replace(f"<!-- validation-record: {name} -->", _validation_records(config, only=name))
     for name, text in _state.get("outputs", {}).items():
         marker = f"<!-- output: {name} -->"
         if marker in markdown:
@@ -163,10 +176,15 @@ _EXTERNAL_SCRIPTS = (
 )
 
 
+#: Sphinx cross-reference roles in the docstrings (``:func:`name```) as mkdocstrings renders them: the role
+#: before the code span, and a leading ``~`` inside it
+_ROLE = re.compile(r":(?:func|mod|class|meth|data|attr|exc|obj):(<code>)~?")
+
+
 def on_post_page(output, page, config):
     for pattern in _EXTERNAL_SCRIPTS:
         output = pattern.sub("", output)
-    return output
+    return _ROLE.sub(r"\1", output)
 
 
 def on_post_build(config):
