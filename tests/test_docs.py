@@ -199,3 +199,23 @@ def test_screenshot_in_chromium(site, page, tmp_path):
     assert img.shape[:2] == (1600, 1280)
     # a rendered page, not a blank one: Material's header colour and the page's text both present
     assert np.unique((img[..., :3] * 255).astype(np.uint8).reshape(-1, 3), axis=0).shape[0] > 50
+
+
+def test_the_settings_the_pages_quote_are_the_code_s():
+    """The pages quote a few settings (not measurements: those come from docs/validation/); they must be the code's."""
+    from rce_gtsam import get_preset
+    from rce_gtsam.diagnosis.settings import N_FOLDS, RESOLUTION
+    from rce_gtsam.sim.simulate import NoiseConfig
+
+    text = "\n".join(p.read_text() for p in PAGES)
+    default, paper = get_preset("default"), get_preset("paper")
+    assert N_FOLDS == 16 and "cut into 16 blocks" in text and "16 held-out folds" in text
+    assert RESOLUTION == 1e-3 and "at least 0.1 % of the bending variance" in text
+    assert default.smoother.window_frames == 1200 and "longer than 1200 frames" in text
+    assert paper.compliance.block_length == 25 and "moving blocks of 25 frames" in text
+    assert paper.compliance.n_boot == 250 and "25 frames, 250 resamples" in text
+    assert paper.compliance.prior_strength == 12 and "(λ = 12)" in text
+    assert paper.smoother.presmooth_window == 5 and "5-frame moving average" in text
+    assert default.smoother.presmooth_window == 1 and default.smoother.edge_weight == 0
+    assert default.bending.rest == "median" and paper.bending.rest == "first"
+    assert NoiseConfig().sigma_across_px == 0.25 and "0.25 px" in text
