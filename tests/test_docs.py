@@ -175,7 +175,7 @@ def _chromium() -> str | None:
 
 @pytest.mark.slow
 @pytest.mark.parametrize("page", ["index", "results"])
-def test_screenshot_in_chromium(site, page, tmp_path):
+def test_screenshot_in_chromium(site, page, tmp_path, capsys):
     chromium = _chromium()
     if not chromium:
         pytest.skip("needs Debian's chromium (`make test` installs it as root)")
@@ -192,7 +192,8 @@ def test_screenshot_in_chromium(site, page, tmp_path):
     finally:
         shutil.rmtree(profile, ignore_errors=True)
     assert p.returncode == 0 and shot.is_file(), p.stderr[-2000:]
-    print(f"screenshot of {page}.html: {shot}")
+    with capsys.disabled():  # the path is printed even when pytest captures output: look at the picture
+        print(f"\nscreenshot of {page}.html: {shot}")
     import numpy as np
     from matplotlib.image import imread
     img = imread(shot)
