@@ -5,12 +5,12 @@ BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 DEMO   := out/demo
 
-.PHONY: demo test setup system-deps bench regression clean
+.PHONY: demo test docs setup system-deps bench regression clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test,realsense]'
+	$(BIN)/python -m pip install --quiet -e '.[test,realsense,docs]'
 	touch $(STAMP)
 
 setup: system-deps $(STAMP)
@@ -35,6 +35,11 @@ demo: system-deps $(STAMP)
 	@echo "ground truth:    $(CURDIR)/$(DEMO)/simulation/truth.json"
 	@echo "Rerun recording: $(CURDIR)/$(DEMO)/run/recording.rrd  (open with: $(BIN)/rerun $(DEMO)/run/recording.rrd)"
 
+# The documentation site, warnings as errors, into site/ (open site/index.html); it runs the tutorial
+# notebooks and the commands whose output and figures the pages show (tests/test_docs.py builds it too).
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/python -m mkdocs build --strict
+
 regression: $(STAMP)
 	$(BIN)/python regression/run_regression.py ../shared/data/plant_2
 
@@ -42,4 +47,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_analyze.py
 
 clean:
-	rm -rf out .pytest_cache
+	rm -rf out site .pytest_cache

@@ -7,7 +7,10 @@ each row is RMS(Y - truth) with the truth on the pipeline's rest reference (per-
 removed). Printed per seed: true and estimated overall RMS (deg), their ratio, the share of rows whose own
 estimate is within 25 %, and the across/along ratio q found vs set.
 
-Usage: python benchmarks/bench_noise_floor.py [--seeds 20] [--first-seed 0] [--frames 900]
+Usage: python benchmarks/bench_noise_floor.py [--seeds 20] [--first-seed 0] [--frames 900] [--record]
+
+``--record`` saves the per-branch table as the validation record ``docs/validation/noise_floor.json``
+(``benchmarks/record.py``), which the documentation's Validation page shows.
 """
 
 from __future__ import annotations
@@ -59,6 +62,7 @@ def main() -> int:
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--frames", type=int, default=900)
+    ap.add_argument("--record", action="store_true", help="save the table as docs/validation/noise_floor.json")
     a = ap.parse_args()
     t0 = time.perf_counter()
     rows = []
@@ -82,6 +86,31 @@ def main() -> int:
     print(f"variance budget on these effect-free branches: floor / true noise variance median {np.median(fv):.3f}, "
           f"RMS relative error {np.sqrt(np.mean((fv - 1) ** 2)):.3f}; status noise {status.count('noise')}, "
           f"misses {status.count('misses')} (false), inconclusive {status.count('inconclusive')}")
+    if a.record:
+        from record import save_record  # benchmarks/record.py (this script's folder is on sys.path)
+        last = a.first_seed + a.seeds - 1
+        path = save_record(
+            "noise_floor", title="Noise floor against the true angle noise",
+            command=f"python benchmarks/bench_noise_floor.py --seeds {a.seeds} --first-seed {a.first_seed} "
+                    f"--frames {a.frames} --record",
+            description=(f"Effect-free simulated branches (seeds {a.first_seed}-{last}, {a.frames} frames) with white "
+                         "noise, drift and along/across noise ratio varied per seed (multiples of the simulator's "
+                         "default), analysed with the default preset. The diagnosis' noise floor is estimated without "
+                         "the model and compared with the true angle noise (RMS of the smoothed angles minus the "
+                         "truth). A ratio near 1 is right; the budget status of an effect-free branch should not be "
+                         "misses."),
+            columns=["seed", "white noise (x default)", "drift (x default)", "along/across", "true noise (deg)",
+                     "estimated (deg)", "estimated / true", "segments within 25 % (%)", "budget status"],
+            rows=[[s, round(r["sigma_mult"], 1), round(r["drift_mult"], 1), round(r["along_ratio"], 1),
+                   round(r["true_rms"], 3), round(r["est_rms"], 3), round(r["est_rms"] / r["true_rms"], 2),
+                   round(100 * r["rows_within_25"]), {"noise": "adequate"}.get(r["budget_status"], r["budget_status"])]
+                  for s, r in zip(range(a.first_seed, last + 1), rows)],
+            notes=[f"estimated / true over {len(rows)} branches: median {np.median(ratio):.2f}, range "
+                   f"{ratio.min():.2f}-{ratio.max():.2f}; within 25 %: {int(np.sum(np.abs(ratio - 1) <= 0.25))} of "
+                   f"{len(rows)}",
+                   f"budget status: adequate {status.count('noise')}, misses {status.count('misses')}, "
+                   f"inconclusive {status.count('inconclusive')}"])
+        print("wrote", path)
     return 0
 
 

@@ -1,6 +1,6 @@
 """How many kappa are flagged not-ok, and why: effect-free simulations (noisy and noise-free) and the two plants.
 
-Usage: python benchmarks/bench_quality.py [--seeds 5] [--frames 900] [--plants /work/shared/data]
+Usage: python benchmarks/bench_quality.py [--seeds 5] [--frames 900] [--plants /work/shared/data] [--record]
 
 For each seed, `rce simulate` (no effect; default tracker-like noise, then --clean) is analysed with the
 default preset; prints the share of segments whose quality is not `ok` and the count of each reason, and
@@ -24,7 +24,7 @@ from rce_gtsam.quality import assess_quality
 from rce_gtsam.sim.simulate import NoiseConfig, SimulationConfig, simulate
 
 
-def sim_share(seeds: int, frames: int, clean: bool) -> None:
+def sim_share(seeds: int, frames: int, clean: bool) -> list:
     reasons, n_seg, n_bad, deserved = Counter(), 0, 0, []
     for seed in range(seeds):
         sim = simulate(SimulationConfig(seed=seed, n_frames=frames, noise=NoiseConfig(enabled=not clean)))
@@ -50,6 +50,9 @@ def sim_share(seeds: int, frames: int, clean: bool) -> None:
     if deserved:
         print(f"  no_signal segments: true signal / noise variance median {np.median(deserved):.2f} "
               f"(max {np.max(deserved):.2f})")
+    med, top = (round(float(np.median(deserved)), 2), round(float(np.max(deserved)), 2)) if deserved else ("-", "-")
+    return [label, n_seg, n_bad, round(100 * n_bad / n_seg, 1), reasons.get("no_signal", 0),
+            ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())) or "-", med, top]
 
 
 def plants(root: Path) -> None:
@@ -68,9 +71,23 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=5)
     ap.add_argument("--frames", type=int, default=900)
     ap.add_argument("--plants", type=Path, default=Path("/work/shared/data"))
+    ap.add_argument("--record", action="store_true", help="save the simulated rows as docs/validation/quality.json")
     args = ap.parse_args()
-    for clean in (False, True):
-        sim_share(args.seeds, args.frames, clean)
+    rows = [sim_share(args.seeds, args.frames, clean) for clean in (False, True)]
+    if args.record:
+        from record import save_record  # benchmarks/record.py (this script's folder is on sys.path)
+        path = save_record(
+            "quality", title="Quality flags on effect-free simulated branches",
+            command=f"python benchmarks/bench_quality.py --seeds {args.seeds} --frames {args.frames} --record",
+            description=(f"Effect-free branches from rce simulate (20 nodes, {args.frames} frames, seeds 0-"
+                         f"{args.seeds - 1}), analysed with the default preset. A segment is not ok when any quality "
+                         "flag is raised. For the no_signal segments the last two columns give the ground truth's "
+                         "bending variance over the variance of the smoothed angle's error: below 1 the flag was "
+                         "deserved (the segment's signal is weaker than its noise)."),
+            columns=["tracks", "segments", "not ok", "not ok (%)", "no_signal", "reasons (count)",
+                     "true signal/noise of no_signal, median", "max"],
+            rows=rows)
+        print("wrote", path)
     if args.plants.is_dir():
         plants(args.plants)
 

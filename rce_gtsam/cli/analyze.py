@@ -246,8 +246,8 @@ def format_summary(result) -> str:
     n_dropped = int((df["kappa"].isna() & (df["quality"] == "tracking_lost")).sum())
     dropped = f", {n_dropped} dropped with a lost node" if n_dropped else ""
     lines.append(f"quality: {n_ok} of {int(df['kappa'].notna().sum()) + n_dropped} segments ok{dropped} "
-                 "(reasons: see README, "
-                 "'Quality of each kappa'; z seen: the share of the excitation's variance in the frames where "
+                 "(flags: docs/results.md, "
+                 "'The quality flags'; z seen: the share of the excitation's variance in the frames where "
                  "the segment's nodes were all tracked, what its kappa rests on)")
     from ..quality import assess_quality, informative_line
     info = informative_line(assess_quality(result))
