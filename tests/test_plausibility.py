@@ -102,3 +102,23 @@ def test_run_reports_the_extended_kappa_beside_the_rank1_kappa(tmp_path):
     k_true = np.array([truth[f"{int(p)}->{int(c)}"] for p, c in zip(df.loc[ok, "parent"], df.loc[ok, "child"])])
     err = lambda k: float(np.sqrt(np.mean(np.log(np.abs(k) / k_true) ** 2)))  # noqa: E731
     assert err(df.loc[ok, "kappa_delay"].to_numpy()) <= err(df.loc[ok, "kappa"].to_numpy()) + 0.02
+
+
+def test_the_tracker_is_named_where_the_misfit_sits_next_to_its_gaps():
+    from types import SimpleNamespace
+
+    from rce_gtsam.diagnosis.tracker_signature import near_gap_share, near_gaps, tracker_text
+    rng = np.random.default_rng(0)
+    E, T = 6, 300
+    Y = rng.standard_normal((E, T))
+    Y[4, 100:110] = np.nan
+    Y[5, 200:220] = np.nan
+    near = near_gaps(Y, 5)
+    assert near[4, 95:100].all() and near[4, 110:115].all() and not near[4, 94] and not near[4, 105]
+    R = 0.5 * rng.standard_normal((E, T))
+    white = SimpleNamespace(residuals=np.where(np.isfinite(Y), R, np.nan), Y=Y)
+    assert tracker_text(near_gap_share(white), [f"s{i}" for i in range(E)]) == ""
+    R[near] *= 6.0  # the tracker's errors around the frames it lost the nodes in
+    burst = SimpleNamespace(residuals=np.where(np.isfinite(Y), R, np.nan), Y=Y)
+    text = tracker_text(near_gap_share(burst), [f"s{i}" for i in range(E)])
+    assert "The tracker" in text and "s5" in text

@@ -96,6 +96,7 @@ from .heldout_null import heldout_gain_null_test
 from .maxt import sign_flip_max_t
 from .noise_floor import NoiseFloor
 from .plausibility import PlausibilityContext, implausibility
+from .tracker_signature import away_from_gaps, near_gap_share, tracker_text
 from .score_test import (effect_score_test, half_fits, is_significant, score_is_significant,
                          shared_time_course_test)
 from .settings import BLOCK_LENGTH, FULL_ITER, N_FOLDS, CV_ITER, RESOLUTION
@@ -431,12 +432,19 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
             pattern = drift_pattern_test(base, basis, seed=seed)
             if shared_p is None and node_disjoint:
                 shared_p = shared_time_course_test(base, halves, seed=seed).p
+            shared_for_drift = shared_p
+            if shared_p is not None and shared_p <= p_crit_score:
+                # a course common to the row sets must show away from the frames where nodes were lost, too
+                # (the tracker's errors sit next to its gaps, at the same gusty frames in every set)
+                away = shared_time_course_test(away_from_gaps(base), halves, seed=seed).p
+                extra["shared_course_p_away_from_gaps"] = away
+                shared_for_drift = max(shared_p, away)
             extra.update({"heldout_null_p": null.p, "heldout_null_threshold_p": alpha,
                           "shared_course_p": shared_p, "shared_course_threshold_p": p_crit_score,
                           "drift_pattern_p": None if pattern is None else pattern.p,
                           "drift_pattern_threshold_p": alpha,
                           "significant_by_fold_t": significant})
-            significant = bool(null.p <= alpha or (shared_p is not None and shared_p <= p_crit_score)
+            significant = bool(null.p <= alpha or (shared_for_drift is not None and shared_for_drift <= p_crit_score)
                                or (pattern is not None and pattern.p <= alpha))
         extra["significant"] = significant
         if starts:
@@ -474,6 +482,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     settings = {"n_folds": len(blocks), "fold_blocks": blocks, "buffer_frames": gap, "block_length": block_length,
                 "seed": seed, "alpha": alpha, "evidence_threshold_t": t_crit, "resolution": resolution,
                 "support_threshold_t": t_support, "plausibility": _jsonable(plausibility.__dict__),
+                "residual_power_near_gaps": near_gap_share(base),
                 "evidence_threshold_t_split": t_crit_split, "score_threshold_p": p_crit_score,
                 "heldout_total_variance": total_var, "maxt_critical_t": mt.critical_t, "maxt_flips": mt.n_flips,
                 "prior_strength": prior_strength,
@@ -503,7 +512,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                          if noise_floor is not None else None,
                          shared=shared, root_distance=s),
                      noise_floor=noise_floor, outside_domain=tuple(outside_domain))
-    object.__setattr__(diag, "explanation", explain(diag))
+    object.__setattr__(diag, "explanation", explain(diag) + tracker_text(settings["residual_power_near_gaps"],
+                                                                         labels))
     return diag
 
 
