@@ -10,7 +10,9 @@ Markers a page may hold (each on a line of its own):
 * ``<!-- validation-record: NAME -->`` — the table of the one record ``docs/validation/NAME.json``, with its
   date and command (no heading);
 * ``<!-- output: NAME -->`` — what step NAME of :data:`STEPS` printed (an ``rce`` command run on the data the
-  repository ships, in a scratch folder).
+  repository ships, in a scratch folder);
+* ``<!-- kappa-to-report -->`` — the κ columns ``rce run`` writes after a verdict and its "Read together:" line,
+  for the analysis and diagnosis of :data:`STEPS` (:func:`kappa_to_report_example`).
 
 Files the steps write under ``figures/`` are added to the site as ``generated/<step>/<file>``, and the effect
 signatures (:func:`signature_figures`) as ``generated/signatures/<effect>.png``.
@@ -94,6 +96,33 @@ def signature_figures(out_dir: Path, n_nodes: int = 14, n_frames: int = 600, see
     return written
 
 
+def kappa_to_report_example(data: Path, candidates: str = "delay,offset,second_mode", n_rows: int = 6) -> str:
+    """What ``rce run`` adds after a verdict, on ``data/sample_delay`` analysed and diagnosed as :data:`STEPS` do
+    (the same candidates and seed): a table of the first ``n_rows`` segments with the rank-1 ``kappa`` beside
+    ``kappa_<effect>`` and the ``report`` column of compliance_summary.csv (:func:`rce_gtsam.kappa_report.add_to_summary`),
+    and the printed "Read together:" line (:func:`rce_gtsam.cli.run.read_together`). Markdown."""
+    import dataclasses
+    import textwrap
+
+    from rce_gtsam import analyze
+    from rce_gtsam.cli.run import read_together
+    from rce_gtsam.diagnosis.io import diagnose_result
+    from rce_gtsam.kappa_report import kappa_after_verdict
+
+    result = analyze(data / "sample_delay" / "tracks.csv", data / "sample_delay" / "graph.json")
+    diagnosis = diagnose_result(result, effects=candidates, seed=0)
+    result = dataclasses.replace(result, kappa_choice=kappa_after_verdict(result, diagnosis))
+    col = result.kappa_choice.column
+    cols = ["parent", "child", "kappa", "kappa_ci_low", "kappa_ci_high"]
+    cols += [c for c in (col, f"{col}_ci_low", f"{col}_ci_high") if c != "kappa"] + ["quality", "report"]
+    df = result.summary().dropna(subset=["kappa"]).head(n_rows)[cols]
+    fmt = lambda v: f"{v:.3f}" if isinstance(v, float) else str(v)  # noqa: E731
+    rows = ["| " + " | ".join(f"`{c}`" for c in cols) + " |", "|" + "---|" * len(cols)]
+    rows += ["| " + " | ".join(_cell(fmt(v)) for v in r) + " |" for r in df.itertuples(index=False)]
+    line = textwrap.fill(read_together(result, diagnosis), 116)
+    return "\n".join([*rows, "", f"(the first {len(df)} segments)", "", "```text", line, "```"])
+
+
 def _cli_reference() -> str:
     from rce_gtsam.cli.app import build_parser
 
@@ -145,6 +174,7 @@ def on_config(config):
 def on_files(files, config):
     work = _state["work"]
     _state["outputs"] = _run_steps(config, work)
+    _state["kappa_to_report"] = kappa_to_report_example(work / "data")
     signature_figures(work / "signatures")
     generated = {f"generated/{name}/{p.name}": p for name in ("analysis",)
                  for p in sorted((work / "out" / name / "figures").glob("*.png"))}
@@ -161,6 +191,8 @@ def on_page_markdown(markdown, page, config, files):
         markdown = markdown.replace("<!-- validation-records -->", _validation_records(config))
     for name in re.findall(r"<!-- validation-record: ([\w-]+) -->", markdown):
         markdown = markdown.replace(f"<!-- validation-record: {name} -->", _validation_records(config, only=name))
+    if "<!-- kappa-to-report -->" in markdown:
+        markdown = markdown.replace("<!-- kappa-to-report -->", _state["kappa_to_report"])
     for name, text in _state.get("outputs", {}).items():
         marker = f"<!-- output: {name} -->"
         if marker in markdown:
