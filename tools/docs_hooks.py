@@ -113,13 +113,18 @@ def kappa_to_report_example(data: Path, candidates: str = "delay,offset,second_m
     diagnosis = diagnose_result(result, effects=candidates, seed=0)
     result = dataclasses.replace(result, kappa_choice=kappa_after_verdict(result, diagnosis))
     col = result.kappa_choice.column
-    cols = ["parent", "child", "kappa", "kappa_ci_low", "kappa_ci_high"]
-    cols += [c for c in (col, f"{col}_ci_low", f"{col}_ci_high") if c != "kappa"] + ["quality", "report"]
-    df = result.summary().dropna(subset=["kappa"]).head(n_rows)[cols]
-    fmt = lambda v: f"{v:.3f}" if isinstance(v, float) else str(v)  # noqa: E731
-    rows = ["| " + " | ".join(f"`{c}`" for c in cols) + " |", "|" + "---|" * len(cols)]
-    rows += ["| " + " | ".join(_cell(fmt(v)) for v in r) + " |" for r in df.itertuples(index=False)]
-    line = textwrap.fill(read_together(result, diagnosis), 116)
+    df = result.summary().dropna(subset=["kappa"]).head(n_rows)
+    ci = lambda lo, hi: f"[{lo:.2f}, {hi:.2f}]"  # noqa: E731
+    head = ["segment", "`kappa` [95 % CI]"] + ([] if col == "kappa" else [f"`{col}` [95 % CI]"]) + ["`quality`",
+                                                                                                   "`report`"]
+    rows = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for r in df.to_dict("records"):
+        cells = [f"{r['parent']}→{r['child']}", f"{r['kappa']:.3f} {ci(r['kappa_ci_low'], r['kappa_ci_high'])}"]
+        if col != "kappa":
+            cells.append(f"{r[col]:.3f} {ci(r[col + '_ci_low'], r[col + '_ci_high'])}")
+        cells += [_cell(r["quality"]), _cell(r["report"])]
+        rows.append("| " + " | ".join(cells) + " |")
+    line = textwrap.fill(read_together(result, diagnosis), 100)
     return "\n".join([*rows, "", f"(the first {len(df)} segments)", "", "```text", line, "```"])
 
 
