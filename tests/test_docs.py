@@ -67,6 +67,10 @@ def test_site_builds_strict_with_every_page_and_generated_content(site):
         assert (site / f"{name}.html").is_file(), name
     results = (site / "results.html").read_text()
     assert "<!-- output:" not in results and "rce analyze data/sample_delay" in results
+    # the extended kappa rce run writes after a verdict, generated on sample_delay (the diagnosis names delay)
+    assert "<!-- kappa-to-report -->" not in results and "Read together: the diagnosis names delay" in results
+    assert "<code>kappa_delay</code> [95 % CI]" in results
+    assert (site / "img" / "review.png").is_file() and "img/review.png" in (site / "own-video.html").read_text()
     for fig in ("compliance", "kappa_overlay", "residuals", "heldout_error", "variance_budget", "residual_analysis",
                 "effect_before_after", "smoothing", "motion", "excitation", "bending_fit", "uncertainty_overlay",
                 "residuals_diagnosis"):
@@ -220,3 +224,25 @@ def test_the_settings_the_pages_quote_are_the_code_s():
     assert default.smoother.presmooth_window == 1 and default.smoother.edge_weight == 0
     assert default.bending.rest == "median" and paper.bending.rest == "first"
     assert NoiseConfig().sigma_across_px == 0.25 and "0.25 px" in text
+
+
+def test_the_quality_flags_and_plausibility_rules_the_pages_describe_are_the_code_s():
+    """Every quality reason has a row in results.md's flags table, with the code's cutoffs; the diagnosis page's
+    plausibility limits are plausibility.py's."""
+    from rce_gtsam import quality
+    from rce_gtsam.diagnosis import plausibility
+
+    results = (DOCS / "results.md").read_text()
+    table = results[results.index("| flag | meaning | what to do |"):]
+    table = table[:table.index("\n\n")]
+    flags = re.findall(r"^\| `(\w+)` \|", table, re.M)
+    assert flags == list(quality.REASONS), flags
+    assert (round(quality.STIFF_BELOW, 2), round(quality.COMPLIANT_ABOVE, 2)) == (0.71, 1.41)
+    assert "below 2^−½ = 0.71 **and** above 2^½ = 1.41" in table
+    assert quality.CALM_SHARE == 0.5 and "`z_var_seen` below 0.5" in table
+    assert quality.POOR_FIT_SHARE == 0.5 and "0.5 × (1 − 1/SNR)" in table
+    assert quality.LOST_SHARE == 0.5 and "more than half of the frames" in table
+    diagnosis = (DOCS / "diagnosis.md").read_text()
+    assert plausibility.SATURATION_REACH == 2.0 and "beyond twice the largest\n   deflection seen" in diagnosis
+    assert plausibility.SHORTEST_PERIOD_FRAMES == 4.0 and "under 4 frames" in diagnosis
+    assert "`no (implausible fit)`" in diagnosis
