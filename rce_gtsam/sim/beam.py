@@ -338,7 +338,8 @@ def simulate_beam(config: BeamConfig = BeamConfig()) -> BeamSimulation:
         U, kc = newmark(beam, K, M, C, lambda i: f[i], len(t_sub) - 1, 1.0 / (fps * n_sub), stiff, creep,
                         record_every=n_sub)
         if "creep" in active:
-            params["creep"]["drift_deg"] = (gc[params["creep"]["weak_edge"][0] - 1] * kc.mean(axis=1)).tolist()
+            drift = gc[params["creep"]["weak_edge"][0] - 1] * kc.mean(axis=1)
+            params["creep"]["drift_deg"] = [round(float(v), 5) for v in drift]   # per frame
         return U, freqs
 
     U0, freqs0 = run(())
