@@ -164,15 +164,16 @@ def main() -> int:
                                   for x in d.candidates)
                 print(f"  {cond} x{mult:g} seed {sd}: verdict {d.verdict}"
                       f"{'' if d.verdict_effect in (None, d.verdict) else ' [' + d.verdict_effect + ']'}"
-                      f" ({'right' if ok else 'WRONG'}){o_txt}; klog {lr:.3f} cover {cv:.0%} floor ratio {ratio[-1]:.2f}"
+                      f" ({'right' if ok else 'WRONG'}){o_txt}; klog {lr:.3f} cover {cv:.0%}"
+                      f" floor ratio {ratio[-1]:.2f}"
                       f" size {size[-1]:.3f}; {cands} (diagnose {td[-1]:.1f} s, pipeline {tp[-1]:.1f} s)", flush=True)
             n = a.seeds
             within = int(np.sum(np.abs(np.array(ratio) - 1) <= 0.25))
             rows.append((cond, mult, n, right, orc, dict(verdicts), float(np.median(klog)), float(np.nanmean(cover)),
                          float(np.median(ratio)), min(ratio), max(ratio), within, float(np.median(size)),
                          float(np.median(td)), float(np.median(tp))))
-    print(f"\n{'condition':<12} {'x':>4} {'right':>6} {'oracle':>7} {'klog':>6} {'cover':>6} {'floor ratio (range)':>22} "
-          f"{'<=25%':>6} {'size':>6} {'diag s':>7} {'pipe s':>7}  verdicts")
+    print(f"\n{'condition':<12} {'x':>4} {'right':>6} {'oracle':>7} {'klog':>6} {'cover':>6} "
+          f"{'floor ratio (range)':>22} {'<=25%':>6} {'size':>6} {'diag s':>7} {'pipe s':>7}  verdicts")
     for cond, mult, n, right, orc, verd, kl, cv, rm, rlo, rhi, within, sz, tdm, tpm in rows:
         o = "-" if cond == "none" or a.no_oracle else f"{orc}/{n}"
         print(f"{cond:<12} {mult:>4g} {right:>3}/{n:<2} {o:>7} {kl:6.3f} {cv:6.0%} {rm:8.2f} ({rlo:.2f}-{rhi:.2f}) "

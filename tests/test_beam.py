@@ -67,17 +67,21 @@ def dominant_lag(a, b, max_lag=40):
     return lags[int(np.argmax(cc))]
 
 
-def test_modal_puts_a_resonance_in_the_wind_band(free):
-    s = sim(("modal",), frames=600, seed=4)
+def test_modal_puts_a_resonance_in_the_wind_band():
+    """The tip bend's gain over its quasi-static response kappa z, around the 1 Hz mode against below it: a
+    resonance with fruit mass, flat without; and the tip lags the wind."""
+    s, free_long = sim(("modal",), frames=600, seed=4), sim(frames=600, seed=4)
     f = np.fft.rfftfreq(600, 1 / 30.0)
     band = (f > 0.7) & (f < 1.4)     # around the 1 Hz first mode
     low = (f > 0.05) & (f < 0.4)
+
     def gain(sm):
-        tip = sm.response_true[-1]
-        H = np.abs(np.fft.rfft(tip)) / np.maximum(np.abs(np.fft.rfft(sm.z_true * sm.kappa_true[sm.graph.bends[-1].edge])), 1e-9)
+        qs = sm.z_true * sm.kappa_true[sm.graph.bends[-1].edge]
+        H = np.abs(np.fft.rfft(sm.response_true[-1])) / np.maximum(np.abs(np.fft.rfft(qs)), 1e-9)
         return np.median(H[band]) / np.median(H[low])
-    assert gain(s) > 1.8 and abs(gain(free_long := sim(frames=600, seed=4)) - 1) < 0.1
-    assert dominant_lag(s.response_true[-1], s.z_true) >= 2 and dominant_lag(free_long.response_true[-1], free_long.z_true) == 0
+    assert gain(s) > 1.8 and abs(gain(free_long) - 1) < 0.1
+    assert dominant_lag(s.response_true[-1], s.z_true) >= 2
+    assert dominant_lag(free_long.response_true[-1], free_long.z_true) == 0
 
 
 def test_gust_front_makes_the_tip_lag_the_root(free):
