@@ -1,4 +1,8 @@
-"""``rce simulate --out DIR [--effect NAME ...] [--seed N] [--frames N] [--nodes N] [--video]``.
+"""``rce simulate --out DIR [--simulator branch|beam] [--effect NAME ...] [--seed N] [--frames N] [--nodes N] [--video]``.
+
+``--simulator beam`` makes the recording with the finite-element beam (:mod:`rce_gtsam.sim.beam`), whose effects
+are ``modal``, ``gust_front``, ``two_sources``, ``creep`` and ``stiffening``; its files are the same, and its
+truth.json adds ``response_effect_free`` and the diagnosis' name of each effect.
 
 Writes a simulated recording with its ground truth: tracks.csv (noisy, tracker-like), true_tracks.csv
 (noise-free), graph.json, truth.json (kappa_true, z_true, response_true, effect parameters), annotations.json
