@@ -215,6 +215,8 @@ def newmark(mesh: Mesh, K: np.ndarray, M: np.ndarray, C: np.ndarray, load, n_ste
                     break
                 Kt = Keff + mesh.assemble(np.einsum("eg,egi,egj->eij", wg * 3 * c3 * k ** 2, B, B))
                 un = un - np.linalg.solve(Kt, res)
+            else:
+                raise RuntimeError(f"beam: Newton iterations did not converge at step {i} ({max_newton} iterations)")
         an = a0 * (un - u) - a2 * v - a3 * acc
         v = v + dt * ((1 - g) * acc + g * an)
         u, acc = un, an
