@@ -23,8 +23,18 @@ load profile, a linear bending law. The effects come from the physics (:data:`BE
 * ``creep``: a weak joint (a Maxwell dashpot in the two elements either side of one mid-branch node) creeps under
   the moment its rest load (self-weight) and the wind put on it: a slow drift of that joint's bend.
 * ``stiffening``: strain stiffening, a cubic moment–curvature law M = EI (k + beta k^3 / k_ref^2) with k_ref the
-  99th percentile of the quasi-static curvature over the beam: the gain falls with amplitude, more where the
-  beam bends most (not a corotational update; see :mod:`.beam_fe`).
+  99th percentile of the quasi-static curvature over the beam times a per-segment onset factor: the gain falls
+  with amplitude (not a corotational update; see :mod:`.beam_fe`). Measured: the rank-1 misfit of the noise-free
+  response stays 0.03-0.09 of its RMS for beta 1-9, onset at the 50th or 99th percentile, onset spread 0.7-1.2:
+  a cantilever is statically determinate, so each joint's bend is a monotone function of its own moment and all
+  the moments follow one load; hardening bends them all along one curve, nearly rank 1 (a bounded saturation,
+  the branch simulator's tanh, is not).
+
+Sizes at the default strengths (rank-1 misfit of the noise-free response / its RMS, 450 frames, 5 seeds,
+median): modal 0.16, gust_front 0.09, two_sources 0.18, creep 0.11, stiffening 0.04; effect-free 0.0005 (the
+10 Hz mode's dynamic part). Most of a gust front's lag is common to all joints (each bend is the moment of every
+load beyond it, weighted toward the tip's long lever arms: joint lags 14-19 frames for a 20-frame front), and a
+rank-1 model absorbs a common lag in z.
 
 kappa truth is quasi-static: the turning angle of each joint under a static unit load with the wind's (effect-
 free) load profile, normalised to geometric mean 1 over the bends (all joints bend the same way under it, so it is
