@@ -1,4 +1,8 @@
-"""``rce simulate --out DIR [--effect NAME ...] [--seed N] [--frames N] [--nodes N] [--video]``.
+"""``rce simulate --out DIR [--simulator branch|beam] [--effect NAME ...] [--seed N] [--frames N] [--nodes N] [--video]``.
+
+``--simulator beam`` makes the recording with the finite-element beam (:mod:`rce_gtsam.sim.beam`), whose effects
+are ``modal``, ``gust_front``, ``two_sources``, ``creep`` and ``stiffening``; its files are the same, and its
+truth.json adds ``response_effect_free`` and the diagnosis' name of each effect.
 
 Writes a simulated recording with its ground truth: tracks.csv (noisy, tracker-like), true_tracks.csv
 (noise-free), graph.json, truth.json (kappa_true, z_true, response_true, effect parameters), annotations.json
@@ -10,6 +14,7 @@ drifting light, a moving soft shadow, ~1 px camera shake, crf 28).
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -20,24 +25,35 @@ from ..errors import InputError
 # help is printed, not when the parser is built (``rce --help`` and argument errors answer at once)
 
 
-def _effect_list(values: list[str] | None) -> tuple[str, ...]:
-    from ..sim.simulate import EFFECTS
+def _effect_list(values: list[str] | None, simulator: str = "branch") -> tuple[str, ...]:
+    EFFECTS = _effect_names(simulator)
     out: list[str] = []
     for v in values or []:
         for name in (s.strip() for s in v.split(",")):
             if not name or name == "none":
                 continue
             if name not in EFFECTS:
-                raise InputError("--effect", f"unknown effect {name!r}; choose from {', '.join(EFFECTS)}")
+                raise InputError("--effect", f"unknown effect {name!r} of --simulator {simulator}; choose from "
+                                             f"{', '.join(EFFECTS)}")
             if name not in out:
                 out.append(name)
     return tuple(out)
 
 
-def _strengths(values: list[str] | None) -> dict[str, float] | None:
+def _effect_names(simulator: str) -> tuple[str, ...]:
+    """The effect names of a simulator (``branch``: :data:`rce_gtsam.sim.simulate.EFFECTS`; ``beam``:
+    :data:`rce_gtsam.sim.beam.BEAM_EFFECTS`)."""
+    if simulator == "beam":
+        from ..sim.beam import BEAM_EFFECTS
+        return BEAM_EFFECTS
+    from ..sim.simulate import EFFECTS
+    return EFFECTS
+
+
+def _strengths(values: list[str] | None, simulator: str = "branch") -> dict[str, float] | None:
     if not values:
         return None
-    from ..sim.simulate import EFFECTS
+    EFFECTS = _effect_names(simulator)
     out = {}
     for v in values:
         name, sep, num = v.partition("=")
@@ -65,11 +81,14 @@ def _forms(values: list[str] | None) -> dict[str, str] | None:
 
 
 def _effects_epilog() -> str:
+    from ..sim.beam import BEAM_EFFECT_DEFAULTS, BEAM_EFFECT_MEANING, BEAM_EFFECTS
     from ..sim.simulate import EFFECT_DEFAULTS, EFFECT_FORMS, EFFECT_MEANING, EFFECTS
-    return ("effects and the meaning of their strengths: " + "; ".join(
+    return ("effects of --simulator branch and the meaning of their strengths: " + "; ".join(
         f"{k} (default {EFFECT_DEFAULTS[k]:g}: {EFFECT_MEANING[k]})" for k in EFFECTS)
         + ". Forms (--form NAME=FORM): " + "; ".join(
-            f"{k}: " + ", ".join(f"{f} ({d})" for f, d in forms.items()) for k, forms in EFFECT_FORMS.items()))
+            f"{k}: " + ", ".join(f"{f} ({d})" for f, d in forms.items()) for k, forms in EFFECT_FORMS.items())
+        + ". Effects of --simulator beam (a finite-element beam in wind, rce_gtsam.sim.beam): " + "; ".join(
+            f"{k} (default {BEAM_EFFECT_DEFAULTS[k]:g}: {BEAM_EFFECT_MEANING[k]})" for k in BEAM_EFFECTS))
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -85,6 +104,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.format_help = format_help
     p.add_argument("--out", type=Path, required=True,
                    help="output folder (created; the files this command writes are replaced, other files are left alone)")
+    p.add_argument("--simulator", choices=("branch", "beam"), default="branch",
+                   help="branch (default): bends written as kappa_e z_t with effects as laws on it; beam: a finite-"
+                        "element cantilever in wind whose effects (modal, gust_front, two_sources, creep, stiffening) "
+                        "come from the physics, kappa truth from a static unit load (rce_gtsam.sim.beam)")
     p.add_argument("--effect", action="append", metavar="NAME",
                    help="hidden effect to switch on, repeatable or comma-separated (names below; default: none)")
     p.add_argument("--strength", action="append", metavar="NAME=VALUE",
@@ -117,22 +140,30 @@ def run(args: argparse.Namespace) -> int:
 
     check_seed(args.seed)
     check_output_dir(args.out)
-    effects = _effect_list(args.effect)
-    strengths, forms = _strengths(args.strength), _forms(args.form)
+    effects = _effect_list(args.effect, args.simulator)
+    strengths = _strengths(args.strength, args.simulator)
+    if args.simulator == "beam":
+        for option, given in (("--form", args.form), ("--layout", args.layout != "chain" or None)):
+            if given:
+                raise InputError(option, "applies to --simulator branch only (the beam is one chain and its effects "
+                                         "have one form each)")
+    forms = _forms(args.form)
     for option, what, given in (("--strength", "strength", strengths), ("--form", "form", forms)):
         for name in (given or {}):
             if name not in effects:
                 raise InputError(option, f"{name}'s {what} is set but the effect is not switched on; add "
                                          f"--effect {name}")
     noise = NoiseConfig(enabled=not args.clean, emit_sigma=args.sigma)
+    if args.z_rms is not None and not args.z_rms > 0:
+        raise InputError("--z-rms", f"must be > 0 degrees, got {args.z_rms}")
+    if args.realism != "clean" and not args.video:
+        raise InputError("--realism", "only applies to the rendered video: add --video")
+    if args.simulator == "beam":
+        return _run_beam(args, effects, strengths, noise)
     cfg = SimulationConfig(n_nodes=args.nodes, n_frames=args.frames, effects=effects, effect_strength=strengths,
                            effect_form=forms, noise=noise, seed=args.seed, branch_layout=args.layout)
     if args.z_rms is not None:
-        if not args.z_rms > 0:
-            raise InputError("--z-rms", f"must be > 0 degrees, got {args.z_rms}")
         cfg = replace(cfg, z_rms_deg=args.z_rms)
-    if args.realism != "clean" and not args.video:
-        raise InputError("--realism", "only applies to the rendered video: add --video")
     t0 = time.perf_counter()
     sim = simulate(cfg)
     files = sim.write(args.out, video=args.video, render=REALISM[args.realism])
@@ -143,6 +174,34 @@ def run(args: argparse.Namespace) -> int:
     print(f"simulated {len(sim.graph.nodes)} nodes x {cfg.n_frames} frames (seed {cfg.seed}, {cfg.branch_layout}); "
           f"hidden effects: {eff}; {100 * (1 - obs.mean()):.1f} % of observations occluded "
           f"[{time.perf_counter() - t0:.1f} s]")
+    for name, path in files.items():
+        print(f"  wrote {path}")
+    return 0
+
+
+def _run_beam(args: argparse.Namespace, effects: tuple[str, ...], strengths: dict | None, noise) -> int:
+    """``rce simulate --simulator beam``: :func:`rce_gtsam.sim.beam.simulate_beam`, written like the branch's."""
+    from ..sim.beam import BeamConfig, simulate_beam
+    from ..sim.nuisance import REALISM
+
+    for name, value in (strengths or {}).items():
+        if not (math.isfinite(value) and value > 0):
+            raise InputError("--strength", f"{name}={value:g}: a beam effect's strength must be a finite number > 0 "
+                                           f"(leave the effect out to switch it off)")
+    cfg = BeamConfig(n_nodes=args.nodes, n_frames=args.frames, effects=effects, effect_strength=strengths,
+                     noise=noise, seed=args.seed)
+    if args.z_rms is not None:
+        cfg = replace(cfg, z_rms_deg=args.z_rms)
+    cfg.validate()
+    t0 = time.perf_counter()
+    sim = simulate_beam(cfg)
+    files = sim.write(args.out, video=args.video, render=REALISM[args.realism])
+    eff = ", ".join(f"{e} (strength {cfg.strength(e):g})" for e in cfg.effects) or "none"
+    f1 = sim.effect_params["_beam"]["f_hz_effect_free"][0]
+    obs = sim.tracks.observed
+    print(f"simulated a finite-element beam, {len(sim.graph.nodes)} tracked nodes x {cfg.n_frames} frames (seed "
+          f"{cfg.seed}; effect-free first mode {f1:.1f} Hz); hidden effects: {eff}; "
+          f"{100 * (1 - obs.mean()):.1f} % of observations occluded [{time.perf_counter() - t0:.1f} s]")
     for name, path in files.items():
         print(f"  wrote {path}")
     return 0
