@@ -145,11 +145,22 @@ class ArtifactResult:
     params: dict = field(default_factory=dict)
 
 
+def branch_tangents(graph, xy: np.ndarray) -> np.ndarray:
+    """Unit branch direction (N, F, 2) at each node: sum of unit incoming and outgoing segment directions."""
+    row = {nid: i for i, nid in enumerate(graph.nodes)}
+    t = np.zeros_like(xy)
+    for p, c in graph.edges:
+        d = xy[row[c]] - xy[row[p]]
+        d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
+        t[row[c]] += d
+        t[row[p]] += d
+    return t / np.maximum(np.linalg.norm(t, axis=-1, keepdims=True), 1e-12)
+
+
 def node_kinematics(graph, true_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(tangent (N, F, 2), normal (N, F, 2), velocity (N, F, 2) px/frame, speed (N, F) px/frame) of the
-    true positions; the tangent is the branch direction at each node (``simulate._tangents``)."""
-    from .simulate import _tangents
-    tan = _tangents(graph, true_xy)
+    true positions; the tangent is the branch direction at each node (:func:`branch_tangents`)."""
+    tan = branch_tangents(graph, true_xy)
     nrm = np.stack([-tan[..., 1], tan[..., 0]], axis=-1)
     v = np.gradient(true_xy, axis=1) if true_xy.shape[1] > 1 else np.zeros_like(true_xy)
     return tan, nrm, v, np.linalg.norm(v, axis=-1)

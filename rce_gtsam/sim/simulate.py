@@ -44,7 +44,7 @@ from ..fileio import publish, temp_dir_beside
 from ..graph import BranchGraph
 from ..jsonutil import jsonable as _jsonable
 from ..tracks import Tracks, write_table_atomic
-from .artifacts import ArtifactConfig, apply_artifacts
+from .artifacts import ArtifactConfig, apply_artifacts, branch_tangents
 
 #: Names of the physical effects the simulator can switch on (and the diagnosis looks for).
 EFFECTS: tuple[str, ...] = ("delay", "dynamics", "second_mode", "offset", "nonlinear")
@@ -486,16 +486,8 @@ def _place_in_image(pos: np.ndarray, image_size, rng, margin: float = 30.0) -> t
 # Noise
 # ----------------------------------------------------------------------------------------------------------
 
-def _tangents(graph: BranchGraph, xy: np.ndarray) -> np.ndarray:
-    """Unit branch direction (N, F, 2) at each node: sum of unit incoming and outgoing segment directions."""
-    row = {nid: i for i, nid in enumerate(graph.nodes)}
-    t = np.zeros_like(xy)
-    for p, c in graph.edges:
-        d = xy[row[c]] - xy[row[p]]
-        d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
-        t[row[c]] += d
-        t[row[p]] += d
-    return t / np.maximum(np.linalg.norm(t, axis=-1, keepdims=True), 1e-12)
+#: the branch direction at each node (kept under its old name for the tests that use it)
+_tangents = branch_tangents
 
 
 def add_tracker_noise(graph: BranchGraph, true_xy: np.ndarray, s_node: np.ndarray, noise: NoiseConfig,
