@@ -141,7 +141,20 @@ def measure_case(folder: Path) -> dict:
         x[:, 0] = 0.0
         return pd.DataFrame(x.T).interpolate(limit_direction="both").values.T
     fa, fc = filled(ra), filled(rc)
+    # cross-correlation of the error with the velocity at shifts -3..3 frames (both channels pooled): a lag
+    # shows as a negative peak at shift 0 or later
+    xc = {}
+    for k in range(-3, 4):
+        a_, b_ = (slice(max(k, 0), F + min(k, 0)), slice(max(-k, 0), F - max(k, 0)))
+        m = ok[:, a_] & ok[:, b_]
+        ee, vv = e[:, a_][m].ravel(), v[:, b_][m].ravel()
+        xc[k] = float(np.dot(ee, vv) / np.sqrt(np.dot(ee, ee) * np.dot(vv, vv)))
+    d4 = np.diff(np.where(ok[..., None], R, np.nan), n=4, axis=1)
+    ta, tc = np.sum(d4 * tan[:, 2:-2], -1), np.sum(d4 * nrm[:, 2:-2], -1)
+    g4 = np.isfinite(ta)
     out = {"case": folder.name, "render": "outdoor" if "_outdoor_" in folder.name else "clean",
+           "xcorr_e_v": xc, "xcorr_peak": min(xc.values(), key=lambda c: -abs(c)),
+           "along_over_across_d4": float(np.median(np.abs(ta[g4])) / np.median(np.abs(tc[g4]))),
            "tau_frames": float(tau0), "tau_per_speed": float(tau1),
            "sd_along_raw": float(np.nanstd(np.sum(e * tan, -1)[ok])),
            "sd_across_raw": float(np.nanstd(np.sum(e * nrm, -1)[ok]))}
@@ -225,7 +238,8 @@ def main() -> int:
     rows = [measure_case(c) for c in cases]
     keys = ["tau_frames", "tau_per_speed", "along_per_speed", "across_per_speed", "white_along_px",
             "white_across_px", "slide_sd", "slide_sd_raw", "slide_sd_null", "coloured_sd_px", "along_beta", "across_beta",
-            "drift_along_px", "drift_across_px", "sd_along_raw", "sd_across_raw"]
+            "drift_along_px", "drift_across_px", "sd_along_raw", "sd_across_raw", "along_over_across_d4",
+            "xcorr_peak"]
     print("The project's tracker on rendered video against the truth (per case; px, frames, px/frame):")
     print(f"{'case':<26}" + "".join(f"{k[:13]:>14}" for k in keys) + f"{'lost share':>11}{'loss m':>8}{'loss g':>8}{'burst':>7}")
     for r in rows:
@@ -244,6 +258,8 @@ def main() -> int:
             med[f"loss_{k}"], lo[f"loss_{k}"], hi[f"loss_{k}"] = (float(np.median(vals)), float(min(vals)),
                                                                   float(max(vals)))
         summary[render] = {"n": len(sel), "median": med, "min": lo, "max": hi}
+        print(f"{render}: cross-correlation of error with velocity at shifts -3..3 frames (median over cases): "
+              + ", ".join(f"{k:+d}: {np.median([r['xcorr_e_v'][k] for r in sel]):+.3f}" for k in range(-3, 4)))
         print(f"{render} renders, median over {len(sel)} cases [min - max]: "
               + "; ".join(f"{k} {med[k]:.3f} [{lo[k]:.3f}-{hi[k]:.3f}]" for k in med))
     plants = [measure_plant(Path(a.plants) / p) for p in ("plant_1", "plant_2") if (Path(a.plants) / p).exists()]
