@@ -64,11 +64,24 @@ def case(family: str | None, scale: float, seed: int, frames: int) -> dict:
             "budget": status, "pipeline_s": tp}
 
 
+def preset_tag(family: str | None) -> str:
+    """A short fingerprint of the family's measured parameters, so that a re-measured preset is not read from
+    the cache of an older one (empty for no artifact)."""
+    if not family:
+        return ""
+    import hashlib
+    import json
+
+    from rce_gtsam.sim.artifacts import load_preset
+    text = json.dumps(load_preset()[family], sort_keys=True)
+    return "_p" + hashlib.sha1(text.encode()).hexdigest()[:8]
+
+
 def cached(cache: str | None, family: str | None, scale: float, seed: int, frames: int) -> dict:
     """:func:`case`, kept in (and read back from) ``cache`` when given."""
     if cache is None:
         return case(family, scale, seed, frames)
-    path = Path(cache) / f"artifact_{family or 'none'}_{scale:g}_{seed}_{frames}.npz"
+    path = Path(cache) / f"artifact_{family or 'none'}_{scale:g}_{seed}_{frames}{preset_tag(family)}.npz"
     if path.exists():
         d = dict(np.load(path))
         d = {k: (v.item() if v.ndim == 0 else v) for k, v in d.items()}

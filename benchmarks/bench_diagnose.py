@@ -125,7 +125,14 @@ def artifact_suffix(artifacts) -> str:
     """The cache file's tag of an :class:`~rce_gtsam.sim.artifacts.ArtifactConfig` (empty for none)."""
     if artifacts is None or not artifacts.active:
         return ""
-    return f"_art-{'+'.join(artifacts.families)}-{artifacts.scale:g}"
+    import hashlib
+    import json
+
+    from rce_gtsam.sim.artifacts import load_preset
+    params = load_preset(artifacts.preset)
+    # a fingerprint of the families' measured parameters: a re-measured preset is not read from an older cache
+    tag = hashlib.sha1(json.dumps([params[f] for f in artifacts.families], sort_keys=True).encode()).hexdigest()[:8]
+    return f"_art-{'+'.join(artifacts.families)}-{artifacts.scale:g}-{tag}"
 
 
 def cached_case(cache, effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False, shape=None,
