@@ -118,7 +118,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a single chain, or a chain with one side branch")
     p.add_argument("--z-rms", type=float, default=None, metavar="DEG",
                    help="RMS of the wind excitation in degrees per joint (default 1.5)")
-    p.add_argument("--clean", action="store_true", help="noise-free tracks (no jitter, drift, jumps or gaps)")
+    p.add_argument("--clean", action="store_true", help="noise-free tracks (no jitter, drift, jumps or gaps; --artifacts, if given, still apply)")
     p.add_argument("--sigma", action="store_true", help="write a per-observation sigma_px column")
     p.add_argument("--artifacts", default=None, metavar="FAMILY[,FAMILY]",
                    help="tracker artifacts in tracks.csv, comma-separated or 'all': lag, speed_error, gust_occlusion, "
