@@ -37,6 +37,9 @@ Usage: python benchmarks/bench_diagnose.py [--seeds 10] [--frames 900] [--effect
        [--shape n_nodes=8,fps=60,branch_layout=tree,root_sway_deg=3]  (recordings of another shape than the
                       simulator's default: 20-node chain, 30 fps; --frames sets their length)
        [--matrices]  (fast: simulator equations + noise instead of the pipeline, for development)
+       [--artifacts FAMILY[,FAMILY] --artifact-scale X]  (tracker artifacts, rce_gtsam.sim.artifacts, at X times
+                      their measured size on top of the tracker noise; benchmarks/bench_artifacts.py runs the
+                      effect-free grid per family)
        [--cache DIR]  (keep each case's pipeline output there: a re-run after a change to the diagnosis only
                        re-diagnoses; the pipeline seconds of a cached case print as 0)
 """
@@ -69,9 +72,10 @@ def held_out_form(effect: str) -> str:
     return list(EFFECT_FORMS[effect])[1]
 
 
-def case(effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False, shape=None):
+def case(effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False, shape=None, artifacts=None):
     """(Y, weights, root_distance, kappa_true, truth (E, T) or None, pipeline seconds, edge labels). ``shape``:
-    :class:`~rce_gtsam.sim.simulate.SimulationConfig` fields other than the simulator's defaults (``--shape``)."""
+    :class:`~rce_gtsam.sim.simulate.SimulationConfig` fields other than the simulator's defaults (``--shape``).
+    ``artifacts``: an :class:`~rce_gtsam.sim.artifacts.ArtifactConfig` (None: none)."""
     from rce_gtsam.sim.simulate import EFFECT_DEFAULTS
     strength = None if effect is None or mult == 1.0 else EFFECT_DEFAULTS[effect] * mult
     if matrices:
@@ -89,6 +93,8 @@ def case(effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=Fa
         if effect is not None:
             kw["effect_form"] = {effect: held_out_form(effect)}
     kw.update(shape or {})
+    if artifacts is not None:
+        kw["artifacts"] = artifacts
     sim = simulate(SimulationConfig(effects=() if effect is None else (effect,), seed=seed, n_frames=frames, **kw))
     t = time.perf_counter()
     res = analyze(sim.tracks, sim.graph, preset="default", n_boot=0)
@@ -115,18 +121,33 @@ def form_p(c) -> str:
     return "".join(f" enc p({k})={v:.4f}" for k, v in ps.items())
 
 
-def cached_case(cache, effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False, shape=None):
+def artifact_suffix(artifacts) -> str:
+    """The cache file's tag of an :class:`~rce_gtsam.sim.artifacts.ArtifactConfig` (empty for none)."""
+    if artifacts is None or not artifacts.active:
+        return ""
+    import hashlib
+    import json
+
+    from rce_gtsam.sim.artifacts import load_preset
+    params = load_preset(artifacts.preset)
+    # a fingerprint of the families' measured parameters: a re-measured preset is not read from an older cache
+    tag = hashlib.sha1(json.dumps([params[f] for f in artifacts.families], sort_keys=True).encode()).hexdigest()[:8]
+    return f"_art-{'+'.join(artifacts.families)}-{artifacts.scale:g}-{tag}"
+
+
+def cached_case(cache, effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False, shape=None,
+                artifacts=None):
     """:func:`case`, its pipeline output kept in (and read back from) the folder ``cache`` when one is given
     (one .npz per effect, strength, seed, length and noise setting; the pipeline seconds of a cached case
     are 0)."""
     if cache is None or matrices:
-        return case(effect, seed, frames, matrices, mult, noise_free, held_out, shape)
+        return case(effect, seed, frames, matrices, mult, noise_free, held_out, shape, artifacts)
     path = Path(cache) / (f"{effect or 'none'}_{mult:g}_{seed}_{frames}{'_noisefree' if noise_free else ''}"
-                          f"{'_heldout' if held_out else ''}{shape_suffix(shape)}.npz")
+                          f"{'_heldout' if held_out else ''}{shape_suffix(shape)}{artifact_suffix(artifacts)}.npz")
     if path.exists():
         d = np.load(path)
         return d["Y"], (d["W"] if d["W"].size else None), d["s"], d["k"], d["y"], 0.0, list(d["labels"])
-    Y, W, s, k, y, tp, labels = case(effect, seed, frames, matrices, mult, noise_free, held_out, shape)
+    Y, W, s, k, y, tp, labels = case(effect, seed, frames, matrices, mult, noise_free, held_out, shape, artifacts)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".part.npz")
     np.savez(tmp, Y=Y, W=W if W is not None else np.array([]), s=s, k=k, y=y, labels=np.array(labels))
@@ -241,6 +262,10 @@ def main() -> int:
     ap.add_argument("--effects", default="none,delay,dynamics,second_mode,offset,nonlinear")
     ap.add_argument("--folds", type=int, default=None,
                     help="cross-validation blocks of diagnose (default: diagnose's own, N_FOLDS = 16)")
+    ap.add_argument("--artifacts", default=None, metavar="FAMILY[,FAMILY]",
+                    help="tracker artifacts (rce_gtsam.sim.artifacts; 'all' for every family) on every recording")
+    ap.add_argument("--artifact-scale", type=float, default=1.0, metavar="X",
+                    help="their strength, x the measured size (default 1)")
     ap.add_argument("--shape", default="",
                     help="simulated recordings of another shape: SimulationConfig fields, e.g. "
                          "n_nodes=8,fps=60,branch_layout=tree,root_sway_deg=3 (frames: --frames)")
@@ -249,6 +274,15 @@ def main() -> int:
         shape = parse_shape(a.shape)
     except ValueError as err:
         ap.error(str(err))
+    artifacts = None
+    if a.artifacts:
+        from rce_gtsam.errors import InputError
+        from rce_gtsam.sim.artifacts import ArtifactConfig, parse_families
+        try:
+            artifacts = ArtifactConfig(parse_families(a.artifacts), scale=a.artifact_scale)
+            artifacts.validate()
+        except InputError as err:
+            ap.error(str(err))
     from scipy import stats
 
     from rce_gtsam.diagnosis.diagnose import diagnose
@@ -260,6 +294,7 @@ def main() -> int:
     print(f"input: {'matrices (simulator equations + noise)' if a.matrices else 'full pipeline (simulate -> analyze default preset)'}; "
           f"{a.seeds} seeds from {a.first_seed}, {a.frames} frames, effect strength {a.strength_mult} x default; "
           f"{'HELD-OUT forms and noise; ' if a.held_out else ''}{f'shape {a.shape}; ' if shape else ''}"
+          f"{f'tracker artifacts {a.artifacts} x{a.artifact_scale:g}; ' if artifacts else ''}"
           "oracle = the hidden effect's candidate with its true shared parameters, through the same folds", flush=True)
     # the core model's config: the default preset's, as `rce diagnose` runs it (rce_gtsam.diagnosis.io);
     # the matrices mode keeps diagnose's own default
@@ -273,7 +308,7 @@ def main() -> int:
             okf, orcf, ok, orc, conf, imp_v, imp_h, ceil, kb, ka, ts, tps, tru, nsr = 0, 0, 0, 0, 0, [], [], [], [], [], [], [], [], []
             for sd in range(a.first_seed, a.first_seed + a.seeds):
                 Y, W, s, k, y, tp, labels = cached_case(a.cache, hidden, sd, a.frames, a.matrices, mult,
-                                                        a.noise_free, a.held_out, shape)
+                                                        a.noise_free, a.held_out, shape, artifacts)
                 t = time.perf_counter()
                 d = diagnose(Y, weights=W, root_distance=s, seed=0, edge_labels=labels, n_folds=a.folds,
                              config=config)

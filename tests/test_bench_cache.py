@@ -14,7 +14,8 @@ def test_a_cached_case_runs_the_pipeline_once_and_reads_back_the_same(tmp_path, 
     rng = np.random.default_rng(0)
     Y, s = rng.standard_normal((4, 30)), np.linspace(0.2, 1, 4)
 
-    def fake_case(effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False, shape=None):
+    def fake_case(effect, seed, frames, matrices, mult=1.0, noise_free=False, held_out=False, shape=None,
+                  artifacts=None):
         calls.append((effect, seed, frames, mult, noise_free, held_out))
         return Y, None, s, np.ones(4), Y * 0.5, 1.5, ["0->1", "1->2", "2->3", "3->4"]
 
@@ -25,10 +26,15 @@ def test_a_cached_case_runs_the_pipeline_once_and_reads_back_the_same(tmp_path, 
     held = bench_diagnose.cached_case(str(tmp_path), "delay", 3, 30, False, 0.75, held_out=True)
     tree = bench_diagnose.cached_case(str(tmp_path), "delay", 3, 30, False, 0.75,
                                       shape=bench_diagnose.parse_shape("branch_layout=tree,n_nodes=9"))
-    assert len(calls) == 4 and calls[1][-2] is True          # the noise-free case is a different file
+    from rce_gtsam.sim.artifacts import ArtifactConfig
+    bench_diagnose.cached_case(str(tmp_path), "delay", 3, 30, False, 0.75,
+                               artifacts=ArtifactConfig(("lag", "slide"), scale=2.0))
+    assert bench_diagnose.artifact_suffix(ArtifactConfig(("lag", "slide"), 2.0)).startswith("_art-lag+slide-2-")
+    assert len(calls) == 5 and calls[1][-2] is True          # the noise-free case is a different file
     assert calls[2][-1] is True                              # and so is the held-out forms and noise case
-    assert sorted(p.name for p in tmp_path.iterdir()) == [   # and a recording of another shape
-        "delay_0.75_3_30.npz", "delay_0.75_3_30_branch_layout-tree_n_nodes-9.npz", "delay_0.75_3_30_heldout.npz",
+    assert sorted(p.name for p in tmp_path.iterdir()) == [   # and a recording of another shape, or with artifacts
+        "delay_0.75_3_30.npz", f"delay_0.75_3_30{bench_diagnose.artifact_suffix(ArtifactConfig(('lag', 'slide'), 2.0))}.npz",
+        "delay_0.75_3_30_branch_layout-tree_n_nodes-9.npz", "delay_0.75_3_30_heldout.npz",
         "delay_0.75_3_30_noisefree.npz"]
     assert tree[5] == 1.5
     assert held[5] == 1.5

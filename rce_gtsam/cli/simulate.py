@@ -8,7 +8,9 @@ Writes a simulated recording with its ground truth: tracks.csv (noisy, tracker-l
 (noise-free), graph.json, truth.json (kappa_true, z_true, response_true, effect parameters), annotations.json
 (first-frame node positions) and, with --video, video.mp4 (H.264). ``--realism`` names the camera nuisances
 of the video (``rce_gtsam.sim.nuisance.REALISM``: clean = the crisp default render; outdoor = motion blur,
-drifting light, a moving soft shadow, ~1 px camera shake, crf 28).
+drifting light, a moving soft shadow, ~1 px camera shake, crf 28). ``--artifacts FAMILY[,FAMILY]`` (or ``all``)
+adds tracker artifacts to tracks.csv (``rce_gtsam.sim.artifacts``: errors that follow the motion, at the sizes
+measured on the project's tracker and the real plants' tracks, times ``--artifact-scale``).
 """
 
 from __future__ import annotations
@@ -80,6 +82,23 @@ def _forms(values: list[str] | None) -> dict[str, str] | None:
     return out
 
 
+def _artifacts(text: str | None, scale: float | None):
+    """``--artifacts`` / ``--artifact-scale`` as an :class:`~rce_gtsam.sim.artifacts.ArtifactConfig`
+    (InputError naming the option on a bad family or scale)."""
+    import math
+
+    from ..sim.artifacts import ArtifactConfig, parse_families
+    families = parse_families(text) if text is not None else ()
+    if text is not None and not families:
+        raise InputError("--artifacts", f"names no artifact family ({text!r}); give FAMILY[,FAMILY] or all")
+    if scale is not None:
+        if not (math.isfinite(scale) and scale >= 0):
+            raise InputError("--artifact-scale", f"must be a finite number >= 0, got {scale}")
+        if not families:
+            raise InputError("--artifact-scale", "is set but no artifact is switched on; add --artifacts FAMILY")
+    return ArtifactConfig(families=families, scale=1.0 if scale is None else float(scale))
+
+
 def _effects_epilog() -> str:
     from ..sim.beam import BEAM_EFFECT_DEFAULTS, BEAM_EFFECT_MEANING, BEAM_EFFECTS
     from ..sim.simulate import EFFECT_DEFAULTS, EFFECT_FORMS, EFFECT_MEANING, EFFECTS
@@ -122,8 +141,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="a single chain, or a chain with one side branch")
     p.add_argument("--z-rms", type=float, default=None, metavar="DEG",
                    help="RMS of the wind excitation in degrees per joint (default 1.5)")
-    p.add_argument("--clean", action="store_true", help="noise-free tracks (no jitter, drift, jumps or gaps)")
+    p.add_argument("--clean", action="store_true", help="noise-free tracks (no jitter, drift, jumps or gaps; --artifacts, if given, still apply)")
     p.add_argument("--sigma", action="store_true", help="write a per-observation sigma_px column")
+    p.add_argument("--artifacts", default=None, metavar="FAMILY[,FAMILY]",
+                   help="tracker artifacts in tracks.csv, comma-separated or 'all': lag, speed_error, gust_occlusion, "
+                        "slide, coloured_along, drift (rce_gtsam.sim.artifacts; sizes measured, see "
+                        "rce_gtsam/sim/artifact_presets.json)")
+    p.add_argument("--artifact-scale", type=float, default=None, metavar="X",
+                   help="strength multiplier of the artifacts (default 1 = the measured size)")
     p.add_argument("--video", action="store_true", help="also render video.mp4 (H.264, 640x480)")
     p.add_argument("--realism", choices=("clean", "outdoor"), default="clean",
                    help="camera nuisances of the video: clean (default; crisp, still, constant light) or outdoor "
@@ -153,6 +178,7 @@ def run(args: argparse.Namespace) -> int:
             if name not in effects:
                 raise InputError(option, f"{name}'s {what} is set but the effect is not switched on; add "
                                          f"--effect {name}")
+    artifacts = _artifacts(args.artifacts, args.artifact_scale)
     noise = NoiseConfig(enabled=not args.clean, emit_sigma=args.sigma)
     if args.z_rms is not None and not args.z_rms > 0:
         raise InputError("--z-rms", f"must be > 0 degrees, got {args.z_rms}")
@@ -161,7 +187,8 @@ def run(args: argparse.Namespace) -> int:
     if args.simulator == "beam":
         return _run_beam(args, effects, strengths, noise)
     cfg = SimulationConfig(n_nodes=args.nodes, n_frames=args.frames, effects=effects, effect_strength=strengths,
-                           effect_form=forms, noise=noise, seed=args.seed, branch_layout=args.layout)
+                           effect_form=forms, noise=noise, seed=args.seed, branch_layout=args.layout,
+                           artifacts=artifacts)
     if args.z_rms is not None:
         cfg = replace(cfg, z_rms_deg=args.z_rms)
     t0 = time.perf_counter()
@@ -171,8 +198,10 @@ def run(args: argparse.Namespace) -> int:
                     + ("" if cfg.form(e) == default_form(e) else f", held-out form {cfg.form(e)}") + ")"
                     for e in cfg.effects) or "none"
     obs = sim.tracks.observed
+    art = (f"tracker artifacts: {', '.join(artifacts.families)} at {artifacts.scale:g}x the measured size; "
+           if artifacts.active else "")
     print(f"simulated {len(sim.graph.nodes)} nodes x {cfg.n_frames} frames (seed {cfg.seed}, {cfg.branch_layout}); "
-          f"hidden effects: {eff}; {100 * (1 - obs.mean()):.1f} % of observations occluded "
+          f"hidden effects: {eff}; {art}{100 * (1 - obs.mean()):.1f} % of observations occluded "
           f"[{time.perf_counter() - t0:.1f} s]")
     for name, path in files.items():
         print(f"  wrote {path}")

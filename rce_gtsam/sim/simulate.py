@@ -14,7 +14,9 @@ What it produces (all deterministic given ``SimulationConfig.seed``):
   see :func:`bend_response`;
 * planar forward kinematics -> true node positions (pixels, x right, y down) in a 640x480 image;
 * tracker-like noisy tracks (see :class:`NoiseConfig`): anisotropic white noise (along the branch >> across),
-  slow AR(1) drift, occlusion gaps (absent rows), occasional jumps.
+  slow AR(1) drift, occlusion gaps (absent rows), occasional jumps; optionally, before that noise, tracker
+  artifacts that follow the motion (speed-dependent error, lag, occlusion in gusts, slide along the stem,
+  coloured along-branch noise, drift; :mod:`rce_gtsam.sim.artifacts`, ``SimulationConfig.artifacts``).
 
 Angle convention (shared with the analysis): the signed turning angle at joint j of bend (g, j, c) is
 ``atan2(cross(u, v), dot(u, v))`` with ``u = p_j - p_g``, ``v = p_c - p_j`` (image coordinates), in degrees;
@@ -42,6 +44,7 @@ from ..fileio import publish, temp_dir_beside
 from ..graph import BranchGraph
 from ..jsonutil import jsonable as _jsonable
 from ..tracks import Tracks, write_table_atomic
+from .artifacts import ArtifactConfig, apply_artifacts, branch_tangents
 
 #: Names of the physical effects the simulator can switch on (and the diagnosis looks for).
 EFFECTS: tuple[str, ...] = ("delay", "dynamics", "second_mode", "offset", "nonlinear")
@@ -162,6 +165,7 @@ class SimulationConfig:
     kappa_sigma_log: float = 0.5
     segment_px: tuple[float, float] = (12.0, 28.0)
     root_sway_deg: float = 0.0
+    artifacts: ArtifactConfig = field(default_factory=ArtifactConfig)
 
     def strength(self, effect: str) -> float:
         """The strength of ``effect`` (override or default)."""
@@ -197,6 +201,7 @@ class SimulationConfig:
                 raise InputError(src, f"effect_form names an unknown effect {k!r}; known: {', '.join(EFFECTS)}")
             if v not in EFFECT_FORMS[k]:
                 raise InputError(src, f"effect_form[{k!r}] must be one of {', '.join(EFFECT_FORMS[k])}, got {v!r}")
+        self.artifacts.validate()
         w, h = self.image_size
         if w < 64 or h < 64:
             raise InputError(src, f"image_size must be at least 64x64, got {self.image_size}")
@@ -481,16 +486,8 @@ def _place_in_image(pos: np.ndarray, image_size, rng, margin: float = 30.0) -> t
 # Noise
 # ----------------------------------------------------------------------------------------------------------
 
-def _tangents(graph: BranchGraph, xy: np.ndarray) -> np.ndarray:
-    """Unit branch direction (N, F, 2) at each node: sum of unit incoming and outgoing segment directions."""
-    row = {nid: i for i, nid in enumerate(graph.nodes)}
-    t = np.zeros_like(xy)
-    for p, c in graph.edges:
-        d = xy[row[c]] - xy[row[p]]
-        d = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
-        t[row[c]] += d
-        t[row[p]] += d
-    return t / np.maximum(np.linalg.norm(t, axis=-1, keepdims=True), 1e-12)
+#: the branch direction at each node (kept under its old name for the tests that use it)
+_tangents = branch_tangents
 
 
 def add_tracker_noise(graph: BranchGraph, true_xy: np.ndarray, s_node: np.ndarray, noise: NoiseConfig,
@@ -557,6 +554,7 @@ class Simulation:
     z_true: (F,) excitation in degrees. response_true: (E, F) true bend deviations from rest in degrees, rows
     in graph.bends order. rest_turn_deg: {(joint, child): rest turning angle in degrees}.
     segment_px: {(parent, child): length in pixels}. effect_params: parameters of the active effects.
+    artifact_params: {family: parameters used} of the active tracker artifacts (:mod:`rce_gtsam.sim.artifacts`).
     """
 
     config: SimulationConfig
@@ -570,6 +568,7 @@ class Simulation:
     rest_turn_deg: dict = field(default_factory=dict)
     segment_px: dict = field(default_factory=dict)
     root_px: tuple[float, float] = (0.0, 0.0)
+    artifact_params: dict = field(default_factory=dict)
 
     def truth_json(self) -> dict:
         """Ground truth as a JSON-ready dict: kappa_true keyed "parent->child", z_true, response_true
@@ -578,7 +577,9 @@ class Simulation:
         cfg = asdict(self.config)
         cfg["effects"] = list(self.config.effects)
         cfg["strengths"] = {e: self.config.strength(e) for e in self.config.effects}
-        return {
+        cfg["artifacts"] = {"families": list(self.config.artifacts.families), "scale": self.config.artifacts.scale,
+                            "preset": self.config.artifacts.preset}
+        out = {
             "format": "rce_gtsam simulation truth v1",
             "seed": self.config.seed,
             "fps": self.config.fps,
@@ -596,6 +597,14 @@ class Simulation:
             "root_px": [float(v) for v in self.root_px],
             "config": _jsonable(cfg),
         }
+        if self.config.artifacts.active:
+            from .artifacts import preset_provenance
+            out["artifacts"] = {"families": list(self.config.artifacts.families),
+                                "scale": self.config.artifacts.scale, "preset": self.config.artifacts.preset,
+                                "units": "px, frames, px/frame, s (rce_gtsam.sim.artifacts.PARAMETERS)",
+                                "params": _jsonable(self.artifact_params),
+                                "provenance": preset_provenance(self.config.artifacts.preset)}
+        return out
 
     def write(self, out_dir: str | Path, video: bool = False, render=None) -> dict[str, Path]:
         """Write tracks.csv, true_tracks.csv, graph.json, truth.json, annotations.json (+ video.mp4).
@@ -678,7 +687,14 @@ def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
         scale = np.linalg.norm(true_xy[1, 0] - true_xy[0, 0]) / lengths[graph.edges[0]]
         lengths = {e: L * scale for e, L in lengths.items()}
     s_node = np.array([dist[n] / dmax for n in graph.nodes])
-    noisy, sigma = add_tracker_noise(graph, true_xy, s_node, config.noise, config.fps, r_noise)
+    tracked, artifact_params = true_xy, {}
+    if config.artifacts.active:
+        # its own stream, spawned after the six above: the default recording's draws stay as they were
+        art = apply_artifacts(graph, true_xy, config.fps, config.artifacts, np.random.default_rng(ss.spawn(1)[0]))
+        tracked, artifact_params = art.xy, art.params
+    noisy, sigma = add_tracker_noise(graph, tracked, s_node, config.noise, config.fps, r_noise)
+    if config.artifacts.active:
+        noisy[~art.visible] = np.nan
     sigma_px = None
     if config.noise.emit_sigma and config.noise.enabled:
         sigma_px = np.where(np.isfinite(noisy[..., 0]), sigma[:, None], np.nan)
@@ -687,7 +703,7 @@ def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
     return Simulation(config=config, graph=graph, tracks=tracks, true_xy=true_xy,
                       kappa_true={b.edge: float(k) for b, k in zip(bends, kappa)}, z_true=z,
                       response_true=y, effect_params=params, rest_turn_deg=rest, segment_px=lengths,
-                      root_px=(float(root_px[0]), float(root_px[1])))
+                      root_px=(float(root_px[0]), float(root_px[1])), artifact_params=artifact_params)
 
 
 # ----------------------------------------------------------------------------------------------------------

@@ -1,0 +1,159 @@
+"""False verdicts and the noise floor under each tracker-artifact family (:mod:`rce_gtsam.sim.artifacts`).
+
+Per case: an effect-free recording ``simulate(SimulationConfig(seed=s, n_frames=F, artifacts=ArtifactConfig(
+(family,), scale)))`` (the default tracker noise plus one artifact family at ``scale`` x its measured size;
+``none`` = the default noise alone) -> ``analyze(preset="default", n_boot=0)`` -> ``diagnose`` (the default
+preset's core model, as ``rce diagnose`` runs it; the same call as ``benchmarks/bench_diagnose.py``).
+
+Printed per family and scale: false verdicts (any verdict on effect-free data is false) and which effects were
+named; the noise-floor ratio = estimated angle-noise RMS (:func:`rce_gtsam.diagnosis.noise_floor.noise_floor_of`)
+/ true angle-noise RMS (RMS of the smoothed bend angles less the truth on the pipeline's rest reference, as
+``benchmarks/bench_noise_floor.py``), median and the count within 25 %; the raw angle noise before smoothing
+(:func:`rce_gtsam.sim.simulate.angle_noise_deg`); the share of missing observations; the variance budget's status.
+
+``--cache DIR`` keeps each case's pipeline output (one .npz per family, scale, seed, length: the keys of
+``bench_diagnose.cached_case`` -- Y, W, s, k, y, labels -- plus the noise-floor numbers), so the diagnosis can be
+re-run after a change to it without the pipeline.
+
+Usage: OMP_NUM_THREADS=1 python benchmarks/bench_artifacts.py [--seeds 5] [--first-seed 0] [--frames 450]
+       [--families none,lag,speed_error,gust_occlusion,slide,coloured_along,drift] [--scales 1,2]
+       [--cache /work/cache/artifacts]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+def case(family: str | None, scale: float, seed: int, frames: int) -> dict:
+    """The pipeline's output on one effect-free recording with ``family`` at ``scale`` (None: no artifact)."""
+    from rce_gtsam.diagnosis.budget import budget_of
+    from rce_gtsam.diagnosis.noise_floor import noise_floor_of
+    from rce_gtsam.pipeline import analyze
+    from rce_gtsam.sim.artifacts import ArtifactConfig
+    from rce_gtsam.sim.simulate import SimulationConfig, angle_noise_deg, simulate
+
+    art = ArtifactConfig(families=(family,), scale=scale) if family else ArtifactConfig()
+    sim = simulate(SimulationConfig(seed=seed, n_frames=frames, artifacts=art))
+    t = time.perf_counter()
+    res = analyze(sim.tracks, sim.graph, preset="default", n_boot=0)
+    tp = time.perf_counter() - t
+    r = res.response
+    row = {b.edge: i for i, b in enumerate(sim.graph.bends)}
+    y = sim.response_true[[row[tuple(e)] for e in r.edges]][:, r.frames]
+    yref = y + np.nanmean(r.Y - y, axis=1, keepdims=True)
+    nf = noise_floor_of(res)
+    try:
+        status = budget_of(res).status
+    except Exception as err:  # noqa: BLE001 - report, do not stop the bench
+        status = f"error: {type(err).__name__}"
+    W = r.weights if res.preset.compliance.weighted else None
+    return {"Y": r.Y, "W": W if W is not None else np.array([]), "s": r.root_distance,
+            "k": np.array([sim.kappa_true[e] for e in r.edges]), "y": y, "labels": np.array(r.edge_labels),
+            "nf_rms": nf.rms_deg, "true_rms": float(np.sqrt(np.nanmean((r.Y - yref) ** 2))),
+            "raw_angle_noise": angle_noise_deg(sim), "missing": float(1 - sim.tracks.observed.mean()),
+            "budget": status, "pipeline_s": tp}
+
+
+def preset_tag(family: str | None) -> str:
+    """A short fingerprint of the family's measured parameters, so that a re-measured preset is not read from
+    the cache of an older one (empty for no artifact)."""
+    if not family:
+        return ""
+    import hashlib
+    import json
+
+    from rce_gtsam.sim.artifacts import load_preset
+    text = json.dumps(load_preset()[family], sort_keys=True)
+    return "_p" + hashlib.sha1(text.encode()).hexdigest()[:8]
+
+
+def cached(cache: str | None, family: str | None, scale: float, seed: int, frames: int) -> dict:
+    """:func:`case`, kept in (and read back from) ``cache`` when given."""
+    if cache is None:
+        return case(family, scale, seed, frames)
+    path = Path(cache) / f"artifact_{family or 'none'}_{scale:g}_{seed}_{frames}{preset_tag(family)}.npz"
+    if path.exists():
+        d = dict(np.load(path))
+        d = {k: (v.item() if v.ndim == 0 else v) for k, v in d.items()}
+        d["pipeline_s"] = 0.0
+        return d
+    d = case(family, scale, seed, frames)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".part.npz")
+    np.savez(tmp, **d)
+    tmp.replace(path)
+    return d
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seeds", type=int, default=5)
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--frames", type=int, default=450)
+    ap.add_argument("--families", default="none,lag,speed_error,gust_occlusion,slide,coloured_along,drift")
+    ap.add_argument("--scales", default="1,2", help="strength multipliers of the measured sizes")
+    ap.add_argument("--cache", default=None, help="folder that keeps each case's pipeline output")
+    a = ap.parse_args()
+    from rce_gtsam.diagnosis.diagnose import diagnose
+    from rce_gtsam.presets import get_preset
+    from rce_gtsam.sim.artifacts import FAMILIES
+
+    fams = [f.strip() for f in a.families.split(",") if f.strip()]
+    bad = [f for f in fams if f != "none" and f not in FAMILIES]
+    if bad:
+        ap.error(f"--families: unknown {bad}; choose from none, {', '.join(FAMILIES)}")
+    try:
+        scales = [float(x) for x in a.scales.split(",")]
+    except ValueError:
+        ap.error(f"--scales: not a list of numbers: {a.scales!r}")
+    config = get_preset("default").compliance
+    print(f"effect-free recordings, {a.seeds} seeds from {a.first_seed}, {a.frames} frames; one artifact family at "
+          f"{a.scales} x its measured size on top of the default tracker noise", flush=True)
+    rows = []
+    t0 = time.perf_counter()
+    for fam in fams:
+        for sc in ([1.0] if fam == "none" else scales):
+            verdicts, ratios, raw, miss, budgets, tds = [], [], [], [], [], []
+            for sd in range(a.first_seed, a.first_seed + a.seeds):
+                c = cached(a.cache, None if fam == "none" else fam, sc, sd, a.frames)
+                t = time.perf_counter()
+                W = c["W"] if np.size(c["W"]) else None
+                d = diagnose(c["Y"], weights=W, root_distance=c["s"], seed=0, edge_labels=list(c["labels"]),
+                             config=config)
+                tds.append(time.perf_counter() - t)
+                verdicts.append(d.verdict)
+                ratios.append(c["nf_rms"] / c["true_rms"])
+                raw.append(c["raw_angle_noise"])
+                miss.append(c["missing"])
+                budgets.append(str(c["budget"]))
+                print(f"  {fam} x{sc:g} seed {sd}: verdict {d.verdict}; noise floor {c['nf_rms']:.3f} / true "
+                      f"{c['true_rms']:.3f} deg = {ratios[-1]:.2f}; raw angle noise {raw[-1]:.3f} deg; missing "
+                      f"{100 * miss[-1]:.1f} %; budget {budgets[-1]} (pipeline {c['pipeline_s']:.1f} s, diagnose "
+                      f"{tds[-1]:.1f} s)", flush=True)
+            named = Counter(v for v in verdicts if v is not None)
+            r = np.array(ratios)
+            rows.append((fam, sc, sum(v is not None for v in verdicts), len(verdicts), dict(named),
+                         float(np.median(r)), float(r.min()), float(r.max()), int(np.sum(np.abs(r - 1) <= 0.25)),
+                         float(np.median(raw)), float(np.median(miss)), dict(Counter(budgets))))
+    print(f"\n{'family':<15} {'x':>4} {'false':>7} {'named':<28} {'floor/true median [range]':>27} {'<=25%':>6} "
+          f"{'raw deg':>8} {'missing':>8}  budget")
+    for fam, sc, nf, n, named, med, lo, hi, w25, rw, ms, bud in rows:
+        nm = ", ".join(f"{k} {v}" for k, v in named.items()) or "-"
+        print(f"{fam:<15} {sc:>4g} {nf:>3}/{n:<3} {nm:<28} {med:>10.2f} [{lo:.2f}-{hi:.2f}]{'':>6} {w25:>3}/{n:<2} "
+              f"{rw:>8.3f} {100 * ms:>7.1f}%  {bud}")
+    print(f"({time.perf_counter() - t0:.0f} s)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
