@@ -109,13 +109,12 @@ def test_diagnose_runs_it_when_dynamics_is_lowest_and_delay_also_supported():
     assert "encompassing test p" in d.explanation
 
 
-def test_weak_inertia_is_named_as_the_richer_form_of_the_lag_the_delay_test_finds():
+def test_weak_inertia_found_by_a_full_data_test_alone_is_not_named():
     """Simulated dynamics at 0.75x the default strength through the whole pipeline (seed 21): the delay's full-data
-    test finds the lag (p = 0.0025) and the dynamics candidate's own tests do not (score p = 0.04), but dynamics
-    predicts what the delay leaves (encompassing z = 4.4, p = 0.0005): dynamics is the verdict, as the richer form
-    of the lag. Its fit is the damped optimum (zeta 0.18) that cross-prediction picks among the starts: the plain
-    start ends at zeta 0.056, a sharp resonance that fits the tip's noise (held-out RMSE 6 % worse than rank-1).
-    Before either change the verdict was delay."""
+    test finds the lag (p = 0.0025) but the held-out frames do not agree (fold t below the nominal one-sided
+    quantile), and a full-data test alone names nothing (on the user's path such tests fired on effect-free
+    video at p 0.0005 with a 0.2 % held-out gain). Until that rule, dynamics was named here as the richer form of
+    the lag the delay test found: this recording is the rule's cost in power."""
     from rce_gtsam.pipeline import analyze
     from rce_gtsam.presets import get_preset
     from rce_gtsam.sim.simulate import EFFECT_DEFAULTS, SimulationConfig, simulate
@@ -124,12 +123,9 @@ def test_weak_inertia_is_named_as_the_richer_form_of_the_lag_the_delay_test_find
     r = analyze(sim.tracks, sim.graph, preset="default", n_boot=0).response
     d = diagnose(r.Y, weights=r.weights, root_distance=r.root_distance, seed=0,
                  edge_labels=[f"{j}->{c}" for j, c in r.edges], config=get_preset("default").compliance)
-    assert d.verdict == "dynamics"
-    dyn = d.candidate("dynamics")
-    assert dyn.extra["supported_as_form_of"] == "delay" and dyn.extra["form_test_p"]["delay"] <= 0.005
-    assert dyn.extra["start_chosen"] > 0 and float(dyn.fit.states[0]["params"]["zeta"]) > 0.1
-    assert dyn.improvement_pct > d.candidate("delay").improvement_pct > 0
-    assert "richer form of the lag that delay finds" in d.explanation
+    dly = d.candidate("delay")
+    assert dly.extra["score_p"] <= 0.005 and dly.evidence <= d.settings["support_threshold_t"]
+    assert not dly.extra["significant"] and d.verdict is None
 
 
 def _lag(name, rmse, k_eff, fold, form_p=None, supported=True):
@@ -195,13 +191,13 @@ def test_the_inertia_leads_where_the_delay_is_lower_but_leaves_what_the_inertia_
     d = diagnose(r.Y, weights=r.weights, root_distance=r.root_distance, seed=0,
                  edge_labels=[f"{j}->{c}" for j, c in r.edges], config=get_preset("default").compliance)
     dyn, dly = d.candidate("dynamics"), d.candidate("delay")
-    assert dly.supported and dyn.supported and "supported_as_form_of" not in dyn.extra
+    assert dly.supported and dyn.supported  # on its own, or as the lag's richer form
     assert dly.heldout_rmse < dyn.heldout_rmse < d.baseline_heldout_rmse
     assert dyn.extra["form_test_p"]["delay"] <= 0.005
     par = d.settings["parsimony"]
     assert par["leading"] == "dynamics" and par["lowest_heldout"] == "delay"
     assert d.verdict == "dynamics"
-    assert "the richer form of the same lag, predicts what delay leaves" in d.explanation
+    assert "predicts what delay leaves" in d.explanation  # as the lag's richer form, or leading it
 
 
 def test_the_lag_forms_are_weighed_with_the_inertia_fit_that_has_the_lowest_in_sample_error():

@@ -14,7 +14,7 @@ from rce_gtsam import effects
 from rce_gtsam.diagnosis.plausibility import PlausibilityContext, at_bound, correlation_time, implausibility
 from rce_gtsam.diagnosis.score_test import is_significant
 
-CTX = PlausibilityContext(q99_deflection_deg=6.0, correlation_time_frames=30.0, n_frames=450)
+CTX = PlausibilityContext(q99_deflection_deg=6.0, correlation_time_frames=40.0, n_frames=450)
 
 
 def test_at_bound_measures_closeness_on_the_ranges_scale():
@@ -27,12 +27,12 @@ def test_at_bound_measures_closeness_on_the_ranges_scale():
     assert at_bound(float("nan"), 0.0, 1.0) is None
 
 
-def test_correlation_time_of_smoothed_noise_grows_with_the_smoothing():
+def test_correlation_time_is_where_the_excitation_forgets_itself():
+    t = np.arange(3000)
+    assert correlation_time(np.sin(2 * np.pi * t / 200)) == pytest.approx(50, abs=1)  # a quarter period
     rng = np.random.default_rng(0)
-    w = rng.standard_normal(5000)
-    short = correlation_time(np.convolve(w, np.ones(5) / 5, "same"))
-    long = correlation_time(np.convolve(w, np.ones(40) / 40, "same"))
-    assert 2 < short < 5 and 15 < long < 30  # a box of width L: about L / 2
+    box = correlation_time(np.convolve(rng.standard_normal(5000), np.ones(40) / 40, "same"))
+    assert 35 <= box <= 80  # a box of width 40: zero from 40 frames on, where sampling noise wanders about 0
 
 
 def _state(effect, n_edges=6, **params):

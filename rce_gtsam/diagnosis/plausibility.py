@@ -50,8 +50,8 @@ class PlausibilityContext:
     """The recording's own scales a fit is judged against.
 
     q99_deflection_deg: 99th percentile of the rank-1 model's |kappa_e z_t| (deg), the largest deflection
-    seen; correlation_time_frames: the excitation's integral time scale (frames; the autocorrelation of z
-    summed to its first zero), the longest lag the record can tell from a change of z's shape;
+    seen; correlation_time_frames: the excitation's memory (frames; the first lag where the autocorrelation of z
+    is no longer positive), the longest lag the record can tell from another signal;
     n_frames: frames in the record; shortest_period_frames, saturation_reach: the limits an effect checks
     against (:data:`SHORTEST_PERIOD_FRAMES`, :data:`SATURATION_REACH`), carried here so that effects need not
     import the diagnosis."""
@@ -72,8 +72,9 @@ class PlausibilityContext:
 
 
 def correlation_time(z) -> float:
-    """Integral time scale of a series in frames: its autocorrelation summed from lag 0 to the first lag where it
-    is negative (NaN frames taken as the mean). A series shorter than 3 frames gives NaN."""
+    """The excitation's memory in frames: the first lag at which its autocorrelation is no longer positive (NaN
+    frames taken as the mean). Beyond it the lagged excitation is another signal, not the same one later. A
+    series shorter than 3 frames gives NaN; one whose autocorrelation never falls to zero gives its length."""
     z = np.asarray(z, float)
     if z.size < 3:
         return float("nan")
@@ -83,10 +84,8 @@ def correlation_time(z) -> float:
     ac = np.fft.irfft(f * np.conj(f))[:n]
     if ac[0] <= 0:
         return float("nan")
-    ac = ac / ac[0]
-    neg = np.flatnonzero(ac < 0)
-    stop = int(neg[0]) if neg.size else n
-    return float(np.sum(ac[:stop]))
+    neg = np.flatnonzero(ac <= 0)
+    return float(neg[0]) if neg.size else float(n)
 
 
 def at_bound(value: float, lower: float, upper: float) -> str | None:

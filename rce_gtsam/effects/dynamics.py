@@ -102,8 +102,10 @@ class Dynamics(Effect):
     # pipeline seeds significant at p = 0.005; each row set's directions from the other set's z: 0/40
     score_excitation = "other_rows"
 
-    #: a natural frequency at its top bound (a period of ~1 frame) is a quasi-static joint, not an edge case
-    natural_limits = {"omega_root": ("upper",), "omega_tip": ("upper",)}
+    #: a natural frequency at its top bound (a period of ~1 frame) is a quasi-static joint, and one at its bottom
+    #: bound a period as long as the search reaches (~125 frames): a slow inertia, still a lag; neither is an edge
+    #: of the form (measured: a 3x default inertia, tip period 117 frames, fits at the bottom bound)
+    natural_limits = {"omega_root": ("upper", "lower"), "omega_tip": ("upper", "lower")}
 
     def parameters(self, n_edges: int):
         return (Parameter("omega_root", "rad/frame", OMEGA_MIN, OMEGA_MAX, description="natural frequency at the root"),

@@ -56,7 +56,7 @@ from ..graph import BranchGraph
 from ..jsonutil import jsonable as _jsonable
 from ..tracks import Tracks
 from .beam_fe import Creep, Mesh, Stiffening, hermite, natural_frequencies_hz, newmark, rayleigh
-from .simulate import (NoiseConfig, Simulation, _place_in_image, add_tracker_noise, make_excitation,
+from .simulate import (NoiseConfig, Simulation, place_in_image, add_tracker_noise, make_excitation,
                        turning_angles_deg)
 
 #: Spread (log) of the per-segment curvature at which stiffening sets in, about the beam's 99th-percentile
@@ -361,7 +361,7 @@ def simulate_beam(config: BeamConfig = BeamConfig()) -> BeamSimulation:
     pos0 = kin.positions(U, scale_px)
     y0 = turning_angles_deg(kin.positions(U0, scale_px), graph.nodes, graph.bends) - rest[:, None]
     y = turning_angles_deg(pos0, graph.nodes, graph.bends) - rest[:, None]
-    true_xy, _, root_px = _place_in_image(pos0, config.image_size, r_place)
+    true_xy, _, root_px = place_in_image(pos0, config.image_size, r_place)
     seg = {e: float(np.linalg.norm(true_xy[i + 1, 0] - true_xy[i, 0])) for i, e in enumerate(graph.edges)}
     dist = np.concatenate([[0.0], np.cumsum([seg[e] for e in graph.edges])])
     noisy, sigma = add_tracker_noise(graph, true_xy, dist / dist[-1], config.noise, fps, r_noise)

@@ -451,7 +451,7 @@ def _root_distance(graph: BranchGraph, lengths: dict) -> dict[int, float]:
     return d
 
 
-def _place_in_image(pos: np.ndarray, image_size, rng, margin: float = 30.0) -> tuple[np.ndarray, float, np.ndarray]:
+def place_in_image(pos: np.ndarray, image_size, rng, margin: float = 30.0) -> tuple[np.ndarray, float, np.ndarray]:
     """Rotate (about the root) and translate positions so that every frame fits the image.
 
     Tries headings in 5-degree steps and keeps the fitting one closest to a seeded preferred direction
@@ -682,7 +682,7 @@ def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
     turn = {b.edge: rest[b.edge] + y[i] for i, b in enumerate(bends)}
     sway = config.root_sway_deg * z / max(np.sqrt(np.mean(z ** 2)), 1e-12)
     pos0 = forward_kinematics(graph, lengths, np.radians(sway), turn)
-    true_xy, rot, root_px = _place_in_image(pos0, config.image_size, r_place)
+    true_xy, rot, root_px = place_in_image(pos0, config.image_size, r_place)
     if not np.isclose(np.linalg.norm(true_xy[1, 0] - true_xy[0, 0]), lengths[graph.edges[0]]):
         scale = np.linalg.norm(true_xy[1, 0] - true_xy[0, 0]) / lengths[graph.edges[0]]
         lengths = {e: L * scale for e, L in lengths.items()}
