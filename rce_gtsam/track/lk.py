@@ -287,6 +287,11 @@ class LKConfig:
     refine_consistency: bool = True
     anchor_highpass_px: float = 0.0
     threads: int = 1
+    hold: bool = True
+    hold_step_px: float = 0.3
+    hold_max_sigma_px: float | None = None
+    hold_agree_px: float = 2.0
+    hold_min_ncc: float = 0.8
 
     def __post_init__(self):
         if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads not in (1, 2):
@@ -336,6 +341,18 @@ class _Progress:
             self._cond.wait_for(lambda: self._n >= k or self._aborted)
             if self._n < k:
                 raise RuntimeError("the first pass was abandoned")
+
+
+def _f2f_ncc(prev_gray: np.ndarray, gray: np.ndarray, a, b, h: int) -> float:
+    """Normalised correlation of the (2h+1)^2 patch of ``prev_gray`` at ``a`` with that of ``gray`` at ``b``
+    (px; sub-pixel crops): whether frame-to-frame LK followed the same appearance (a node covered by a leaf or a
+    blank patch correlates poorly). 0 for a flat patch."""
+    size = (2 * h + 1, 2 * h + 1)
+    pa = cv2.getRectSubPix(prev_gray, size, (float(a[0]), float(a[1])), patchType=cv2.CV_32F).ravel()
+    pb = cv2.getRectSubPix(gray, size, (float(b[0]), float(b[1])), patchType=cv2.CV_32F).ravel()
+    pa, pb = pa - pa.mean(), pb - pb.mean()
+    den = math.sqrt(float(pa @ pa) * float(pb @ pb))
+    return float(pa @ pb) / den if den > 1e-6 else 0.0
 
 
 def _rotation_about(cx: float, cy: float, theta: float, dx: float, dy: float) -> np.ndarray:
@@ -648,6 +665,17 @@ class LKTracker:
             return xy, math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
         return None
 
+    def _length_ok(self, i: int, xy, est, vis) -> bool:
+        """Whether ``xy`` for node i keeps the segment to its parent (when the parent is visible) within the
+        stretch limits of ``LKConfig`` (``max_stretch``, ``min_length_fraction``, ``length_tol_px``)."""
+        p, cfg = self.parent[i], self.config
+        if p < 0 or not vis[p]:
+            return True
+        d = math.hypot(xy[0] - est[p, 0], xy[1] - est[p, 1])
+        l0 = self.rest_len[i]
+        return (cfg.min_length_fraction * l0 - cfg.length_tol_px <= d
+                <= (1 + cfg.max_stretch) * l0 + cfg.length_tol_px)
+
     def _refine(self, gray0, gray, q0, est, vis, fb_max, first_done=None):
         """Second pass: re-match every visible node with segment rotations from this frame's matches.
 
@@ -732,7 +760,10 @@ class LKTracker:
         counts = {"anchored": 0, "invisible": 0, "rejected_ncc": 0, "rejected_fb": 0, "rejected_length": 0,
                   "lost_match": 0, "predicted_from_graph": 0, "rejected_ambiguous": 0,
                   "predicted_from_segment": 0, "from_segment": 0, "rejected_unanchored": 0,
-                  "rejected_refine": 0}
+                  "rejected_refine": 0, "held": 0}
+        held = np.zeros(n, int)  # consecutive frames each node has been held by frame-to-frame LK alone
+        sig_prev = np.full(n, cfg.sigma_floor_px)
+        hold_max = cfg.hold_max_sigma_px if cfg.hold_max_sigma_px is not None else 0.5 * h
         t0 = time.perf_counter()
         n_done = 0
         pool = ThreadPoolExecutor(1, thread_name_prefix="lk-refine") if cfg.threads == 2 else None
@@ -817,7 +848,7 @@ class LKTracker:
                                 thetas.append(_turn(pred, f2f[ch], ang0[ch]) if f2f_ok[ch] and prev_vis[ch] else tp)
                         # a wide search (no frame-to-frame or segment prediction to trust) is a re-acquisition
                         # whatever the previous frame said: the same ambiguity and geometry checks apply
-                        reacquiring = not prev_vis[i] or r > h
+                        reacquiring = not prev_vis[i] or r > h or held[i] > 0
                         preds[i], wide[i] = pred, r > h
                         m = self._anchor(gray0, ga, i, q0[i], pred, theta, r, thetas)
                         ok = m is not None
@@ -862,6 +893,7 @@ class LKTracker:
                                     bend_rot[i] = seg_rot[i] - seg_rot[p]
                             sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
                             counts["anchored"] += 1
+                            held[i] = 0
                         elif (cfg.segment_fallback and seg is not None and seg[2] >= cfg.min_segment_ncc
                               ):
                             # the node's own patch failed (a leaf over the joint, a template spoiled by a leaf in
@@ -872,6 +904,21 @@ class LKTracker:
                             sig[i] = math.sqrt(sig[p] ** 2 + 0.5 ** 2)
                             seg_rot[i] = seg[1]
                             counts["from_segment"] += 1
+                        elif (cfg.hold and f2f_ok[i] and prev_vis[i]
+                              and (s_hold := math.sqrt(sig_prev[i] ** 2 + (fb_f2f[i] / 2) ** 2 + cfg.hold_step_px ** 2))
+                              <= hold_max and self._length_ok(i, f2f[i], new_est, new_vis)
+                              and (seg is None or seg[2] < cfg.min_ncc
+                                   or math.hypot(*(f2f[i] - seg[0])) <= cfg.hold_agree_px)
+                              and _f2f_ncc(prev_gray, gray, prev_est[i], f2f[i], h) >= cfg.hold_min_ncc):
+                            # the frame-0 template does not fit here now (blur, a leaf, a pose far from frame 0),
+                            # but frame-to-frame LK followed the node from a measured (or held) position: keep it
+                            # visible with a sigma that grows as a random walk (``hold_step_px`` a frame plus the
+                            # round trip's own error) until the template fits again or sigma passes ``hold_max``
+                            new_est[i], new_vis[i], sig[i] = f2f[i], True, s_hold
+                            if p >= 0:
+                                seg_rot[i] = _turn(new_est[p], f2f[i], ang0[i])
+                            held[i] += 1
+                            counts["held"] += 1
                         else:
                             new_est[i], new_vis[i], sig[i] = pred, False, float(r)
                             counts["invisible"] += 1
@@ -891,6 +938,7 @@ class LKTracker:
                 xs.append(est.copy())
                 vis_all.append(vis.copy())
                 sig_all.append(np.maximum(sig, cfg.sigma_floor_px))
+                sig_prev = sig_all[-1]
                 n_done += 1
                 if progress is not None:
                     progress(1)
