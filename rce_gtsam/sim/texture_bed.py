@@ -17,7 +17,7 @@ mean 1) unchanged. Rendering (:func:`render_frames`), per frame:
   motion; the segments' motions are blended at the joints (Gaussian weights of the distance to each segment,
   ``blend_px``); between ``inner_px`` and ``outer_px`` the motion fades out, and the background stays;
 * motion blur follows the pixel speed: the frame is the mean of ``n_sub`` sub-frame warps over an exposure of
-  ``exposure`` frames (more sub-frames where the motion is fast, one where the branch is still);
+  ``exposure`` frames centred on the frame's time (more sub-frames where the motion is fast, one where the branch is still);
 * sensor noise (``noise_grey`` grey levels RMS), a flicker (global gain, ``flicker`` RMS), then H.264
   (``crf``) when written by :func:`write_bed_video`.
 
@@ -254,14 +254,16 @@ def render_frames(bed: Bed, image: np.ndarray, q: np.ndarray, settings: RenderSe
     gain = 1 + st.flicker * rng.standard_normal(F)
     speed = np.zeros(F)
     speed[1:] = np.hypot(*np.diff(bed.true_xy, axis=1).transpose(2, 0, 1)).max(axis=0)
+    speed[:-1] = np.maximum(speed[:-1], speed[1:])
     for f in range(F):
         n_sub = int(np.clip(np.ceil(speed[f] * st.exposure / 0.5), 1, st.max_sub))
         acc = np.zeros((y1 - y0, x1 - x0, 3), np.float32)
         for s in range(n_sub):
-            # sub-frame times over the exposure ending at frame f (linear interpolation of the headings)
-            t = f - st.exposure * (1 - (s + 0.5) / n_sub) if n_sub > 1 else float(f)
-            f0 = int(np.floor(max(t, 0.0)))
-            fr = max(t, 0.0) - f0
+            # sub-frame times over an exposure centred on frame f (linear interpolation of the headings), so
+            # that the true position of frame f is the middle of its blur
+            t = float(np.clip(f + st.exposure * ((s + 0.5) / n_sub - 0.5), 0.0, F - 1.0))
+            f0 = min(int(np.floor(t)), F - 1)
+            fr = t - f0
             hd = bed.heading[:, f0] * (1 - fr) + bed.heading[:, min(f0 + 1, F - 1)] * fr
             mx, my = _warp_map(bed, q, hd, box, st)
             acc += cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)

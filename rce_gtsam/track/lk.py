@@ -287,6 +287,7 @@ class LKConfig:
     refine_consistency: bool = True
     anchor_highpass_px: float = 0.0
     threads: int = 1
+    tip_segment_fallback: bool = True
     hold: bool = True
     hold_step_px: float = 0.3
     hold_max_sigma_px: float | None = None
@@ -894,7 +895,8 @@ class LKTracker:
                             sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
                             counts["anchored"] += 1
                             held[i] = 0
-                        elif (cfg.segment_fallback and seg is not None and seg[2] >= cfg.min_segment_ncc
+                        elif ((cfg.segment_fallback or (cfg.tip_segment_fallback and i in self._tips))
+                              and seg is not None and seg[2] >= cfg.min_segment_ncc
                               ):
                             # the node's own patch failed (a leaf over the joint, a template spoiled by a leaf in
                             # frame 0) but its whole segment matched well, hinged at a measured parent: the node is
