@@ -50,7 +50,7 @@ def bed_case(seed: int, effects: tuple, n_frames: int, tip_px: float, cache: Pat
     """(bed, clean frame, mp4 path), rendered once and cached."""
     from rce_gtsam.sim.texture_bed import clean_first_frame, make_bed, write_bed_video
 
-    tag = f"s{seed}_{'-'.join(effects) or 'none'}_f{n_frames}_tip{tip_px:g}"
+    tag = f"v2_s{seed}_{'-'.join(effects) or 'none'}_f{n_frames}_tip{tip_px:g}"
     cache.mkdir(parents=True, exist_ok=True)
     path, meta = cache / f"{tag}.mp4", cache / f"{tag}.pkl"
     cf = clean_first_frame(PLANT)

@@ -147,7 +147,6 @@ def make_bed(points: np.ndarray, graph: BranchGraph, n_frames: int, seed: int, e
     y = np.asarray(sim.response_true)
     sim_bends = [b.edge for b in sim.graph.bends]
     assert sim_bends == [(k, k + 1) for k in range(1, len(edges))]
-    d = q_vec = None  # noqa: F841
     vec = np.array([points[c] - points[p] for p, c in edges])
     length = np.hypot(*vec.T)
     h0 = np.arctan2(vec[:, 1], vec[:, 0])
