@@ -108,8 +108,8 @@ def report(name, res, q, graph, tap, kappa: bool):
         print(f"  tip {t}: visible {100 * res.visible[t].mean():.1f} %; distance to TAPIR where marked lost: "
               f"median {np.median(d[inv]) if inv.any() else np.nan:.2f} px")
     worst = min(r[2] for r in rows[2:6])
-    print(f"  frames 120-359: visible {' / '.join(f'{100 * r[2]:.0f}' for r in rows[2:6])} % (worst {100 * worst:.0f}); "
-          f"p90 {' / '.join(f'{r[3]:.2f}' for r in rows[2:6])} px")
+    print(f"  frames 120-359: visible {' / '.join(f'{100 * r[2]:.0f}' for r in rows[2:6])} % "
+          f"(worst {100 * worst:.0f}); p90 {' / '.join(f'{r[3]:.2f}' for r in rows[2:6])} px")
     if kappa:
         rho, lr, inside, n = kappa_vs_tapir(res, tap, graph)
         print(f"  kappa vs the TAPIR run's: Spearman {rho:.2f}, log-RMS {lr:.2f}, inside its CI {inside}/{n}")

@@ -17,7 +17,8 @@ mean 1) unchanged. Rendering (:func:`render_frames`), per frame:
   motion; the segments' motions are blended at the joints (Gaussian weights of the distance to each segment,
   ``blend_px``); between ``inner_px`` and ``outer_px`` the motion fades out, and the background stays;
 * motion blur follows the pixel speed: the frame is the mean of ``n_sub`` sub-frame warps over an exposure of
-  ``exposure`` frames centred on the frame's time (more sub-frames where the motion is fast, one where the branch is still);
+  ``exposure`` frames centred on the frame's time (more sub-frames where the motion is fast, one where the branch
+  is still);
 * sensor noise (``noise_grey`` grey levels RMS), a flicker (global gain, ``flicker`` RMS), then H.264
   (``crf``) when written by :func:`write_bed_video`.
 

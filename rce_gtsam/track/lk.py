@@ -254,6 +254,24 @@ class LKConfig:
         0.85/0.81/0.96/0.91/0.95 -> 0.93/0.85/0.98/0.97/0.97) but so does the tail (share of visible
         errors > 2 px on seeds 2-4: 0.8/0.2/0.6 % -> 1.1/1.1/0.9 %), and under the soft 60-px shadow one
         visible point was 201 px off (seed 0), so it is not the default.
+    hold: when a node's frame-0 match fails but frame-to-frame pyramidal LK followed it from a measured (or held)
+        position -- round trip within the forward-backward limit, the (2h+1)^2 patch correlating at least
+        ``hold_min_ncc`` with the previous frame's (a covered node or a blank patch does not), the segment to a
+        visible parent within the stretch limits and, where the hinged segment search matched, within
+        ``hold_agree_px`` of its position -- keep the node visible at the LK position with a sigma that grows as a
+        random walk: sigma^2 = sigma_prev^2 + (fb/2)^2 + ``hold_step_px``^2, until it passes ``hold_max_sigma_px``
+        (None: h/2). A held node that the frame-0 template finds again counts as re-acquired (the strict
+        ``distinct_reacquire`` and parent checks apply), so a hold that drifted cannot re-anchor on a neighbouring
+        knot. Measured (``benchmarks/bench_track_plant2.py``, ``benchmarks/bench_texture_bed.py``)
+        on plant 2's footage against TAPIR, frames 120-359, visible 48-63 % -> 63-77 % of TAPIR's rows,
+        p90 distance 1.1-1.3 -> 1.7-2.9 px; on the texture bed visible 89 -> 95 %, median error 0.22 -> 0.23 px.
+        ``hold_step_px`` (0.3 px a frame) is an assumption, not a calibration: on plant 2 the held points' distance
+        to TAPIR was ~3 sigma at the median (TAPIR's own error included), so the sigma of a held point is low.
+    tip_segment_fallback: a tip (a node with a parent and no child) whose own patch fails is placed where the
+        hinged segment search puts it (``min_segment_ncc``), as ``segment_fallback`` does for every node: a tip's
+        band is short and thin, and it was marked lost in ~90 % of the texture bed's frames while the positions
+        were right to ~0.5 px; with it the tip is visible throughout (bed seed 0: error median 0.96 px, p90 3.0 px,
+        sigma median 0.5 px).
     threads: 2 = the refinement pass runs in a second thread, node by node right behind the first pass (a node
         is re-matched as soon as the first pass has finished it, its parent and its children, and after its
         parent's re-match: exactly the values a pass after the first reads, so the tracks are bit-identical to
