@@ -306,6 +306,9 @@ class LKConfig:
     anchor_highpass_px: float = 0.0
     threads: int = 1
     tip_segment_fallback: bool = True
+    segment_tiebreak: bool = True
+    recent_template: bool = True
+    recent_min_ncc: float = 0.8
     hold: bool = True
     hold_step_px: float = 0.3
     hold_max_sigma_px: float | None = None
@@ -684,6 +687,36 @@ class LKTracker:
             return xy, math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
         return None
 
+    def _keep_recent(self, gray, est, sig, anchored, recent) -> None:
+        """Store, for every node anchored to its frame-0 template in this frame, the (2(h + margin) + 1)^2 crop of
+        ``gray`` centred on its position, the position and its sigma (``recent``, in place)."""
+        kp = 2 * (self.h + self._margin) + 1
+        for i in np.flatnonzero(anchored):
+            x, y = float(est[i, 0]), float(est[i, 1])
+            recent[i] = (cv2.getRectSubPix(gray, (kp, kp), (x, y)).astype(np.float32), (x, y), float(sig[i]))
+
+    def _match_recent(self, gray, rec, pred, r, fb_max, i, est, vis):
+        """Match node i's last frame-0-anchored appearance ``rec`` (see ``_keep_recent``) within r px of ``pred``
+        in ``gray``: the same correlation search, Lucas-Kanade refinement and forward-backward check as a frame-0
+        match, on the whole patch. Returns (xy, sigma px) when it passes ``min_ncc``, the forward-backward limit,
+        the distinctness test of a re-acquisition (``distinct_sigmas``) and the segment-length check, else None."""
+        cfg, h, margin = self.config, self.h, self._margin
+        prev = rec[0]
+        tmpl = np.ascontiguousarray(prev[margin:margin + 2 * h + 1, margin:margin + 2 * h + 1])
+        k = 2 * (h + r) + 1
+        qx, qy = float(pred[0]), float(pred[1])
+        cur = cv2.getRectSubPix(gray, (k, k), (qx, qy)).astype(np.float32)
+        m = self._kernels.match_node(cur, tmpl, np.ones_like(tmpl), prev, r, h, float(h + margin))
+        if not m[0] or m[3] < cfg.min_ncc or m[4] > fb_max:
+            return None
+        if m[9] and m[6] > m[3] - cfg.distinct_sigmas / math.sqrt(tmpl.size):
+            return None
+        c = float(h + r)
+        xy = np.array([qx + (m[1] - c), qy + (m[2] - c)])
+        if not self._length_ok(i, xy, est, vis):
+            return None
+        return xy, math.sqrt(m[5] ** 2 + (m[4] / 2) ** 2)
+
     def _length_ok(self, i: int, xy, est, vis) -> bool:
         """Whether ``xy`` for node i keeps the segment to its parent (when the parent is visible) within the
         stretch limits of ``LKConfig`` (``max_stretch``, ``min_length_fraction``, ``length_tol_px``)."""
@@ -779,7 +812,8 @@ class LKTracker:
         counts = {"anchored": 0, "invisible": 0, "rejected_ncc": 0, "rejected_fb": 0, "rejected_length": 0,
                   "lost_match": 0, "predicted_from_graph": 0, "rejected_ambiguous": 0,
                   "predicted_from_segment": 0, "from_segment": 0, "rejected_unanchored": 0,
-                  "rejected_refine": 0, "held": 0}
+                  "rejected_refine": 0, "held": 0, "recent_template": 0}
+        recent = [None] * n  # per node: (crop of its last frame-0-anchored frame, that position, its sigma)
         held = np.zeros(n, int)  # consecutive frames each node has been held by frame-to-frame LK alone
         sig_prev = np.full(n, cfg.sigma_floor_px)
         hold_max = cfg.hold_max_sigma_px if cfg.hold_max_sigma_px is not None else 0.5 * h
@@ -828,6 +862,7 @@ class LKTracker:
                     # latest estimates (this frame's where already done): new_est holds prev_est until a node
                     # is done, so only the visibility needs its own merged copy
                     cur_vis = prev_vis.copy()
+                    anchored_now = np.zeros(n, bool)
                     # the refinement pass follows the first one node by node in the second thread (``_refine``)
                     first = _Progress() if pool is not None else None
                     refine = None
@@ -879,7 +914,14 @@ class LKTracker:
                             if score < cfg.min_ncc:
                                 ok = False
                                 counts["rejected_ncc"] += 1
-                            elif cfg.distinct_reacquire and reacquiring and ambiguous:
+                            elif (cfg.distinct_reacquire and reacquiring and ambiguous
+                                  and not (cfg.segment_tiebreak and seg is not None and seg[2] >= cfg.min_segment_ncc
+                                           and xy2 is not None
+                                           and math.hypot(xy[0] - seg[0][0], xy[1] - seg[0][1]) <= h / 2
+                                           < math.hypot(xy2[0] - seg[0][0], xy2[1] - seg[0][1]))):
+                                # two indistinguishable peaks, unless the whole segment strip, hinged at the
+                                # visible parent, matched well (``min_segment_ncc``) and points at the best one
+                                # (within h/2) and not at the other: the strip's many pixels break the tie
                                 ok = False
                                 counts["rejected_ambiguous"] += 1
                             elif (cfg.distinct_follow and ambiguous and xy2 is not None
@@ -906,6 +948,7 @@ class LKTracker:
                                     counts["rejected_length"] += 1
                         if ok:
                             new_est[i], new_vis[i] = xy, True
+                            anchored_now[i] = score >= cfg.recent_min_ncc
                             if p >= 0:
                                 seg_rot[i] = _turn(new_est[p], xy, ang0[i])
                                 if new_vis[p]:
@@ -924,6 +967,18 @@ class LKTracker:
                             sig[i] = math.sqrt(sig[p] ** 2 + 0.5 ** 2)
                             seg_rot[i] = seg[1]
                             counts["from_segment"] += 1
+                        elif (cfg.recent_template and recent[i] is not None and r <= h and i not in self._tips
+                              and (rm := self._match_recent(gray, recent[i], pred, r, fb_max, i, new_est, new_vis))
+                              is not None):
+                            # the frame-0 template does not fit, but the node's appearance in the last frame it was
+                            # anchored to frame 0 does: measured against that frame, so its error is that anchor's
+                            # plus this match's (no accumulation while the node stays off its frame-0 template)
+                            new_est[i], new_vis[i] = rm[0], True
+                            sig[i] = math.sqrt(recent[i][2] ** 2 + rm[1] ** 2 + cfg.sigma_floor_px ** 2)
+                            if p >= 0:
+                                seg_rot[i] = _turn(new_est[p], rm[0], ang0[i])
+                            held[i] += 1  # off its frame-0 template: finding it there again is a re-acquisition
+                            counts["recent_template"] += 1
                         elif (cfg.hold and f2f_ok[i] and prev_vis[i]
                               and (s_hold := math.sqrt(sig_prev[i] ** 2 + (fb_f2f[i] / 2) ** 2 + cfg.hold_step_px ** 2))
                               <= hold_max and self._length_ok(i, f2f[i], new_est, new_vis)
@@ -954,6 +1009,8 @@ class LKTracker:
                     new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
                     new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)
                     est, vis = new_est, new_vis
+                    if cfg.recent_template:
+                        self._keep_recent(ga, est, sig, anchored_now, recent)
                 prev_gray = gray
                 xs.append(est.copy())
                 vis_all.append(vis.copy())
