@@ -86,6 +86,17 @@ never recovers after an occlusion. This tracker uses frame-to-frame pyramidal LK
    (when the parent is visible) stretches beyond ``(1 + max_stretch) * L0 + length_tol_px`` or
    shrinks below ``min_length_fraction * L0 - length_tol_px`` (L0 = frame-0 segment length; a branch
    segment does not stretch, but it may foreshorten when it turns out of the image plane).
+3b. **Hold through fast motion** (issue 38; ``benchmarks/bench_track_plant2.py``, ``bench_texture_bed.py``): before a
+   node whose frame-0 match failed is marked invisible, (i) it is matched against its appearance in the last frame
+   it was anchored to frame 0 with correlation >= ``recent_min_ncc`` (``recent_template``; only with a trusted
+   prediction -- never in the wide window -- and not at a tip), its sigma that anchor's plus this match's;
+   (ii) failing that, it is held at its frame-to-frame LK position with a sigma that grows frame by frame
+   (``hold``); (iii) a tip is placed by its hinged segment search (``tip_segment_fallback``). A node placed by
+   (i) or (ii) is off its frame-0 template, so finding it there again counts as a re-acquisition (strict checks).
+   An ambiguous re-acquisition is accepted when the whole segment strip, hinged at the visible parent, matched
+   well and points at the best peak and not at the second (``segment_tiebreak``).
+   Measured on plant 2's footage against TAPIR's tracks, frames 120-359 by 60-frame window (visible share of
+   TAPIR's rows; p90 distance): before 63/52/48/53 % (1.1-1.3 px), after 90/82/75/86 % (1.5-2.1 px).
 4. **Uncertainty**: ``sigma_px = sqrt(s_lk^2 + (fb/2)^2 + sigma_floor_px^2)`` with the LK
    least-squares standard error ``s_lk = sqrt(residual_variance / lambda_min(G))`` (G = structure
    tensor of the template, residual = template minus the matched patch, so appearance change counts)
@@ -267,6 +278,12 @@ class LKConfig:
         p90 distance 1.1-1.3 -> 1.7-2.9 px; on the texture bed visible 89 -> 95 %, median error 0.22 -> 0.23 px.
         ``hold_step_px`` (0.3 px a frame) is an assumption, not a calibration: on plant 2 the held points' distance
         to TAPIR was ~3 sigma at the median (TAPIR's own error included), so the sigma of a held point is low.
+    recent_template, recent_min_ncc: see the module docstring (3b). The stored appearance is only as good as its
+        anchor: 0.8 (the template explains >= 64 % of the patch variance) keeps a node partly covered by a leaf
+        from being stored. Without the narrow-window rule the recent template locked onto the occluding leaf 13-16
+        px off in ``tests/test_track_lk.py``'s scene, and at a tip matched with its full patch 7.6 px off
+        (simulator seed 0): both are excluded.
+    segment_tiebreak: see the module docstring (3b); re-uses ``min_segment_ncc`` and h/2.
     tip_segment_fallback: a tip (a node with a parent and no child) whose own patch fails is placed where the
         hinged segment search puts it (``min_segment_ncc``), as ``segment_fallback`` does for every node: a tip's
         band is short and thin, and it was marked lost in ~90 % of the texture bed's frames while the positions
