@@ -326,6 +326,7 @@ class LKConfig:
     segment_tiebreak: bool = True
     recent_template: bool = True
     recent_min_ncc: float = 0.8
+    fallback_sigma_px: float = 1.0
     hold: bool = True
     hold_step_px: float = 0.3
     hold_max_sigma_px: float | None = None
@@ -336,6 +337,10 @@ class LKConfig:
         if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads not in (1, 2):
             raise InputError("LKConfig", f"threads must be 1 or 2, got {self.threads!r}", "threads")
 
+
+#: ``TrackResult.info["how"]`` (P, F) int8 of :class:`LKTracker`: how each position was found.
+HOW = {-1: "invisible", 0: "anchored to frame 0", 1: "recent template", 2: "held by frame-to-frame LK",
+       3: "hinged segment"}
 
 # A tip's template uses its branch band whenever the band holds at least this many (weighted) pixels: a 4x4
 # block, where the correlation of an unrelated patch has a standard error of 1/sqrt(16) = 0.25, so ``min_ncc``
@@ -819,7 +824,8 @@ class LKTracker:
         ang0 = self._ang0
         fb_max = max(cfg.min_fb_px, cfg.max_fb_fraction * h)
         lk_params = dict(winSize=(2 * h + 1, 2 * h + 1), maxLevel=cfg.pyr_levels, criteria=_LK_CRITERIA)
-        xs, vis_all, sig_all = [], [], []
+        xs, vis_all, sig_all, how_all = [], [], [], []
+        how = np.zeros(n, np.int8)  # per node in this frame: a key of ``HOW`` (how its position was found)
         gray0 = prev_gray = None
         est = q0.copy()
         vis = np.ones(n, bool)
@@ -880,6 +886,7 @@ class LKTracker:
                     # is done, so only the visibility needs its own merged copy
                     cur_vis = prev_vis.copy()
                     anchored_now = np.zeros(n, bool)
+                    how = np.full(n, -1, np.int8)
                     # the refinement pass follows the first one node by node in the second thread (``_refine``)
                     first = _Progress() if pool is not None else None
                     refine = None
@@ -965,6 +972,7 @@ class LKTracker:
                                     counts["rejected_length"] += 1
                         if ok:
                             new_est[i], new_vis[i] = xy, True
+                            how[i] = 0
                             anchored_now[i] = score >= cfg.recent_min_ncc
                             if p >= 0:
                                 seg_rot[i] = _turn(new_est[p], xy, ang0[i])
@@ -984,6 +992,7 @@ class LKTracker:
                             sig[i] = math.sqrt(sig[p] ** 2 + 0.5 ** 2)
                             seg_rot[i] = seg[1]
                             counts["from_segment"] += 1
+                            how[i] = 3
                         elif (cfg.recent_template and recent[i] is not None and r <= h and i not in self._tips
                               and (rm := self._match_recent(gray, recent[i], pred, r, fb_max, i, new_est, new_vis))
                               is not None):
@@ -991,16 +1000,18 @@ class LKTracker:
                             # anchored to frame 0 does: measured against that frame, so its error is that anchor's
                             # plus this match's (no accumulation while the node stays off its frame-0 template)
                             new_est[i], new_vis[i] = rm[0], True
-                            sig[i] = math.sqrt(recent[i][2] ** 2 + rm[1] ** 2 + cfg.sigma_floor_px ** 2)
+                            sig[i] = math.sqrt(recent[i][2] ** 2 + rm[1] ** 2 + cfg.fallback_sigma_px ** 2)
                             if p >= 0:
                                 seg_rot[i] = _turn(new_est[p], rm[0], ang0[i])
                             held[i] += 1  # off its frame-0 template: finding it there again is a re-acquisition
                             counts["recent_template"] += 1
-                        elif (cfg.hold and f2f_ok[i] and prev_vis[i]
-                              and (s_hold := math.sqrt(sig_prev[i] ** 2 + (fb_f2f[i] / 2) ** 2 + cfg.hold_step_px ** 2))
+                            how[i] = 1
+                        elif (cfg.hold and f2f_ok[i] and prev_vis[i] and (p < 0 or new_vis[p])
+                              and (s_hold := math.sqrt(max(sig_prev[i], cfg.fallback_sigma_px) ** 2 + (fb_f2f[i] / 2) ** 2
+                                                       + cfg.hold_step_px ** 2))
                               <= hold_max and self._length_ok(i, f2f[i], new_est, new_vis)
-                              and (seg is None or seg[2] < cfg.min_ncc
-                                   or math.hypot(*(f2f[i] - seg[0])) <= cfg.hold_agree_px)
+                              and (p < 0 or (seg is not None and seg[2] >= cfg.min_ncc
+                                             and math.hypot(*(f2f[i] - seg[0])) <= cfg.hold_agree_px))
                               and _f2f_ncc(prev_gray, gray, prev_est[i], f2f[i], h) >= cfg.hold_min_ncc):
                             # the frame-0 template does not fit here now (blur, a leaf, a pose far from frame 0),
                             # but frame-to-frame LK followed the node from a measured (or held) position: keep it
@@ -1011,6 +1022,7 @@ class LKTracker:
                                 seg_rot[i] = _turn(new_est[p], f2f[i], ang0[i])
                             held[i] += 1
                             counts["held"] += 1
+                            how[i] = 2
                         else:
                             new_est[i], new_vis[i], sig[i] = pred, False, float(r)
                             counts["invisible"] += 1
@@ -1030,6 +1042,7 @@ class LKTracker:
                         self._keep_recent(ga, est, sig, anchored_now, recent)
                 prev_gray = gray
                 xs.append(est.copy())
+                how_all.append(np.where(vis, how, -1).astype(np.int8))
                 vis_all.append(vis.copy())
                 sig_all.append(np.maximum(sig, cfg.sigma_floor_px))
                 sig_prev = sig_all[-1]
@@ -1040,7 +1053,7 @@ class LKTracker:
                     on_frame(n_done - 1, est.copy(), vis.copy())
         if n_done == 0:
             raise InputError(src_name, "the video has no frames")
-        info = {"tracker": "lk-anchored", "patch_radius_px": h, "branch_halfwidth_px": self.branch_halfwidth_px, "frames": n_done,
+        info = {"how": np.stack(how_all, axis=1), "tracker": "lk-anchored", "patch_radius_px": h, "branch_halfwidth_px": self.branch_halfwidth_px, "frames": n_done,
                 "time_total_s": time.perf_counter() - t0, **counts}
         return TrackResult(point_ids=np.arange(n), xy=np.stack(xs, axis=1), visible=np.stack(vis_all, axis=1),
                            sigma_px=np.stack(sig_all, axis=1), fps=source.fps, info=info)
