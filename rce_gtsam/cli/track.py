@@ -77,6 +77,12 @@ def run_track(args: argparse.Namespace) -> int:
     print(f"tracked {result.n_points} points over {result.n_frames} frames with {result.info.get('tracker')}; "
           f"visible {100 * vis.mean():.1f}% of point-frames, median sigma "
           f"{float(_median(result.sigma_px[vis])):.2f} px")
+    how = result.info.get("how")
+    if how is not None and vis.any():
+        from ..track.lk import HOW
+        parts = [f"{100 * float((how == k).sum()) / vis.sum():.1f} % {HOW[k]}" for k in (1, 2, 3) if (how == k).any()]
+        if parts:
+            print("of the visible point-frames, not anchored to the first frame: " + ", ".join(parts))
     print_visibility(vis)
     if corrections is not None:
         print(f"then re-tracked {len({c.node for c in corrections})} node(s) between {len(corrections)} correction(s) "

@@ -86,6 +86,24 @@ never recovers after an occlusion. This tracker uses frame-to-frame pyramidal LK
    (when the parent is visible) stretches beyond ``(1 + max_stretch) * L0 + length_tol_px`` or
    shrinks below ``min_length_fraction * L0 - length_tol_px`` (L0 = frame-0 segment length; a branch
    segment does not stretch, but it may foreshorten when it turns out of the image plane).
+3b. **Hold through fast motion** (issue 38; ``benchmarks/bench_track_plant2.py``, ``bench_texture_bed.py``): before a
+   node whose frame-0 match failed is marked invisible, (i) it is matched against its appearance in the last frame
+   it was anchored to frame 0 with correlation >= ``recent_min_ncc`` (``recent_template``; only with a trusted
+   prediction -- never in the wide window -- and not at a tip), its sigma that anchor's plus this match's;
+   (ii) failing that, it is held at its frame-to-frame LK position with a sigma that grows frame by frame
+   (``hold``); (iii) a tip is placed by its hinged segment search (``tip_segment_fallback``). A node placed by
+   (i) or (ii) is off its frame-0 template, so finding it there again counts as a re-acquisition (strict checks).
+   An ambiguous re-acquisition is accepted when the whole segment strip, hinged at the visible parent, matched
+   well and points at the best peak and not at the second (``segment_tiebreak``).
+   Measured against revision 9adf3ee in one run: on plant 2's footage against TAPIR's tracks, frames 120-359 by
+   60-frame window (visible share of TAPIR's rows; p90 distance), 63/52/48/53 % (1.1-1.3 px) -> 85/75/64/90 %
+   (1.5-1.7 px), and kappa against the TAPIR run's kappa Spearman 0.50 -> 0.82, log-RMS 0.79 -> 0.51, inside its
+   CI 12 -> 15 of 23; on the real-texture bed (``rce_gtsam.sim.texture_bed``) see ``bench_texture_bed.py``. Cost:
+   on the simulator's renders (600 frames, seeds 0/2/3/4) Spearman of kappa 0.917/0.903/0.765/0.942 ->
+   0.763/0.913/0.711/0.961 and the p99 error of visible points 0.6-1.0 -> 0.65-2.6 px: the recent template
+   follows a fluttering leaf now and then (seed 0; without it 0.926). Not kept (measured on plant 2): predicting
+   a lost node from where it was last seen moved as its nearest seen ancestor (p90 distance 13-19 px in two
+   windows), and requiring the recent template to agree with the segment search (visible 41-67 %).
 4. **Uncertainty**: ``sigma_px = sqrt(s_lk^2 + (fb/2)^2 + sigma_floor_px^2)`` with the LK
    least-squares standard error ``s_lk = sqrt(residual_variance / lambda_min(G))`` (G = structure
    tensor of the template, residual = template minus the matched patch, so appearance change counts)
@@ -254,6 +272,32 @@ class LKConfig:
         0.85/0.81/0.96/0.91/0.95 -> 0.93/0.85/0.98/0.97/0.97) but so does the tail (share of visible
         errors > 2 px on seeds 2-4: 0.8/0.2/0.6 % -> 1.1/1.1/0.9 %), and under the soft 60-px shadow one
         visible point was 201 px off (seed 0), so it is not the default.
+    hold: when a node's frame-0 match (and the recent template) fails but frame-to-frame pyramidal LK followed it
+        from a measured (or held) position -- round trip within the forward-backward limit, the (2h+1)^2 patch
+        correlating at least ``hold_min_ncc`` with the previous frame's (a covered node or a blank patch does not),
+        its parent visible in this frame (the root excepted), the segment to it within the stretch limits and
+        within ``hold_agree_px`` of where the hinged segment search (matched at >= ``min_ncc``) puts the node --
+        keep the node visible at the LK position with a sigma that grows as a random walk: sigma^2 =
+        max(sigma_prev, ``fallback_sigma_px``)^2 + (fb/2)^2 + ``hold_step_px``^2, until it passes
+        ``hold_max_sigma_px`` (None: h/2). A held node that the frame-0 template finds again counts as re-acquired
+        (the strict ``distinct_reacquire`` and parent checks apply), so a hold that drifted cannot re-anchor on a
+        neighbouring knot. Without the parent and segment conditions a held tip drifted 149 px off on the texture
+        bed (150 px excursion), and held points followed fluttering leaves on the simulator clips (p90 7.4 px).
+        ``hold_step_px`` (0.3 px a frame) is an assumption, not a calibration.
+    fallback_sigma_px: the smallest sigma (px) of a recent-template or held position. Their errors are not what
+        the match's own least-squares error says: median 0.5-1.4 px on the texture bed (seeds 0-1) and 1.1-1.8 px
+        on simulator seed 0, at err/sigma medians of 1.2-4.3 with the match's sigma alone; 1 px is that scale.
+    recent_template, recent_min_ncc: see the module docstring (3b). The stored appearance is only as good as its
+        anchor: 0.8 (the template explains >= 64 % of the patch variance) keeps a node partly covered by a leaf
+        from being stored. Without the narrow-window rule the recent template locked onto the occluding leaf 13-16
+        px off in ``tests/test_track_lk.py``'s scene, and at a tip matched with its full patch 7.6 px off
+        (simulator seed 0): both are excluded.
+    segment_tiebreak: see the module docstring (3b); re-uses ``min_segment_ncc`` and h/2.
+    tip_segment_fallback: a tip (a node with a parent and no child) whose own patch fails is placed where the
+        hinged segment search puts it (``min_segment_ncc``), as ``segment_fallback`` does for every node: a tip's
+        band is short and thin, and it was marked lost in ~90 % of the texture bed's frames while the positions
+        were right to ~0.5 px; with it the tip is visible throughout (bed seed 0: error median 0.96 px, p90 3.0 px,
+        sigma median 0.5 px).
     threads: 2 = the refinement pass runs in a second thread, node by node right behind the first pass (a node
         is re-matched as soon as the first pass has finished it, its parent and its children, and after its
         parent's re-match: exactly the values a pass after the first reads, so the tracks are bit-identical to
@@ -287,11 +331,25 @@ class LKConfig:
     refine_consistency: bool = True
     anchor_highpass_px: float = 0.0
     threads: int = 1
+    tip_segment_fallback: bool = True
+    segment_tiebreak: bool = True
+    recent_template: bool = True
+    recent_min_ncc: float = 0.8
+    fallback_sigma_px: float = 1.0
+    hold: bool = True
+    hold_step_px: float = 0.3
+    hold_max_sigma_px: float | None = None
+    hold_agree_px: float = 2.0
+    hold_min_ncc: float = 0.8
 
     def __post_init__(self):
         if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads not in (1, 2):
             raise InputError("LKConfig", f"threads must be 1 or 2, got {self.threads!r}", "threads")
 
+
+#: ``TrackResult.info["how"]`` (P, F) int8 of :class:`LKTracker`: how each position was found.
+HOW = {-1: "invisible", 0: "anchored to frame 0", 1: "recent template", 2: "held by frame-to-frame LK",
+       3: "hinged segment"}
 
 # A tip's template uses its branch band whenever the band holds at least this many (weighted) pixels: a 4x4
 # block, where the correlation of an unrelated patch has a standard error of 1/sqrt(16) = 0.25, so ``min_ncc``
@@ -336,6 +394,18 @@ class _Progress:
             self._cond.wait_for(lambda: self._n >= k or self._aborted)
             if self._n < k:
                 raise RuntimeError("the first pass was abandoned")
+
+
+def _f2f_ncc(prev_gray: np.ndarray, gray: np.ndarray, a, b, h: int) -> float:
+    """Normalised correlation of the (2h+1)^2 patch of ``prev_gray`` at ``a`` with that of ``gray`` at ``b``
+    (px; sub-pixel crops): whether frame-to-frame LK followed the same appearance (a node covered by a leaf or a
+    blank patch correlates poorly). 0 for a flat patch."""
+    size = (2 * h + 1, 2 * h + 1)
+    pa = cv2.getRectSubPix(prev_gray, size, (float(a[0]), float(a[1])), patchType=cv2.CV_32F).ravel()
+    pb = cv2.getRectSubPix(gray, size, (float(b[0]), float(b[1])), patchType=cv2.CV_32F).ravel()
+    pa, pb = pa - pa.mean(), pb - pb.mean()
+    den = math.sqrt(float(pa @ pa) * float(pb @ pb))
+    return float(pa @ pb) / den if den > 1e-6 else 0.0
 
 
 def _rotation_about(cx: float, cy: float, theta: float, dx: float, dy: float) -> np.ndarray:
@@ -648,6 +718,47 @@ class LKTracker:
             return xy, math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
         return None
 
+    def _keep_recent(self, gray, est, sig, anchored, recent) -> None:
+        """Store, for every node anchored to its frame-0 template in this frame, the (2(h + margin) + 1)^2 crop of
+        ``gray`` centred on its position, the position and its sigma (``recent``, in place)."""
+        kp = 2 * (self.h + self._margin) + 1
+        for i in np.flatnonzero(anchored):
+            x, y = float(est[i, 0]), float(est[i, 1])
+            recent[i] = (cv2.getRectSubPix(gray, (kp, kp), (x, y)).astype(np.float32), (x, y), float(sig[i]))
+
+    def _match_recent(self, gray, rec, pred, r, fb_max, i, est, vis):
+        """Match node i's last frame-0-anchored appearance ``rec`` (see ``_keep_recent``) within r px of ``pred``
+        in ``gray``: the same correlation search, Lucas-Kanade refinement and forward-backward check as a frame-0
+        match, on the whole patch. Returns (xy, sigma px) when it passes ``min_ncc``, the forward-backward limit,
+        the distinctness test of a re-acquisition (``distinct_sigmas``) and the segment-length check, else None."""
+        cfg, h, margin = self.config, self.h, self._margin
+        prev = rec[0]
+        tmpl = np.ascontiguousarray(prev[margin:margin + 2 * h + 1, margin:margin + 2 * h + 1])
+        k = 2 * (h + r) + 1
+        qx, qy = float(pred[0]), float(pred[1])
+        cur = cv2.getRectSubPix(gray, (k, k), (qx, qy)).astype(np.float32)
+        m = self._kernels.match_node(cur, tmpl, np.ones_like(tmpl), prev, r, h, float(h + margin))
+        if not m[0] or m[3] < cfg.min_ncc or m[4] > fb_max:
+            return None
+        if m[9] and m[6] > m[3] - cfg.distinct_sigmas / math.sqrt(tmpl.size):
+            return None
+        c = float(h + r)
+        xy = np.array([qx + (m[1] - c), qy + (m[2] - c)])
+        if not self._length_ok(i, xy, est, vis):
+            return None
+        return xy, math.sqrt(m[5] ** 2 + (m[4] / 2) ** 2)
+
+    def _length_ok(self, i: int, xy, est, vis) -> bool:
+        """Whether ``xy`` for node i keeps the segment to its parent (when the parent is visible) within the
+        stretch limits of ``LKConfig`` (``max_stretch``, ``min_length_fraction``, ``length_tol_px``)."""
+        p, cfg = self.parent[i], self.config
+        if p < 0 or not vis[p]:
+            return True
+        d = math.hypot(xy[0] - est[p, 0], xy[1] - est[p, 1])
+        l0 = self.rest_len[i]
+        return (cfg.min_length_fraction * l0 - cfg.length_tol_px <= d
+                <= (1 + cfg.max_stretch) * l0 + cfg.length_tol_px)
+
     def _refine(self, gray0, gray, q0, est, vis, fb_max, first_done=None):
         """Second pass: re-match every visible node with segment rotations from this frame's matches.
 
@@ -722,7 +833,8 @@ class LKTracker:
         ang0 = self._ang0
         fb_max = max(cfg.min_fb_px, cfg.max_fb_fraction * h)
         lk_params = dict(winSize=(2 * h + 1, 2 * h + 1), maxLevel=cfg.pyr_levels, criteria=_LK_CRITERIA)
-        xs, vis_all, sig_all = [], [], []
+        xs, vis_all, sig_all, how_all = [], [], [], []
+        how = np.zeros(n, np.int8)  # per node in this frame: a key of ``HOW`` (how its position was found)
         gray0 = prev_gray = None
         est = q0.copy()
         vis = np.ones(n, bool)
@@ -732,7 +844,11 @@ class LKTracker:
         counts = {"anchored": 0, "invisible": 0, "rejected_ncc": 0, "rejected_fb": 0, "rejected_length": 0,
                   "lost_match": 0, "predicted_from_graph": 0, "rejected_ambiguous": 0,
                   "predicted_from_segment": 0, "from_segment": 0, "rejected_unanchored": 0,
-                  "rejected_refine": 0}
+                  "rejected_refine": 0, "held": 0, "recent_template": 0}
+        recent = [None] * n  # per node: (crop of its last frame-0-anchored frame, that position, its sigma)
+        held = np.zeros(n, int)  # consecutive frames each node has been held by frame-to-frame LK alone
+        sig_prev = np.full(n, cfg.sigma_floor_px)
+        hold_max = cfg.hold_max_sigma_px if cfg.hold_max_sigma_px is not None else 0.5 * h
         t0 = time.perf_counter()
         n_done = 0
         pool = ThreadPoolExecutor(1, thread_name_prefix="lk-refine") if cfg.threads == 2 else None
@@ -778,6 +894,8 @@ class LKTracker:
                     # latest estimates (this frame's where already done): new_est holds prev_est until a node
                     # is done, so only the visibility needs its own merged copy
                     cur_vis = prev_vis.copy()
+                    anchored_now = np.zeros(n, bool)
+                    how = np.full(n, -1, np.int8)
                     # the refinement pass follows the first one node by node in the second thread (``_refine``)
                     first = _Progress() if pool is not None else None
                     refine = None
@@ -817,7 +935,7 @@ class LKTracker:
                                 thetas.append(_turn(pred, f2f[ch], ang0[ch]) if f2f_ok[ch] and prev_vis[ch] else tp)
                         # a wide search (no frame-to-frame or segment prediction to trust) is a re-acquisition
                         # whatever the previous frame said: the same ambiguity and geometry checks apply
-                        reacquiring = not prev_vis[i] or r > h
+                        reacquiring = not prev_vis[i] or r > h or held[i] > 0
                         preds[i], wide[i] = pred, r > h
                         m = self._anchor(gray0, ga, i, q0[i], pred, theta, r, thetas)
                         ok = m is not None
@@ -829,7 +947,14 @@ class LKTracker:
                             if score < cfg.min_ncc:
                                 ok = False
                                 counts["rejected_ncc"] += 1
-                            elif cfg.distinct_reacquire and reacquiring and ambiguous:
+                            elif (cfg.distinct_reacquire and reacquiring and ambiguous
+                                  and not (cfg.segment_tiebreak and seg is not None and seg[2] >= cfg.min_segment_ncc
+                                           and xy2 is not None
+                                           and math.hypot(xy[0] - seg[0][0], xy[1] - seg[0][1]) <= h / 2
+                                           < math.hypot(xy2[0] - seg[0][0], xy2[1] - seg[0][1]))):
+                                # two indistinguishable peaks, unless the whole segment strip, hinged at the
+                                # visible parent, matched well (``min_segment_ncc``) and points at the best one
+                                # (within h/2) and not at the other: the strip's many pixels break the tie
                                 ok = False
                                 counts["rejected_ambiguous"] += 1
                             elif (cfg.distinct_follow and ambiguous and xy2 is not None
@@ -856,13 +981,17 @@ class LKTracker:
                                     counts["rejected_length"] += 1
                         if ok:
                             new_est[i], new_vis[i] = xy, True
+                            how[i] = 0
+                            anchored_now[i] = score >= cfg.recent_min_ncc
                             if p >= 0:
                                 seg_rot[i] = _turn(new_est[p], xy, ang0[i])
                                 if new_vis[p]:
                                     bend_rot[i] = seg_rot[i] - seg_rot[p]
                             sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
                             counts["anchored"] += 1
-                        elif (cfg.segment_fallback and seg is not None and seg[2] >= cfg.min_segment_ncc
+                            held[i] = 0
+                        elif ((cfg.segment_fallback or (cfg.tip_segment_fallback and i in self._tips))
+                              and seg is not None and seg[2] >= cfg.min_segment_ncc
                               ):
                             # the node's own patch failed (a leaf over the joint, a template spoiled by a leaf in
                             # frame 0) but its whole segment matched well, hinged at a measured parent: the node is
@@ -872,6 +1001,37 @@ class LKTracker:
                             sig[i] = math.sqrt(sig[p] ** 2 + 0.5 ** 2)
                             seg_rot[i] = seg[1]
                             counts["from_segment"] += 1
+                            how[i] = 3
+                        elif (cfg.recent_template and recent[i] is not None and r <= h and i not in self._tips
+                              and (rm := self._match_recent(gray, recent[i], pred, r, fb_max, i, new_est, new_vis))
+                              is not None):
+                            # the frame-0 template does not fit, but the node's appearance in the last frame it was
+                            # anchored to frame 0 does: measured against that frame, so its error is that anchor's
+                            # plus this match's (no accumulation while the node stays off its frame-0 template)
+                            new_est[i], new_vis[i] = rm[0], True
+                            sig[i] = math.sqrt(recent[i][2] ** 2 + rm[1] ** 2 + cfg.fallback_sigma_px ** 2)
+                            if p >= 0:
+                                seg_rot[i] = _turn(new_est[p], rm[0], ang0[i])
+                            held[i] += 1  # off its frame-0 template: finding it there again is a re-acquisition
+                            counts["recent_template"] += 1
+                            how[i] = 1
+                        elif (cfg.hold and f2f_ok[i] and prev_vis[i] and (p < 0 or new_vis[p])
+                              and (s_hold := math.sqrt(max(sig_prev[i], cfg.fallback_sigma_px) ** 2 + (fb_f2f[i] / 2) ** 2
+                                                       + cfg.hold_step_px ** 2))
+                              <= hold_max and self._length_ok(i, f2f[i], new_est, new_vis)
+                              and (p < 0 or (seg is not None and seg[2] >= cfg.min_ncc
+                                             and math.hypot(*(f2f[i] - seg[0])) <= cfg.hold_agree_px))
+                              and _f2f_ncc(prev_gray, gray, prev_est[i], f2f[i], h) >= cfg.hold_min_ncc):
+                            # the frame-0 template does not fit here now (blur, a leaf, a pose far from frame 0),
+                            # but frame-to-frame LK followed the node from a measured (or held) position: keep it
+                            # visible with a sigma that grows as a random walk (``hold_step_px`` a frame plus the
+                            # round trip's own error) until the template fits again or sigma passes ``hold_max``
+                            new_est[i], new_vis[i], sig[i] = f2f[i], True, s_hold
+                            if p >= 0:
+                                seg_rot[i] = _turn(new_est[p], f2f[i], ang0[i])
+                            held[i] += 1
+                            counts["held"] += 1
+                            how[i] = 2
                         else:
                             new_est[i], new_vis[i], sig[i] = pred, False, float(r)
                             counts["invisible"] += 1
@@ -887,10 +1047,14 @@ class LKTracker:
                     new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
                     new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)
                     est, vis = new_est, new_vis
+                    if cfg.recent_template:
+                        self._keep_recent(ga, est, sig, anchored_now, recent)
                 prev_gray = gray
                 xs.append(est.copy())
+                how_all.append(np.where(vis, how, -1).astype(np.int8))
                 vis_all.append(vis.copy())
                 sig_all.append(np.maximum(sig, cfg.sigma_floor_px))
+                sig_prev = sig_all[-1]
                 n_done += 1
                 if progress is not None:
                     progress(1)
@@ -898,7 +1062,7 @@ class LKTracker:
                     on_frame(n_done - 1, est.copy(), vis.copy())
         if n_done == 0:
             raise InputError(src_name, "the video has no frames")
-        info = {"tracker": "lk-anchored", "patch_radius_px": h, "branch_halfwidth_px": self.branch_halfwidth_px, "frames": n_done,
+        info = {"how": np.stack(how_all, axis=1), "tracker": "lk-anchored", "patch_radius_px": h, "branch_halfwidth_px": self.branch_halfwidth_px, "frames": n_done,
                 "time_total_s": time.perf_counter() - t0, **counts}
         return TrackResult(point_ids=np.arange(n), xy=np.stack(xs, axis=1), visible=np.stack(vis_all, axis=1),
                            sigma_px=np.stack(sig_all, axis=1), fps=source.fps, info=info)

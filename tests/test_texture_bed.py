@@ -1,0 +1,57 @@
+"""The real-texture test bed (plant 2's frame 0, overlays inpainted, known articulated motion); skips without
+``../shared/data`` (the footage is not part of the repository)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rce_gtsam.sim.simulate import turning_angles_deg
+from rce_gtsam.sim.texture_bed import angle_floor_deg, clean_first_frame, make_bed, render_frames
+from rce_gtsam.track import ArraySource, LKTracker
+
+
+@pytest.fixture(scope="module")
+def bed(shared_data):
+    cf = clean_first_frame(shared_data / "plant_2")
+    b = make_bed(cf.points, cf.graph, n_frames=60, seed=0, tip_excursion_px=60.0)
+    return cf, b
+
+
+def test_overlays_are_removed_at_the_known_positions(bed):
+    cf, _ = bed
+    import cv2
+    sat = cv2.cvtColor(cf.rgb, cv2.COLOR_RGB2HSV)[..., 1]
+    for x, y in np.floor(cf.points).astype(int):
+        # the drawn dots are saturated colours; the inpainted stem there is not
+        assert np.median(sat[y - 2:y + 3, x - 2:x + 3]) < 150
+    assert cf.mask.mean() < 0.08  # only the overlays are inpainted, not the picture
+
+
+def test_motion_is_the_simulators_on_the_real_chain(bed):
+    cf, b = bed
+    nodes = list(cf.graph.nodes)
+    xy = b.true_xy[nodes]
+    # the root is fixed, segment lengths are the real ones, the bends are the scaled simulator response
+    assert np.ptp(b.true_xy[cf.graph.root], axis=0).max() < 1e-9
+    for p, c in b.edges:
+        L0 = np.hypot(*(cf.points[c] - cf.points[p]))
+        np.testing.assert_allclose(np.hypot(*(b.true_xy[c] - b.true_xy[p]).T), L0, rtol=1e-9)
+    ang = turning_angles_deg(xy, nodes, cf.graph.bends)
+    np.testing.assert_allclose(ang - ang[:, :1], b.response_deg, atol=1e-9)
+    assert len(b.kappa_true) == len(cf.graph.bends) == 23
+
+
+def test_tracker_follows_the_warped_texture(bed):
+    cf, b = bed
+    frames = np.stack(list(render_frames(b, cf.rgb, cf.points)))
+    res = LKTracker().track(ArraySource(frames), cf.points, cf.graph)
+    err = np.hypot(*(res.xy - b.true_xy).transpose(2, 0, 1))
+    assert res.visible.mean() > 0.9
+    assert np.median(err[res.visible]) < 0.5
+
+
+def test_angle_floor():
+    lo, hi = angle_floor_deg(0.2, np.array([20.0]))
+    np.testing.assert_allclose(np.radians(lo), np.sqrt(2) * 0.01)
+    np.testing.assert_allclose(np.radians(hi), np.sqrt(6) * 0.01)
