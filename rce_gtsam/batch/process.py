@@ -102,7 +102,10 @@ def run_pipeline(recording: Recording, options: BatchOptions, folder: Path) -> l
     Returns the written file names (relative to ``folder``)."""
     from ..cli.analyze import extra_writers
     from ..cli.wording import cli_wording_json
+    import dataclasses
+
     from ..diagnosis.io import diagnose_result, diagnosis_for_viz, diagnosis_json
+    from ..kappa_report import kappa_after_verdict
     from ..pipeline import analyze
 
     preset = options.preset_for(recording)
@@ -125,6 +128,8 @@ def run_pipeline(recording: Recording, options: BatchOptions, folder: Path) -> l
         result = analyze(recording.tracks, recording.graph, preset=preset, seed=options.seed,
                          n_boot=options.n_boot)
     diagnosis = diagnose_result(result, effects=options.effects, seed=options.seed or 0)
+    # the kappa to report after the verdict, beside the rank-1 kappa, as `rce run` writes it
+    result = dataclasses.replace(result, kappa_choice=kappa_after_verdict(result, diagnosis))
     # a command-line tool: the advice in command-line words, as `rce diagnose` / `rce run` write it
     view = cli_wording_json(diagnosis_for_viz(diagnosis, result)) if options.figures else None
 
