@@ -89,9 +89,7 @@ def _run_polyline(args: argparse.Namespace) -> int:
 
 
 def _run_browser(args: argparse.Namespace) -> int:
-    import threading
-
-    from ..annotate_web import AnnotationSession, make_server
+    from ..annotate_web import AnnotationSession
     from ..errors import InputError
 
     if args.snap_radius < 0:
@@ -107,12 +105,27 @@ def _run_browser(args: argparse.Namespace) -> int:
         print(f"wrote {res['annotations']} and {res['graph']} ({res['n_nodes']} nodes, {res['n_bends']} bends)")
         print(f"next: {res['next']}", flush=True)
 
-    server = make_server(session, args.port, on_save=on_save)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    print(f"annotate {args.video} in your browser: {server.url}", flush=True)
-    print(f"(writes {out}/annotations.json and graph.json; press Save & finish or Ctrl+C when done)", flush=True)
-    if not args.no_browser:
+    serve_until_finished(session, args.port, on_save, open_in_browser=not args.no_browser, announce=(
+        f"annotate {args.video} in your browser: {{url}}",
+        f"(writes {out}/annotations.json and graph.json; press Save & finish or Ctrl+C when done)"))
+    if not session.saves:
+        print("nothing saved", file=sys.stderr)
+        return 1
+    return 0
+
+
+def serve_until_finished(session, port: int, on_save, open_in_browser: bool, announce=()) -> None:
+    """Serve a browser session (``rce annotate``, ``rce review``) on localhost ``port`` until the page says it is
+    finished or Ctrl+C: print the ``announce`` lines (``{url}`` filled in), open the page where asked, and close
+    the server and the session whatever happens."""
+    import threading
+
+    from ..annotate_web import make_server
+    server = make_server(session, port, on_save=on_save)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    for line in announce:
+        print(line.replace("{url}", server.url), flush=True)
+    if open_in_browser:
         open_browser(server.url)
     try:
         session.finished.wait()
@@ -122,10 +135,6 @@ def _run_browser(args: argparse.Namespace) -> int:
         server.shutdown()
         server.server_close()
         session.close()
-    if not session.saves:
-        print("nothing saved", file=sys.stderr)
-        return 1
-    return 0
 
 
 def open_browser(url: str) -> None:

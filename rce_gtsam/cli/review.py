@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import threading
 from pathlib import Path
 
 
@@ -91,8 +90,7 @@ def _video_frames(video: Path) -> int | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..annotate_web import make_server
-    from .annotate import open_browser
+    from .annotate import serve_until_finished
 
     session = build_session(args)
 
@@ -108,20 +106,7 @@ def run(args: argparse.Namespace) -> int:
                   "re-tracks the same corrections over the tracker's own rows",
                   flush=True)
 
-    server = make_server(session, args.port, on_save=on_save)
-    thread = threading.Thread(target=server.serve_forever, daemon=True)
-    thread.start()
-    print(f"review {args.tracks} over {args.video} in your browser: {server.url}", flush=True)
-    print(f"(Save writes {session.corrections_path} and {args.tracks}; Finish or Ctrl+C ends the session)",
-          flush=True)
-    if not args.no_browser:
-        open_browser(server.url)
-    try:
-        session.finished.wait()
-    except KeyboardInterrupt:
-        pass
-    finally:
-        server.shutdown()
-        server.server_close()
-        session.close()
+    serve_until_finished(session, args.port, on_save, open_in_browser=not args.no_browser, announce=(
+        f"review {args.tracks} over {args.video} in your browser: {{url}}",
+        f"(Save writes {session.corrections_path} and {args.tracks}; Finish or Ctrl+C ends the session)"))
     return 0
