@@ -160,7 +160,8 @@ def main() -> int:
                f"--frames {a.frames} --effects {a.effects} --renders {a.renders}"
                + (" (then the same with --rediagnose)" if a.rediagnose else ""))
         save_record(a.record, title="The user's path: rce simulate --video, then rce run (our tracker on our "
-                                    "rendered video)" + (", first and current diagnosis" if a.rediagnose else ""),
+                                    "rendered video): " + ("effect-free" if a.effects == "none" else a.effects.replace(",", ", "))
+                                    + (", first and current diagnosis" if a.rediagnose else ""),
                     command=cmd,
                     description=("Each case renders a simulated branch as video (clean: crisp and still; outdoor: "
                                  "motion blur, light drift, shadow, camera shake, crf 28), tracks it with the built-in "
