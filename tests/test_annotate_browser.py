@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import shutil
 import subprocess
 import sys
 import time
@@ -19,6 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from _browser import chromium_driver
 
 # A branch on a 320 x 240 frame (px): main chain 0-1-2-3-4 and a side branch 2-5-6.
 MAIN = [(60.0, 210.0), (98.0, 172.0), (136.0, 134.0), (172.0, 100.0), (206.0, 64.0)]
@@ -55,18 +55,7 @@ def branch_video(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def browser():
-    chromium, driver_bin = shutil.which("chromium"), shutil.which("chromedriver")
-    if not (chromium and driver_bin):
-        pytest.skip("needs Debian's chromium and chromium-driver (`make test` installs them as root)")
-    webdriver = pytest.importorskip("selenium.webdriver")
-    from selenium.webdriver.chrome.service import Service
-
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = chromium
-    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1100,800",
-              "--force-device-scale-factor=1"):
-        opts.add_argument(a)
-    drv = webdriver.Chrome(service=Service(executable_path=driver_bin), options=opts)
+    drv = chromium_driver(1100, 800)
     yield drv
     drv.quit()
 

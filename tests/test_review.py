@@ -23,6 +23,7 @@ from rce_gtsam.graph import load_graph
 from rce_gtsam.track import LKTracker
 from rce_gtsam.track.anchors import Correction, DenseTracks, FrameStore, retrack
 from rce_gtsam.tracks import read_tracks_table
+from _browser import chromium_driver
 
 N_FRAMES = 36
 K = 18          # the corrected frame
@@ -109,18 +110,7 @@ def test_bad_input_is_one_line_and_exit_2(scene, tmp_path, capsys, case):
 # ---------------------------------------------------------------------------------------------- the page
 @pytest.fixture(scope="module")
 def browser():
-    chromium, driver_bin = shutil.which("chromium"), shutil.which("chromedriver")
-    if not (chromium and driver_bin):
-        pytest.skip("needs Debian's chromium and chromium-driver (`make test` installs them as root)")
-    webdriver = pytest.importorskip("selenium.webdriver")
-    from selenium.webdriver.chrome.service import Service
-
-    opts = webdriver.ChromeOptions()
-    opts.binary_location = chromium
-    for a in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1280,800",
-              "--force-device-scale-factor=1"):
-        opts.add_argument(a)
-    drv = webdriver.Chrome(service=Service(executable_path=driver_bin), options=opts)
+    drv = chromium_driver(1280, 800)
     yield drv
     drv.quit()
 
