@@ -240,12 +240,16 @@ class Dynamics(Effect):
                 "accel_vs_root_distance_r": ar, "residual_to_signal_spectrum_peak_cycles_per_frame": peak_f,
                 "residual_to_signal_spectrum_peak_over_median": peak_ratio}
 
+    def longest_period_frames(self, state) -> float:
+        """The longest natural period of the fitted state (frames): root's or tip's."""
+        d = self.describe(state)
+        return max(d["period_root_frames"], d["period_tip_frames"])
+
     def implausible(self, state, ctx):
         """Every natural period under ``ctx.shortest_period_frames``: an oscillator the video cannot resolve (it
         fits frame-to-frame tracker jitter). A root or tip at the top frequency bound alone is quasi-static,
         a physical limit (:attr:`natural_limits`)."""
-        d = self.describe(state)
-        longest = max(d["period_root_frames"], d["period_tip_frames"])
+        longest = self.longest_period_frames(state)
         if longest < ctx.shortest_period_frames:
             return [f"its longest natural period, {longest:.3g} frames, is under {ctx.shortest_period_frames:g} "
                     f"frames: the video cannot resolve such an oscillation"]

@@ -194,14 +194,9 @@ class Resonances(Dynamics):
         return {"accel_coef_per_edge_frames2": np.where(ok, acc, 0.0), "accel_scatter_chi2": chi2,
                 "accel_scatter_dof": float(dof), "accel_scatter_p": p}
 
-    def implausible(self, state, ctx):
-        """Every resonating joint's natural period under ``ctx.shortest_period_frames`` (see
-        :meth:`~rce_gtsam.effects.dynamics.Dynamics.implausible`)."""
-        longest = self.describe(state)["period_longest_frames"]
-        if longest < ctx.shortest_period_frames:
-            return [f"its longest natural period, {longest:.3g} frames, is under {ctx.shortest_period_frames:g} "
-                    f"frames: the video cannot resolve such an oscillation"]
-        return []
+    def longest_period_frames(self, state) -> float:
+        """The longest natural period among the resonating joints (frames); :meth:`Dynamics.implausible` judges it."""
+        return self.describe(state)["period_longest_frames"]
 
     def explain(self, summary: dict, statistics: dict) -> str:
         zeta = (summary.get("zeta") or {}).get("value") or float("nan")
