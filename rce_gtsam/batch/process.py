@@ -100,10 +100,10 @@ def write_record(folder: Path, recording: Recording, outcome: Outcome, files) ->
 def run_pipeline(recording: Recording, options: BatchOptions, folder: Path) -> list[str]:
     """Track (video rows), analyze and diagnose one recording; write its folder like ``rce run`` does.
     Returns the written file names (relative to ``folder``)."""
-    from ..cli.analyze import extra_writers
-    from ..cli.wording import cli_wording_json
     import dataclasses
 
+    from ..cli.analyze import extra_writers
+    from ..cli.wording import cli_wording_json
     from ..diagnosis.io import diagnose_result, diagnosis_for_viz, diagnosis_json
     from ..kappa_report import kappa_after_verdict
     from ..pipeline import analyze

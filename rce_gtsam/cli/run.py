@@ -48,14 +48,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
+    import dataclasses
     import shutil
     import tempfile
 
-    import dataclasses
-
-    from ..kappa_report import kappa_after_verdict
     from ..diagnosis.io import diagnose_result, diagnosis_for_viz, diagnosis_json, parse_effect_names
     from ..graph import load_graph
+    from ..kappa_report import kappa_after_verdict
     from ..pipeline import ANALYSIS_STEPS, analyze
     from ..track import load_annotations, make_tracker, open_video
     from ..quality import OFF_STRUCTURE_KEY
@@ -113,8 +112,9 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
             t_diag = time.perf_counter()
             diagnosis = diagnose_result(result, effects=candidates,
                                         seed=args.seed if args.seed is not None else 0)
-            t_diag = time.perf_counter() - t_diag
+            # the named effect's kappa intervals belong to the diagnosis stage, not to "write"
             result = dataclasses.replace(result, kappa_choice=kappa_after_verdict(result, diagnosis))
+            t_diag = time.perf_counter() - t_diag
             view = cli_wording_json(diagnosis_for_viz(diagnosis, result))
             if live:
                 live.diagnosis(view)

@@ -96,9 +96,9 @@ def heldout_gain_null_test(fit, blocks, gap: int, basis: np.ndarray, n_surrogate
     X = np.where(obs, R, 0.0)
     T = X.shape[1]
     q = float(heldout_gain(X[None], M, blocks, gap, basis)[0])
-    spectrum = residual_spectrum(np.where(M > 0, R, np.nan))
+    spectrum = residual_spectrum(np.where(obs, R, np.nan))
     draws = draw_phases(np.random.default_rng(seed), n_surrogates, T)
-    qs = np.concatenate([heldout_gain(surrogate_slice(spectrum, T, draws, slice(i, i + SURROGATE_BATCH)) * (M > 0),
+    qs = np.concatenate([heldout_gain(surrogate_slice(spectrum, T, draws, slice(i, i + SURROGATE_BATCH)) * obs,
                                       M, blocks, gap, basis)
                          for i in range(0, n_surrogates, SURROGATE_BATCH)])
     p = float((1 + np.sum(qs >= q)) / (n_surrogates + 1))
