@@ -269,23 +269,32 @@ def render_video(sim, path: str | Path, *, crf: int | None = None, preset: str =
     ``config.crf`` when given.
     The file is written next to ``path`` under a temporary name and renamed when complete.
     """
+    cfg = config or RenderConfig()
+    return write_h264(iter_frames(sim, n_frames=n_frames, config=cfg), path, fps=sim.config.fps,
+                      size=sim.config.image_size, crf=cfg.crf if crf is None else crf, preset=preset,
+                      pixel_format="bgr24")
+
+
+def write_h264(frames, path: str | Path, *, fps: float, size: tuple[int, int], crf: int, preset: str = "veryfast",
+               pixel_format: str = "bgr24") -> Path:
+    """Stream ``frames`` (uint8 images of ``size`` = (width, height) px, channels in ``pixel_format`` order) into
+    an H.264 (libx264, yuv420p) mp4 at ``fps`` frames/s with x264's ``crf`` and ``preset``. The file is written
+    next to ``path`` under a temporary name and renamed when complete (nothing half-written is left)."""
     try:
         import av
     except ImportError as exc:  # pragma: no cover - av is a dependency
         raise MissingDependencyError("rendering a video needs PyAV: pip install av") from exc
     from ..fileio import temp_file_beside
     path = Path(path)
-    width, height = sim.config.image_size
+    width, height = size
     tmp = temp_file_beside(path, suffix=".mp4")
     try:
         with av.open(str(tmp), mode="w", format="mp4") as container:
-            stream = container.add_stream("libx264", rate=Fraction(sim.config.fps).limit_denominator(1001))
+            stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))
             stream.width, stream.height, stream.pix_fmt = width, height, "yuv420p"
-            cfg = config or RenderConfig()
-            stream.options = {"crf": str(cfg.crf if crf is None else crf), "preset": preset}
-            for img in iter_frames(sim, n_frames=n_frames, config=cfg):
-                frame = av.VideoFrame.from_ndarray(img, format="bgr24")
-                for packet in stream.encode(frame):
+            stream.options = {"crf": str(crf), "preset": preset}
+            for img in frames:
+                for packet in stream.encode(av.VideoFrame.from_ndarray(img, format=pixel_format)):
                     container.mux(packet)
             for packet in stream.encode():
                 container.mux(packet)

@@ -276,31 +276,10 @@ def render_frames(bed: Bed, image: np.ndarray, q: np.ndarray, settings: RenderSe
 def write_bed_video(bed: Bed, image: np.ndarray, q: np.ndarray, path: str | Path,
                     settings: RenderSettings = RenderSettings(), fps: float = 30.0) -> Path:
     """Render the bed and write it as H.264 (libx264, yuv420p, ``settings.crf``) to ``path`` (atomic)."""
-    import os
-    from fractions import Fraction
-
-    import av
-
-    from ..fileio import temp_file_beside
-
-    path = Path(path)
-    tmp = temp_file_beside(path, suffix=".mp4")
+    from .render import write_h264
     h, w = image.shape[:2]
-    try:
-        with av.open(str(tmp), mode="w", format="mp4") as container:
-            stream = container.add_stream("libx264", rate=Fraction(fps).limit_denominator(1001))
-            stream.width, stream.height, stream.pix_fmt = w, h, "yuv420p"
-            stream.options = {"crf": str(settings.crf), "preset": "veryfast"}
-            for img in render_frames(bed, image, q, settings):
-                for packet in stream.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
-                    container.mux(packet)
-            for packet in stream.encode():
-                container.mux(packet)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return write_h264(render_frames(bed, image, q, settings), path, fps=fps, size=(w, h), crf=settings.crf,
+                      preset="veryfast", pixel_format="rgb24")
 
 
 def angle_floor_deg(err_px: float, length_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
