@@ -45,6 +45,7 @@ from ..graph import BranchGraph
 from ..jsonutil import jsonable as _jsonable
 from ..tracks import Tracks, write_table_atomic
 from .artifacts import ArtifactConfig, apply_artifacts, branch_tangents
+from .three_d import DEFAULT_SHARE, GEOMETRIC_EFFECTS, MEANING as _OOP_MEANING, Scene3D, Truth3D
 
 #: Names of the physical effects the simulator can switch on (and the diagnosis looks for).
 EFFECTS: tuple[str, ...] = ("delay", "dynamics", "second_mode", "offset", "nonlinear")
@@ -58,6 +59,7 @@ EFFECT_DEFAULTS: dict[str, float] = {
     "second_mode": 0.25, # RMS of the second-mode term mu_e*w_t divided by RMS of kappa_e*z_t
     "offset": 0.3,       # RMS of the offset+creep term c_e + d_e*t/T divided by RMS of kappa_e*z_t
     "nonlinear": 3.0,    # q / y_s: largest linear deflection q (99th pct of |kappa_e z_t|) over saturation y_s
+    "out_of_plane": DEFAULT_SHARE,  # share of the wind swinging the branch out of its plane (sim/three_d.py)
 }
 
 EFFECT_MEANING: dict[str, str] = {
@@ -66,6 +68,7 @@ EFFECT_MEANING: dict[str, str] = {
     "second_mode": "RMS(mu_e w_t) / RMS(kappa_e z_t): independent second excitation with its own pattern",
     "offset": "RMS(c_e + d_e t/T) / RMS(kappa_e z_t): constant offset and linear creep per edge",
     "nonlinear": "q / y_s: saturation y_e = y_s tanh(kappa_e z_t / y_s), q = 99th percentile of |kappa_e z_t|",
+    "out_of_plane": _OOP_MEANING,
 }
 
 
@@ -166,6 +169,7 @@ class SimulationConfig:
     segment_px: tuple[float, float] = (12.0, 28.0)
     root_sway_deg: float = 0.0
     artifacts: ArtifactConfig = field(default_factory=ArtifactConfig)
+    scene3d: Scene3D | None = None  # the 3-D scene (sim/three_d.py); None: 3-D only with out_of_plane
 
     def strength(self, effect: str) -> float:
         """The strength of ``effect`` (override or default)."""
@@ -188,11 +192,11 @@ class SimulationConfig:
             raise InputError(src, f"n_frames must be an integer >= 10, got {self.n_frames!r}")
         if not self.fps > 0:
             raise InputError(src, f"fps must be > 0, got {self.fps!r}")
-        unknown = [e for e in self.effects if e not in EFFECTS]
+        unknown = [e for e in self.effects if e not in EFFECTS + GEOMETRIC_EFFECTS]
         if unknown:
             raise InputError(src, f"unknown effect(s) {unknown}; known: {', '.join(EFFECTS)}")
         for k, v in (self.effect_strength or {}).items():
-            if k not in EFFECTS:
+            if k not in EFFECTS + GEOMETRIC_EFFECTS:
                 raise InputError(src, f"effect_strength names an unknown effect {k!r}; known: {', '.join(EFFECTS)}")
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise InputError(src, f"effect_strength[{k!r}] must be a finite number >= 0, got {v!r}")
@@ -202,6 +206,7 @@ class SimulationConfig:
             if v not in EFFECT_FORMS[k]:
                 raise InputError(src, f"effect_form[{k!r}] must be one of {', '.join(EFFECT_FORMS[k])}, got {v!r}")
         self.artifacts.validate()
+        (self.scene3d or Scene3D()).validate(self.image_size)
         w, h = self.image_size
         if w < 64 or h < 64:
             raise InputError(src, f"image_size must be at least 64x64, got {self.image_size}")
@@ -569,6 +574,7 @@ class Simulation:
     segment_px: dict = field(default_factory=dict)
     root_px: tuple[float, float] = (0.0, 0.0)
     artifact_params: dict = field(default_factory=dict)
+    three_d: Truth3D | None = None  # the 3-D truth (sim/three_d.py) when the scene is 3-D
 
     def truth_json(self) -> dict:
         """Ground truth as a JSON-ready dict: kappa_true keyed "parent->child", z_true, response_true
@@ -597,6 +603,8 @@ class Simulation:
             "root_px": [float(v) for v in self.root_px],
             "config": _jsonable(cfg),
         }
+        if self.three_d is not None:
+            out.update(self.three_d.truth_json(self.graph))
         if self.config.artifacts.active:
             from .artifacts import preset_provenance
             out["artifacts"] = {"families": list(self.config.artifacts.families),
@@ -606,8 +614,9 @@ class Simulation:
                                 "provenance": preset_provenance(self.config.artifacts.preset)}
         return out
 
-    def write(self, out_dir: str | Path, video: bool = False, render=None) -> dict[str, Path]:
-        """Write tracks.csv, true_tracks.csv, graph.json, truth.json, annotations.json (+ video.mp4).
+    def write(self, out_dir: str | Path, video: bool = False, render=None, depth: bool = False) -> dict[str, Path]:
+        """Write tracks.csv, true_tracks.csv, graph.json, truth.json, annotations.json (+ video.mp4; with
+        ``depth`` also recording.db3 with colour and aligned depth, :mod:`rce_gtsam.sim.recording`).
 
         ``render``: camera nuisances of the video (:class:`~rce_gtsam.sim.nuisance.RenderConfig`; None = the
         clean render). With camera shake, true_tracks.csv and tracks.csv hold positions in the image
@@ -641,9 +650,9 @@ class Simulation:
             row = {nid: i for i, nid in enumerate(self.tracks.node_ids)}
             pts = [[round(float(v), 4) for v in self.true_xy[row[n], 0]] for n in sorted(row)]
             (tmp / "annotations.json").write_text(json.dumps({"points": pts}) + "\n")
-            if video:
-                from .render import render_video
-                render_video(self, tmp / "video.mp4", config=render)
+            if video or depth:
+                from .recording import write_media
+                write_media(self, tmp, render=render, depth=depth)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
@@ -652,7 +661,8 @@ class Simulation:
 
 
 #: Files :meth:`Simulation.write` may write.
-WRITTEN_FILES = ("tracks.csv", "true_tracks.csv", "graph.json", "truth.json", "annotations.json", "video.mp4")
+WRITTEN_FILES = ("tracks.csv", "true_tracks.csv", "graph.json", "truth.json", "annotations.json", "video.mp4",
+                 "recording.db3")
 
 
 def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
@@ -686,6 +696,10 @@ def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
     if not np.isclose(np.linalg.norm(true_xy[1, 0] - true_xy[0, 0]), lengths[graph.edges[0]]):
         scale = np.linalg.norm(true_xy[1, 0] - true_xy[0, 0]) / lengths[graph.edges[0]]
         lengths = {e: L * scale for e, L in lengths.items()}
+    three = None
+    if config.scene3d is not None or "out_of_plane" in config.effects:  # 3-D scene, projected (sim/three_d.py)
+        from .three_d import simulate_3d
+        true_xy, three, lengths = simulate_3d(graph, true_xy, root_px, kappa, z, config, lengths)
     s_node = np.array([dist[n] / dmax for n in graph.nodes])
     tracked, artifact_params = true_xy, {}
     if config.artifacts.active:
@@ -703,7 +717,7 @@ def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
     return Simulation(config=config, graph=graph, tracks=tracks, true_xy=true_xy,
                       kappa_true={b.edge: float(k) for b, k in zip(bends, kappa)}, z_true=z,
                       response_true=y, effect_params=params, rest_turn_deg=rest, segment_px=lengths,
-                      root_px=(float(root_px[0]), float(root_px[1])), artifact_params=artifact_params)
+                      root_px=(float(root_px[0]), float(root_px[1])), artifact_params=artifact_params, three_d=three)
 
 
 # ----------------------------------------------------------------------------------------------------------
