@@ -18,12 +18,6 @@ import numpy as np
 RECORDING_NAME = "recording.db3"
 
 
-def camera_intrinsics(camera) -> dict:
-    """The pinhole intrinsics (px) of a :class:`~rce_gtsam.sim.three_d.Camera` as a mapping."""
-    return {"width": camera.width, "height": camera.height, "fx": camera.fx, "fy": camera.fy,
-            "cx": camera.cx, "cy": camera.cy}
-
-
 def depth_frames(sim, render=None, noise=None):
     """The simulation's depth frames (H, W) uint16 mm, moved with the camera shake of ``render`` (nearest
     neighbour; pixels shifted in from outside are holes)."""
@@ -75,6 +69,6 @@ def write_media(sim, folder: str | Path, render=None, depth: bool = False, depth
             yield img
 
     write_h264(tee(), video, **common)
-    rec = write_recording(folder / RECORDING_NAME, colour, depth_mm, camera_intrinsics(sim.three_d.camera),
+    rec = write_recording(folder / RECORDING_NAME, colour, depth_mm, sim.three_d.camera,
                           fps=int(round(fps)))
     return {"video.mp4": video, RECORDING_NAME: Path(rec)}

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..camera import CameraIntrinsics
 from ..errors import InputError
 
 #: Effects of the 3-D geometry (not laws on the in-plane response): switched on like the others.
@@ -50,24 +51,9 @@ MEANING = ("share: psi_e(t) = kappa_e * share * (rho z(t) + sqrt(1-rho^2) z'(t))
            "branch plane (tilted by --tilt-deg, default 30, about the image x axis; rho 0.5)")
 
 
-@dataclass(frozen=True)
-class Camera:
-    """Pinhole camera (D435i-like colour intrinsics at 640x480). fx, fy, cx, cy in px; width, height in px."""
-
-    fx: float = 615.0
-    fy: float = 615.0
-    cx: float = 320.0
-    cy: float = 240.0
-    width: int = 640
-    height: int = 480
-
-    def project(self, P: np.ndarray) -> np.ndarray:
-        """Image positions (..., 2) in px of camera-frame points P (..., 3) in mm (z > 0)."""
-        return np.stack([self.fx * P[..., 0] / P[..., 2] + self.cx, self.fy * P[..., 1] / P[..., 2] + self.cy], -1)
-
-    def as_dict(self) -> dict:
-        return {"fx": self.fx, "fy": self.fy, "cx": self.cx, "cy": self.cy, "width": self.width,
-                "height": self.height, "model": "pinhole, no distortion", "units": "px"}
+#: The pinhole camera of the scene (:class:`rce_gtsam.camera.CameraIntrinsics`, shared with the RealSense
+#: reader/writer and the 3-D smoother).
+Camera = CameraIntrinsics
 
 
 @dataclass(frozen=True)
@@ -85,7 +71,7 @@ class Scene3D:
     rho: float = DEFAULT_RHO
     root_depth_mm: tuple[float, float] = (700.0, 900.0)
     background_mm: float = 1500.0
-    camera: Camera = field(default_factory=Camera)
+    camera: CameraIntrinsics = field(default_factory=CameraIntrinsics.d435i_colour)
 
     def tilt(self, effects) -> float:
         """The tilt in degrees that applies to a simulation with ``effects``."""
@@ -156,7 +142,7 @@ class Truth3D:
                 "units": {"positions_mm": "mm, camera frame (x right, y down, z forward), frames x nodes x 3 in "
                                           "graph.nodes order", "angles": "degrees", "camera": "px"},
                 "node_order": [int(n) for n in graph.nodes],
-                "camera": self.camera.as_dict(), "tilt_deg": self.tilt_deg, "share": self.share, "rho": self.rho,
+                "camera": {**self.camera.to_dict(), "model": "pinhole, no distortion", "units": "px"}, "tilt_deg": self.tilt_deg, "share": self.share, "rho": self.rho,
                 "root_depth_mm": self.root_depth_mm, "mm_per_px": self.mm_per_px,
                 "plane_normal": r(self.plane_normal, 6), "z_o": r(self.z_o, 6), "z_prime": r(self.z_prime, 6),
                 "segment_mm": {key(e): float(v) for e, v in self.segment_mm.items()},
