@@ -221,7 +221,9 @@ def run(args: argparse.Namespace) -> int:
     if sim.three_d is not None:
         t3 = sim.three_d
         eff += (f"; 3-D scene: branch plane tilted {t3.tilt_deg:g} deg, root at {t3.root_depth_mm:.0f} mm, "
-                f"out-of-plane share {t3.share:g}")
+                f"out-of-plane share {t3.share:g}"
+                + (f"; the branch was shrunk to {100 * t3.fit_scale:.0f} % of its planar size to stay in view"
+                   if t3.fit_scale < 0.995 else ""))
     obs = sim.tracks.observed
     art = (f"tracker artifacts: {', '.join(artifacts.families)} at {artifacts.scale:g}x the measured size; "
            if artifacts.active else "")

@@ -128,6 +128,12 @@ class Truth3D:
     segment_mm: dict
     stem_radius_mm: dict
 
+    @property
+    def fit_scale(self) -> float:
+        """Size of the branch relative to the planar layout (1 = as the planar simulator draws it; below 1 the
+        branch was shrunk so that its tilted, swinging image stays in view)."""
+        return self.mm_per_px * self.camera.fx / self.root_depth_mm
+
     def truth_json(self, graph) -> dict:
         """The 3-D entries of truth.json (keys ``kappa_true_3d``, ``kappa_true_image``, ``positions_mm`` and
         ``three_d``: the scene, the camera, the angles), edges keyed "parent->child"."""
@@ -143,7 +149,7 @@ class Truth3D:
                                           "graph.nodes order", "angles": "degrees", "camera": "px"},
                 "node_order": [int(n) for n in graph.nodes],
                 "camera": {**self.camera.to_dict(), "model": "pinhole, no distortion", "units": "px"}, "tilt_deg": self.tilt_deg, "share": self.share, "rho": self.rho,
-                "root_depth_mm": self.root_depth_mm, "mm_per_px": self.mm_per_px,
+                "root_depth_mm": self.root_depth_mm, "mm_per_px": self.mm_per_px, "fit_scale": self.fit_scale,
                 "plane_normal": r(self.plane_normal, 6), "z_o": r(self.z_o, 6), "z_prime": r(self.z_prime, 6),
                 "segment_mm": {key(e): float(v) for e, v in self.segment_mm.items()},
                 "stem_radius_mm": {key(e): float(v) for e, v in self.stem_radius_mm.items()},
