@@ -134,6 +134,15 @@ class Truth3D:
         branch was shrunk so that its tilted, swinging image stays in view)."""
         return self.mm_per_px * self.camera.fx / self.root_depth_mm
 
+    def width_factor(self, edge, graph) -> float:
+        """The stem's image width at frame 0 over its width in the planar layout for segment ``edge``: the tube
+        (radius ``stem_radius_mm``) seen at its mid-point's depth, so the colour and the depth images agree.
+        Exactly 1 for a flat scene (tilt 0, no swing)."""
+        row = {n: i for i, n in enumerate(graph.nodes)}
+        z_mid = 0.5 * (self.positions_mm[row[edge[0]], 0, 2] + self.positions_mm[row[edge[1]], 0, 2])
+        k = self.fit_scale * self.root_depth_mm / z_mid
+        return 1.0 if abs(k - 1.0) < 1e-9 else float(k)
+
     def truth_json(self, graph) -> dict:
         """The 3-D entries of truth.json (keys ``kappa_true_3d``, ``kappa_true_image``, ``positions_mm`` and
         ``three_d``: the scene, the camera, the angles), edges keyed "parent->child"."""
