@@ -90,12 +90,12 @@ class LKConfig:
     fallback_sigma_px: the smallest sigma (px) of a recent-template or held position. Their errors are not what
         the match's own least-squares error says: median 0.5-1.4 px on the texture bed (seeds 0-1) and 1.1-1.8 px
         on simulator seed 0, at err/sigma medians of 1.2-4.3 with the match's sigma alone; 1 px is that scale.
-    recent_template, recent_min_ncc: see the module docstring (3b). The stored appearance is only as good as its
+    recent_template, recent_min_ncc: see :mod:`rce_gtsam.track.lk` (3b). The stored appearance is only as good as its
         anchor: 0.8 (the template explains >= 64 % of the patch variance) keeps a node partly covered by a leaf
         from being stored. Without the narrow-window rule the recent template locked onto the occluding leaf 13-16
         px off in ``tests/test_track_lk.py``'s scene, and at a tip matched with its full patch 7.6 px off
         (simulator seed 0): both are excluded.
-    segment_tiebreak: see the module docstring (3b); re-uses ``min_segment_ncc`` and h/2.
+    segment_tiebreak: see :mod:`rce_gtsam.track.lk` (3b); re-uses ``min_segment_ncc`` and h/2.
     tip_segment_fallback: a tip (a node with a parent and no child) whose own patch fails is placed where the
         hinged segment search puts it (``min_segment_ncc``), as ``segment_fallback`` does for every node: a tip's
         band is short and thin, and it was marked lost in ~90 % of the texture bed's frames while the positions
@@ -108,8 +108,8 @@ class LKConfig:
         OpenCV release the GIL, but the per-node Python between them does not, and a re-match is short (a
         2-px search): on the shared 2-core machine (load 4-6) two threads were 0.75-0.98x as fast as one
         (``benchmarks/bench_track.py``, ``current2`` row), so one thread is the default. With less Python per node
-        (see the module docstring's Speed paragraph) two threads were 1.08x as fast alone and 1.06x from the mp4 at
-        load 2.3-2.5, for 1.1x the CPU time.
+        (see the Speed paragraph of :mod:`rce_gtsam.track.lk`) two threads were 1.08x as fast alone and 1.06x from
+        the mp4 at load 2.3-2.5, for 1.1x the CPU time.
     """
 
     patch_radius_px: int | None = None

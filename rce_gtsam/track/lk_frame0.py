@@ -21,7 +21,7 @@ from ..graph import BranchGraph
 
 # A tip's template uses its branch band whenever the band holds at least this many (weighted) pixels: a 4x4
 # block, where the correlation of an unrelated patch has a standard error of 1/sqrt(16) = 0.25, so ``min_ncc``
-# (0.5) is still two standard errors above chance. See the module docstring ("Below 4 (2h + 1) band pixels").
+# (0.5) is still two standard errors above chance. See :mod:`rce_gtsam.track.lk` ("Below 4 (2h + 1) band pixels").
 _TIP_MIN_BAND_PX = 16.0
 
 
