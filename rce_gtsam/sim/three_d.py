@@ -38,6 +38,7 @@ import numpy as np
 
 from ..camera import CameraIntrinsics
 from ..errors import InputError
+from .kinematics import turning_angles_deg
 
 #: Effects of the 3-D geometry (not laws on the in-plane response): switched on like the others.
 GEOMETRIC_EFFECTS: tuple[str, ...] = ("out_of_plane",)
@@ -182,7 +183,6 @@ def chain_3d(graph, planar: np.ndarray, psi_deg: np.ndarray) -> np.ndarray:
     root headings, in-plane turning angles and segment lengths are kept. ``psi_deg`` (E, F): out-of-plane bend per
     joint (rows in graph.bends order). See the module docstring for the kinematics.
     """
-    from .simulate import turning_angles_deg
     N, F, _ = planar.shape
     row = {n: i for i, n in enumerate(graph.nodes)}
     theta = np.radians(turning_angles_deg(planar, graph.nodes, graph.bends))
@@ -258,7 +258,7 @@ def out_of_plane_excitation(z: np.ndarray, share: float, rho: float, fps: float,
                             rms_deg: float) -> tuple[np.ndarray, np.ndarray]:
     """(z_o, z') in degrees: ``z_o = share * (rho z + sqrt(1 - rho^2) z')``, ``z'`` drawn by
     :func:`~rce_gtsam.sim.simulate.make_excitation` (RMS ``rms_deg``) from its own seed stream."""
-    from .simulate import make_excitation
+    from .bend_laws import make_excitation
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x0B3D]))
     z2 = make_excitation(len(z), fps, rng, rms_deg=rms_deg)
     return share * (rho * z + math.sqrt(max(0.0, 1 - rho ** 2)) * z2), z2
@@ -297,7 +297,6 @@ def simulate_3d(graph, planar_xy: np.ndarray, root_px, kappa: np.ndarray, z: np.
 
 
 def _image_turn(xy: np.ndarray, graph) -> np.ndarray:
-    from .simulate import turning_angles_deg
     return turning_angles_deg(xy, graph.nodes, graph.bends)
 
 
