@@ -146,3 +146,22 @@ def test_at_tilt_0_the_swing_shortens_segments_to_second_order_but_for_perspecti
     assert np.all(ortho <= 1e-9)                      # only ever shorter
     assert _r2(ortho, t3.z_o ** 2) > 0.9 and _r2(ortho, t3.z_o) < 0.3
     assert _r2(dlen(sim.true_xy), t3.z_o) > 0.8
+
+
+def test_stem_width_in_colour_matches_the_depth_tube():
+    """The renderer's bark width (planar width x width_factor) is the tube's image width 2 r f / z at frame 0."""
+    from rce_gtsam.sim.three_d import stem_widths_px
+    flat = _sim(seed=2, n_frames=20, scene3d=Scene3D())
+    assert all(flat.three_d.width_factor(e, flat.graph) == 1.0 for e in flat.graph.edges)
+    sim = _sim(seed=2, n_frames=20, effects=("out_of_plane",))
+    t3, g = sim.three_d, sim.graph
+    planar = simulate(SimulationConfig(n_frames=20, seed=2, noise=CLEAN))
+    w0 = stem_widths_px(g, planar.segment_px)
+    row = {n: i for i, n in enumerate(g.nodes)}
+    factors = []
+    for e in g.edges:
+        z_mid = t3.positions_mm[[row[e[0]], row[e[1]]], 0, 2].mean()
+        expect = 2 * t3.stem_radius_mm[e] * t3.camera.fx / z_mid
+        assert w0[e] * t3.width_factor(e, g) == pytest.approx(expect, rel=1e-9)
+        factors.append(t3.width_factor(e, g))
+    assert min(factors) < 0.95                     # the upper branch leans away: thinner in the image
