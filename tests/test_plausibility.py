@@ -73,6 +73,39 @@ def test_a_full_data_test_alone_names_nothing():
     assert not is_significant(2.0, 2.95, 0.2, 0.005, support_t=1.75)
 
 
+def test_a_saturation_needs_both_of_its_tests():
+    """The effect-free user-path recordings named nonlinear by one test alone (the fold t or the score test)
+    are not named; both together are; effects without the flag keep either route."""
+    assert effects.make("nonlinear").needs_both_tests and not effects.make("delay").needs_both_tests
+    for t, p in [(4.5, 0.20), (3.2, 0.44), (3.1, 0.043), (2.0, 0.002)]:  # the measured cases
+        assert not is_significant(t, 2.95, p, 0.005, support_t=1.75, both=True)
+    assert is_significant(3.1, 2.95, 0.004, 0.005, support_t=1.75, both=True)
+    assert is_significant(3.1, 2.95, None, 0.005, both=True)  # no score test: the fold t, as for any effect
+
+
+def test_the_diagnosis_asks_a_saturation_for_both_tests(monkeypatch):
+    """diagnose hands each candidate's flag to the significance rule (a nonlinear fit on a branch is asked for
+    both tests, the others for either)."""
+    from rce_gtsam.diagnosis import diagnose as diagnose_mod
+    from rce_gtsam.sim.simulate import SimulationConfig, simulate
+
+    seen = {}
+    real = diagnose_mod.is_significant
+
+    def spy(*args, both=False, **kw):
+        seen.setdefault(len(seen), both)
+        return real(*args, both=both, **kw)
+
+    monkeypatch.setattr(diagnose_mod, "is_significant", spy)
+    sim = simulate(SimulationConfig(seed=1, n_frames=200, n_nodes=10))
+    Y = sim.response_true + np.random.default_rng(0).normal(0, 0.3, sim.response_true.shape)
+    s = np.linspace(0.05, 1, Y.shape[0])
+    d = diagnose_mod.diagnose(Y, root_distance=s, effects=["delay", "nonlinear"],
+                              edge_nodes=[{i, i + 1, i + 2} for i in range(Y.shape[0])])
+    assert d is not None
+    assert set(seen.values()) == {False, True}  # delay: either test; nonlinear: both
+
+
 @pytest.mark.slow
 def test_run_reports_the_extended_kappa_beside_the_rank1_kappa(tmp_path):
     from rce_gtsam import analyze, load_graph, load_tracks

@@ -418,7 +418,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                           "score_excitation": eff.score_excitation})
             if score.peak is not None:
                 extra["score_peak"] = eff.scan_label(score.peak)
-            significant = is_significant(ev, t_crit_split, score.p, p_crit_score, t_support)
+            significant = is_significant(ev, t_crit_split, score.p, p_crit_score, t_support,
+                                         both=eff.needs_both_tests)
             if eff.score_excitation == "between_rows":  # the very test the drift check below asks (same seed)
                 shared_p = score.p
         basis = eff.heldout_time_basis(T)

@@ -97,7 +97,8 @@ def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str
         out = _scored_test(diag, Y, pred)
     else:
         out = _scored_test(diag, Y, pred, threshold_t=st["evidence_threshold_t_split"],
-                           score_p=score.p, score_threshold_p=st["score_threshold_p"])
+                           score_p=score.p, score_threshold_p=st["score_threshold_p"],
+                           effect_needs_both=eff.needs_both_tests)
     # an effect of per-segment courses of time also needs what tracker drift cannot give (its held-out gain
     # beyond phase surrogates, a course common to two node-disjoint row sets, or courses not laid out as a node's
     # drift turns its bends; rce_gtsam.diagnosis.diagnose); all three tests read the baseline's residuals only,
@@ -130,7 +131,7 @@ def true_signature(truth: np.ndarray) -> np.ndarray:
 
 
 def _scored_test(diag: "Diagnosis", Y: np.ndarray, prediction: np.ndarray, threshold_t: float | None = None,
-                 score_p: float | None = None, score_threshold_p: float = 0.0) -> dict:
+                 score_p: float | None = None, score_threshold_p: float = 0.0, effect_needs_both: bool = False) -> dict:
     """The verdict's fold-paired t (and the Diebold-Mariano t) of a held-out ``prediction`` (E, T, degrees;
     NaN = not scored) against the baseline's held-out error, over the frames of the folds. ``threshold_t``:
     the fold t threshold (default: the verdict's single-test one); ``score_p``: a full-data score test's p
@@ -157,7 +158,7 @@ def _scored_test(diag: "Diagnosis", Y: np.ndarray, prediction: np.ndarray, thres
     share = float(np.mean(base[both]) - np.mean(loss[both])) / tv if both.any() and tv > 0 else 0.0
     # the verdict's own rule, its intersection included: a full-data test names nothing without the fold t's support
     support = st.get("support_threshold_t", -np.inf)
-    ok = bool(is_significant(t, crit, score_p, score_threshold_p, support)
+    ok = bool(is_significant(t, crit, score_p, score_threshold_p, support, both=effect_needs_both)
               and imp > 0 and share >= st.get("resolution", 0.0))
     # per fold, pooled over the fold's scored entries as the candidates' fold_mse are (to pair with theirs)
     pooled = np.array([sse_t[a:b].sum() / max(cnt_t[a:b].sum(), 1) for a, b in st["fold_blocks"]])

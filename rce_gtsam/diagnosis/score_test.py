@@ -110,7 +110,7 @@ def score_is_significant(score_p: float | None, score_threshold_p: float) -> boo
 
 
 def is_significant(t: float, threshold_t: float, score_p: float | None, score_threshold_p: float,
-                   support_t: float = -np.inf) -> bool:
+                   support_t: float = -np.inf, both: bool = False) -> bool:
     """The diagnosis' significance rule: the held-out fold t above its threshold, or (for an effect with a score
     test, ``score_p`` not None) the score test's p at or below its threshold **and** the fold t above
     ``support_t`` (the one-sided t quantile at the nominal alpha).
@@ -120,8 +120,14 @@ def is_significant(t: float, threshold_t: float, score_p: float | None, score_th
     on the user's path (``benchmarks/bench_user_path.py``), effect-free recordings were named at score p 0.0005
     with a held-out gain of 0.2 % (fold t 0.8). Asking the held-out frames to agree at the nominal level keeps
     the test's power where the effect is real (the held-out gain then follows) and makes the rule an
-    intersection of two tests: it fires falsely only where both do."""
+    intersection of two tests: it fires falsely only where both do.
+
+    ``both`` (an effect's :attr:`~rce_gtsam.effects.Effect.needs_both_tests`): the fold t above ``threshold_t``
+    **and** the score p at or below its threshold, each test at its own share of alpha. For an effect whose
+    signature the excitation mostly absorbs, so that either test alone has only ever fired on artifacts."""
     fold = bool(np.isfinite(t) and t > threshold_t)
+    if both and score_p is not None:
+        return fold and score_is_significant(score_p, score_threshold_p)
     full = score_is_significant(score_p, score_threshold_p) and bool(np.isfinite(t) and t > support_t)
     return fold or full
 

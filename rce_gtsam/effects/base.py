@@ -89,6 +89,11 @@ class Effect:
     #: and/or "upper")}: a fit there is plausible (:mod:`rce_gtsam.diagnosis.plausibility`; e.g. a natural
     #: frequency at its top bound is a quasi-static joint).
     natural_limits: ClassVar[dict] = {}
+    #: Named only where its held-out fold t AND its full-data score test are both significant (each at its share
+    #: of alpha), instead of either (:func:`~rce_gtsam.diagnosis.score_test.is_significant`). For an effect whose
+    #: signature the rank-1 model's excitation mostly absorbs, so that its oracle detects nothing and whatever one
+    #: test alone finds has been a tracker's artifact (see :class:`~.nonlinear.Nonlinear`). Needs a score test.
+    needs_both_tests: ClassVar[bool] = False
 
     @property
     def verdict_name(self) -> str:
