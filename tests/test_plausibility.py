@@ -12,7 +12,7 @@ import pytest
 
 from rce_gtsam import effects
 from rce_gtsam.diagnosis.plausibility import PlausibilityContext, at_bound, correlation_time, implausibility
-from rce_gtsam.diagnosis.score_test import is_significant
+from rce_gtsam.diagnosis.decision import is_significant
 
 CTX = PlausibilityContext(q99_deflection_deg=6.0, correlation_time_frames=40.0, n_frames=450)
 
