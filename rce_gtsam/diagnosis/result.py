@@ -116,7 +116,8 @@ class Diagnosis:
     #: the analysis' settings under which the diagnosis is not calibrated (rce_gtsam.diagnosis.domain): no
     #: effect is named where there are any
     outside_domain: tuple = ()
-    #: the text report (:func:`~rce_gtsam.diagnosis.explain.render_diagnosis_report`), written by the report step
+    #: the text report (:func:`~rce_gtsam.diagnosis.explain.render_diagnosis_report`), written by the report step;
+    #: a copy changed with ``dataclasses.replace`` keeps it (render it again from the copy)
     report_text: str = ""
 
     @property
