@@ -54,7 +54,7 @@ class KappaChoice:
 
 
 def kappa_after_verdict(result, diagnosis) -> KappaChoice:
-    """The κ to report after ``diagnosis`` (:class:`~rce_gtsam.diagnosis.diagnose.Diagnosis`) of an analysis
+    """The κ to report after ``diagnosis`` (:class:`~rce_gtsam.diagnosis.result.Diagnosis`) of an analysis
     ``result`` (:class:`~rce_gtsam.pipeline.AnalysisResult`, rank-1). With a verdict, the named candidate's fit
     gets bootstrap intervals under the analysis preset's bootstrap settings (none where the preset runs none)."""
     cand = diagnosis.verdict_candidate

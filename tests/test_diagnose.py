@@ -290,7 +290,7 @@ def test_a_significant_score_test_waives_the_aic_hurdle_but_not_the_held_out_err
     AND the gain reaches the resolution. The AIC guards the 16-number fold t; a second excitation's free w pays
     ~2 AIC per frame for what the held-out error already charges (pipeline, 1x: p = 0.0005, held-out -1.1 %,
     no verdict before)."""
-    from rce_gtsam.diagnosis.verdict import earns_its_place
+    from rce_gtsam.diagnosis.decision import earns_its_place
     assert not earns_its_place(0.99, 1.0, +30.0, 0.01, 0.001)
     assert earns_its_place(0.99, 1.0, +30.0, 0.01, 0.001, calibrated=True)
     assert not earns_its_place(1.01, 1.0, -30.0, 0.01, 0.001, calibrated=True)   # held-out error must fall

@@ -12,7 +12,7 @@ import pytest
 
 from rce_gtsam import effects
 from rce_gtsam.diagnosis.plausibility import PlausibilityContext, at_bound, correlation_time, implausibility
-from rce_gtsam.diagnosis.score_test import is_significant
+from rce_gtsam.diagnosis.decision import is_significant
 
 CTX = PlausibilityContext(q99_deflection_deg=6.0, correlation_time_frames=40.0, n_frames=450)
 
@@ -84,26 +84,27 @@ def test_a_saturation_needs_both_of_its_tests():
 
 
 def test_the_diagnosis_asks_a_saturation_for_both_tests(monkeypatch):
-    """diagnose hands each candidate's flag to the significance rule (a nonlinear fit on a branch is asked for
-    both tests, the others for either)."""
-    from rce_gtsam.diagnosis import diagnose as diagnose_mod
+    """diagnose hands each candidate's flag to the decision's significance rule (a nonlinear fit on a branch is
+    asked for both tests, the others for either)."""
+    from rce_gtsam.diagnosis import decision
+    from rce_gtsam.diagnosis.diagnose import diagnose
     from rce_gtsam.sim.simulate import SimulationConfig, simulate
 
-    seen = {}
-    real = diagnose_mod.is_significant
+    seen = []
+    real = decision.significant
 
-    def spy(*args, both=False, **kw):
-        seen.setdefault(len(seen), both)
-        return real(*args, both=both, **kw)
+    def spy(tests, lv, both=False):
+        seen.append(both)
+        return real(tests, lv, both=both)
 
-    monkeypatch.setattr(diagnose_mod, "is_significant", spy)
+    monkeypatch.setattr(decision, "significant", spy)
     sim = simulate(SimulationConfig(seed=1, n_frames=200, n_nodes=10))
     Y = sim.response_true + np.random.default_rng(0).normal(0, 0.3, sim.response_true.shape)
     s = np.linspace(0.05, 1, Y.shape[0])
-    d = diagnose_mod.diagnose(Y, root_distance=s, effects=["delay", "nonlinear"],
-                              edge_nodes=[{i, i + 1, i + 2} for i in range(Y.shape[0])])
+    d = diagnose(Y, root_distance=s, effects=["delay", "nonlinear"],
+                 edge_nodes=[{i, i + 1, i + 2} for i in range(Y.shape[0])])
     assert d is not None
-    assert set(seen.values()) == {False, True}  # delay: either test; nonlinear: both
+    assert sorted(set(seen)) == [False, True]  # delay: either test; nonlinear: both
 
 
 @pytest.mark.slow

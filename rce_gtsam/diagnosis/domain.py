@@ -23,7 +23,7 @@ moving average 0 of 40, its velocity and acceleration weights 0 of 40, an unweig
 surrogates); settings not named here are unmeasured. Outside the domain
 the diagnosis still runs (its baseline is the analysis' fit, and the candidates' numbers are there to read),
 but names no effect: :func:`settings_outside_domain` says why, and
-:attr:`~rce_gtsam.diagnosis.diagnose.Diagnosis.status` reads ``"uncalibrated"``.
+:attr:`~rce_gtsam.diagnosis.result.Diagnosis.status` reads ``"uncalibrated"``.
 """
 
 from __future__ import annotations

@@ -51,6 +51,7 @@ import numpy as np
 from scipy import stats
 
 from .heldout_null import basis_coefficients
+from .result import TestResult
 from .score_test import ScoreTest, robust_residuals
 from .statistics import difference_covariance
 
@@ -108,3 +109,14 @@ def drift_pattern_test(fit, basis: np.ndarray, n_draws: int = N_DRAWS, seed: int
     the data's), or None where the basis has only a constant."""
     return layout_test(robust_residuals(fit.residuals), fit.weights, basis, along=fit.kappa, n_draws=n_draws,
                        seed=seed)
+
+
+NULL = ("trends drawn as N(0, s^2 C) from the fast noise's correlation C between segments (2000 draws), assuming a "
+        "node's slow and fast tracking errors share their layout along the branch")
+CALIBRATION = ("benchmarks/bench_diagnose.py (11 of 220 effect-free pipeline recordings at p <= 0.05) and "
+               "benchmarks/bench_drift_layout_real.py (the real plants' segment lengths)")
+
+
+def drift_pattern_result(test: ScoreTest, threshold_p: float) -> TestResult:
+    """:func:`drift_pattern_test`'s result read at ``threshold_p``."""
+    return TestResult("drift_pattern", float(test.q), float(test.p), float(threshold_p), NULL, CALIBRATION)

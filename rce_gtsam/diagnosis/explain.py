@@ -1,20 +1,15 @@
 """The diagnosis in words: the verdict's explanation with the numbers behind it (:func:`explain`), the sentence
 for significant candidates that were not named, and the text report (:func:`render_diagnosis_report`). A leaf
-module: it reads a :class:`~rce_gtsam.diagnosis.diagnose.Diagnosis` and computes nothing.
+module: it reads a :class:`~rce_gtsam.diagnosis.result.Diagnosis` (its only import from the diagnosis is
+:mod:`rce_gtsam.diagnosis.result`) and computes nothing.
 
 Units: degrees (RMSE), deg^2 (variances), frames.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 from ..model import render_fit_report
-from .score_test import score_is_significant
-from .verdict import complexity
-
-if TYPE_CHECKING:
-    from .diagnose import Diagnosis
+from .result import Diagnosis, complexity, score_is_significant
 
 
 def significant_but_not_named(diag: Diagnosis) -> str:
@@ -245,7 +240,7 @@ def explain(diag: Diagnosis) -> str:
 
 def form_p_text(c, simpler: str, thr: float) -> str:
     """"encompassing test p = P <= THR" (or "> THR") for candidate ``c``'s test against ``simpler``
-    (:func:`~rce_gtsam.diagnosis.verdict.form_test`), saying where P is the smaller of two fits' p times 2."""
+    (:func:`~rce_gtsam.diagnosis.evidence.form_test`), saying where P is the smaller of two fits' p times 2."""
     p = c.extra['form_test_p'][simpler]
     text = f"encompassing test p = {p:.3g} {'<=' if p <= thr else '>'} {thr:.3g}"
     raw = c.extra.get("form_test_p_per_fit", {}).get(simpler, {})
@@ -257,7 +252,7 @@ def form_p_text(c, simpler: str, thr: float) -> str:
 
 def _support_label(c) -> str:
     """The report's "supported" cell: yes / no, or the lag it is the richer form of
-    (:func:`~rce_gtsam.diagnosis.verdict.support_a_richer_form`)."""
+    (:func:`~rce_gtsam.diagnosis.decision.support_richer_forms`)."""
     form_of = c.extra.get("supported_as_form_of")
     if form_of:
         return f"yes, as the richer form of {form_of}"

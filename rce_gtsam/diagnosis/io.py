@@ -101,7 +101,7 @@ def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = N
     edge split; ``n_folds``: cross-validation blocks (default: diagnose's N_FOLDS, 16). Under a preset whose
     settings lie outside the domain the diagnosis is calibrated on (the ``paper`` preset:
     :mod:`rce_gtsam.diagnosis.domain`) it names no effect and its status reads ``"uncalibrated"``.
-    Returns a :class:`~rce_gtsam.diagnosis.diagnose.Diagnosis`.
+    Returns a :class:`~rce_gtsam.diagnosis.result.Diagnosis`.
     """
     from .diagnose import diagnose
 

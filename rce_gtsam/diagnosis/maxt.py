@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .result import TestResult
+
 
 @dataclass(frozen=True)
 class MaxTResult:
@@ -66,3 +68,13 @@ def sign_flip_max_t(ref_mse: np.ndarray, cand_mse: list, alpha: float = 0.05, ma
     p = np.array([(np.sum(mx >= tc - 1e-12)) / len(mx) for tc in t])
     crit = float(np.quantile(mx, 1 - alpha, method="higher"))
     return MaxTResult(t=t, p_adjusted=p, critical_t=crit, n_flips=len(mx))
+
+
+NULL = ("sign flips of whole folds, the same flip for every candidate (all 2^K, or a seeded sample of 4096): the "
+        "family-wise rate is alpha up to the flips' granularity")
+CALIBRATION = "exact by construction; benchmarks/bench_diagnose.py reports its verdicts beside the diagnosis'"
+
+
+def maxt_result(t: float, p_adjusted: float, alpha: float) -> TestResult:
+    """A candidate's max-T result (its fold t, the family-wise p) read at ``alpha``."""
+    return TestResult("maxt", float(t), float(p_adjusted), float(alpha), NULL, CALIBRATION)

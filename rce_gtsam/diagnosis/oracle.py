@@ -8,21 +8,18 @@ Units: degrees (responses, predictions), frames.
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from .. import effects as effects_mod
 from .heldout import frame_loss, heldout_errors, paired_t
-from .score_test import effect_score_test, half_fits, is_significant
+from .decision import is_significant
+from .result import Diagnosis
+from .score_test import effect_score_test, half_fits
 from .settings import CV_ITER, FULL_ITER
 from ..model.series import loss_difference_test
 
-if TYPE_CHECKING:
-    from .diagnose import Diagnosis
 
-
-def oracle_test(diag: "Diagnosis", Y: np.ndarray, truth: np.ndarray, effect: str | None) -> dict:
+def oracle_test(diag: Diagnosis, Y: np.ndarray, truth: np.ndarray, effect: str | None) -> dict:
     """The verdict's held-out test for the hidden effect's own candidate with its true parameters.
 
     ``truth``: the noise-free response (E, T, degrees), put on Y's per-row rest reference; ``effect``: the name
@@ -130,7 +127,7 @@ def true_signature(truth: np.ndarray) -> np.ndarray:
     return t - S[0] * np.outer(U[:, 0], Vt[0])
 
 
-def _scored_test(diag: "Diagnosis", Y: np.ndarray, prediction: np.ndarray, threshold_t: float | None = None,
+def _scored_test(diag: Diagnosis, Y: np.ndarray, prediction: np.ndarray, threshold_t: float | None = None,
                  score_p: float | None = None, score_threshold_p: float = 0.0, effect_needs_both: bool = False) -> dict:
     """The verdict's fold-paired t (and the Diebold-Mariano t) of a held-out ``prediction`` (E, T, degrees;
     NaN = not scored) against the baseline's held-out error, over the frames of the folds. ``threshold_t``:

@@ -34,6 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .result import TestResult
+
 #: A natural period shorter than this many frames (a frequency above a quarter of the frame rate, half the
 #: Nyquist frequency) is not resolved by the video: an oscillator there fits frame-to-frame tracker jitter.
 SHORTEST_PERIOD_FRAMES = 4.0
@@ -123,3 +125,14 @@ def implausibility(effect, state: dict, n_edges: int, ctx: PlausibilityContext) 
                            f"the best fit lies outside the form this effect describes")
     reasons.extend(effect.implausible(state, ctx))
     return tuple(reasons)
+
+
+NULL = ("none: each reason is a scale the recording itself sets (a parameter's range, the frame rate, the largest "
+        "deflection seen, the excitation's memory); fires on any reason")
+CALIBRATION = ("benchmarks/bench_user_path.py (effect-free rendered video named nonlinear or dynamics with such "
+               "fits before)")
+
+
+def implausibility_result(reasons: tuple) -> TestResult:
+    """:func:`implausibility`'s reasons as a result: the statistic is their number, and it fires on any."""
+    return TestResult("implausibility", float(len(reasons)), None, 0.0, NULL, CALIBRATION)

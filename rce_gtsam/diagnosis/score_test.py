@@ -76,6 +76,7 @@ from scipy import stats
 
 from ..model.compliance import draw_phases, residual_spectrum, surrogate_slice
 from ..model.tangent import remove_rank1_tangent
+from .result import TestResult, score_is_significant  # noqa: F401 (score_is_significant re-exported)
 from .statistics import noise_correlation
 
 N_SURROGATES = 2000  # phase surrogates of the null (p-value resolution 1/2001)
@@ -102,34 +103,6 @@ class ScoreTest:
     z_equivalent: float
     statistic: str = "quadratic"
     peak: int | None = None
-
-
-def score_is_significant(score_p: float | None, score_threshold_p: float) -> bool:
-    """A full-data score test's p at or below its threshold (False for an effect without one, ``score_p`` None)."""
-    return score_p is not None and score_p <= score_threshold_p
-
-
-def is_significant(t: float, threshold_t: float, score_p: float | None, score_threshold_p: float,
-                   support_t: float = -np.inf, both: bool = False) -> bool:
-    """The diagnosis' significance rule: the held-out fold t above its threshold, or (for an effect with a score
-    test, ``score_p`` not None) the score test's p at or below its threshold **and** the fold t above
-    ``support_t`` (the one-sided t quantile at the nominal alpha).
-
-    A full-data test alone cannot name an effect: its null (phase surrogates of the residuals) is calibrated on
-    stationary noise, and a tracker's errors are not (blur grows with speed, nodes are lost in gusts). Measured
-    on the user's path (``benchmarks/bench_user_path.py``), effect-free recordings were named at score p 0.0005
-    with a held-out gain of 0.2 % (fold t 0.8). Asking the held-out frames to agree at the nominal level keeps
-    the test's power where the effect is real (the held-out gain then follows) and makes the rule an
-    intersection of two tests: it fires falsely only where both do.
-
-    ``both`` (an effect's :attr:`~rce_gtsam.effects.Effect.needs_both_tests`): the fold t above ``threshold_t``
-    **and** the score p at or below its threshold, each test at its own share of alpha. For an effect whose
-    signature the excitation mostly absorbs, so that either test alone has only ever fired on artifacts."""
-    fold = bool(np.isfinite(t) and t > threshold_t)
-    if both and score_p is not None:
-        return fold and score_is_significant(score_p, score_threshold_p)
-    full = score_is_significant(score_p, score_threshold_p) and bool(np.isfinite(t) and t > support_t)
-    return fold or full
 
 
 def effect_directions(effect):
@@ -437,3 +410,22 @@ def effect_score_test(excitation: str, model, fit, Y, W, s, fits, halves, direct
     if excitation == "between_rows":
         return shared_time_course_test(fit, halves, seed=seed)
     raise ValueError(f"score_excitation {excitation!r}: expected 'own', 'other_rows' or 'between_rows'")
+
+
+#: how each version's null is calibrated (by :attr:`~rce_gtsam.effects.Effect.score_excitation`)
+SCORE_NULLS = {
+    "own": ("refitted surrogates: the fitted prediction plus phase surrogates of the residuals and of z's own "
+            "noise, the baseline refitted to each (400)"),
+    "other_rows": ("multivariate phase surrogates of both node-disjoint row sets' residuals, the directions from "
+                   "the other set's excitation held fixed (2000)"),
+    "between_rows": ("multivariate phase surrogates of one node-disjoint row set's residuals against the other's, "
+                     "held fixed (2000)"),
+}
+SCORE_CALIBRATION = ("benchmarks/bench_diagnose.py: 40 effect-free pipeline seeds (delay 0/40 below 0.05, dynamics "
+                     "2/40 below 0.01, shared course 0/40 at 0.005)")
+
+
+def score_result(test: ScoreTest, excitation: str, threshold_p: float, name: str = "score") -> TestResult:
+    """A full-data score test's result (``excitation``: its version) read at ``threshold_p``."""
+    return TestResult(name, float(test.q), float(test.p), float(threshold_p),
+                      SCORE_NULLS.get(excitation, "phase surrogates of the residuals"), SCORE_CALIBRATION)

@@ -21,6 +21,8 @@ from dataclasses import replace
 import numpy as np
 from scipy import ndimage
 
+from .result import TestResult
+
 #: Frames on each side of a missing segment-frame that count as the tracker's: a few frames of a template
 #: sliding off before a node is declared lost, and of a re-found node settling.
 GAP_MARGIN_FRAMES = 5
@@ -76,3 +78,15 @@ def tracker_text(share: dict | None, labels) -> str:
             f"{100 * share['entries']:.0f}% of segment-frames within {GAP_MARGIN_FRAMES} frames of a frame where a "
             f"node was lost (worst in {where}); look at the tracks there (rce review) before reading it as "
             f"physics.")
+
+
+AWAY_NULL = ("multivariate phase surrogates of one node-disjoint row set's residuals against the other's (2000), "
+             f"the segment-frames within {GAP_MARGIN_FRAMES} frames of a lost node left out")
+AWAY_CALIBRATION = "benchmarks/bench_user_path.py (our tracker on rendered effect-free video)"
+
+
+def shared_course_away_result(test, threshold_p: float) -> TestResult:
+    """The shared-course test on :func:`away_from_gaps` of the baseline (a
+    :class:`~rce_gtsam.diagnosis.score_test.ScoreTest`) read at ``threshold_p``."""
+    return TestResult("shared_course_away_from_gaps", float(test.q), float(test.p), float(threshold_p), AWAY_NULL,
+                      AWAY_CALIBRATION)

@@ -64,7 +64,7 @@ def solve_from_starts(model, Y, W, s, halves, start=None, max_iter: int | None =
 
     The lowest in-sample fit is the maximum-likelihood one, which the cross-prediction criterion can pass over
     for a more damped one (see the module's note): the diagnosis' test between two forms of one lag also tries
-    it (:func:`rce_gtsam.diagnosis.verdict.form_test`)."""
+    it (:func:`rce_gtsam.diagnosis.evidence.form_test`)."""
     fit = model.solve(Y, W, s, start=start, max_iter=max_iter)
     alternatives = []
     for i, eff in enumerate(model.effects):
