@@ -83,6 +83,19 @@ def test_a_saturation_needs_both_of_its_tests():
     assert is_significant(3.1, 2.95, None, 0.005, both=True)  # no score test: the fold t, as for any effect
 
 
+def test_the_report_says_why_a_saturation_with_one_test_was_not_named():
+    from types import SimpleNamespace
+
+    from rce_gtsam.diagnosis.explain import both_tests_text
+
+    one = SimpleNamespace(effect="nonlinear", evidence=3.08, extra={"score_p": 0.043, "score_threshold_p": 0.005,
+                                                                    "threshold_t": 2.98})
+    assert "named only where both its tests pass" in both_tests_text(one)
+    assert both_tests_text(SimpleNamespace(effect="delay", evidence=3.08, extra=one.extra)) == ""
+    neither = SimpleNamespace(effect="nonlinear", evidence=1.0, extra=one.extra)
+    assert both_tests_text(neither) == ""
+
+
 def test_the_diagnosis_asks_a_saturation_for_both_tests(monkeypatch):
     """diagnose hands each candidate's flag to the decision's significance rule (a nonlinear fit on a branch is
     asked for both tests, the others for either)."""

@@ -41,6 +41,22 @@ def significant_but_not_named(diag: Diagnosis) -> str:
             "the data show.")
 
 
+def both_tests_text(c) -> str:
+    """Why a candidate of an effect that needs both of its tests (a saturation) was not named though one passed."""
+    from ..effects import CANDIDATES
+
+    cls = CANDIDATES.get(c.effect)
+    sp, thr = c.extra.get("score_p"), c.extra.get("score_threshold_p")
+    if cls is None or not getattr(cls, "needs_both_tests", False) or sp is None or thr is None:
+        return ""
+    fold_ok = c.evidence > c.extra.get("threshold_t", float("inf"))
+    if fold_ok == (sp <= thr):
+        return ""
+    return (f" ({c.effect} is named only where both its tests pass, the fold t and the score test at p <= "
+            f"{thr:.2g}: the excitation absorbs most of a saturation, and one test alone has been a tracker's "
+            f"artifact)")
+
+
 def heldout_null_text(c) -> str:
     """The held-out gain's surrogate test of an effect made of per-segment courses of time
     (:mod:`rce_gtsam.diagnosis.heldout_null`), as a clause starting with "; ", or empty where it did not run."""
@@ -114,7 +130,8 @@ def explain(diag: Diagnosis) -> str:
             closest = (f" The closest candidate, {best.effect}, changes held-out RMSE to {best.heldout_rmse:.3f} deg "
                        f"({-best.improvement_pct:+.1f}%), evidence t = {best.evidence:.2f} against the threshold "
                        f"{best.extra.get('threshold_t', diag.settings['evidence_threshold_t']):.2f}"
-                       + ("" if sp is None else f", full-data score test p = {sp:.2g}") + heldout_null_text(best) + ".")
+                       + ("" if sp is None else f", full-data score test p = {sp:.2g}") + heldout_null_text(best)
+                       + both_tests_text(best) + ".")
         closest += significant_but_not_named(diag)
         b = diag.budget
         if b is None:
