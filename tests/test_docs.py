@@ -246,3 +246,6 @@ def test_the_quality_flags_and_plausibility_rules_the_pages_describe_are_the_cod
     assert plausibility.SATURATION_REACH == 2.0 and "beyond twice the largest\n   deflection seen" in diagnosis
     assert plausibility.SHORTEST_PERIOD_FRAMES == 4.0 and "under 4 frames" in diagnosis
     assert "`no (implausible fit)`" in diagnosis
+    from rce_gtsam import effects
+    named_by_both = [n for n, c in effects.CANDIDATES.items() if c.needs_both_tests]
+    assert named_by_both == ["nonlinear"] and "is named only where **both** its\ntests pass" in diagnosis
