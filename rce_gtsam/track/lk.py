@@ -300,7 +300,7 @@ class LKTracker(NodeDecision, Measurement, Frame0Setup):
         counts = {"anchored": 0, "invisible": 0, "rejected_ncc": 0, "rejected_fb": 0, "rejected_length": 0,
                   "lost_match": 0, "predicted_from_graph": 0, "rejected_ambiguous": 0,
                   "predicted_from_segment": 0, "from_segment": 0, "rejected_unanchored": 0,
-                  "rejected_refine": 0, "held": 0, "recent_template": 0}
+                  "rejected_refine": 0, "held": 0, "recent_template": 0, "soft": 0}
         recent = [None] * n  # per node: (crop of its last frame-0-anchored frame, that position, its sigma)
         held = np.zeros(n, int)  # consecutive frames each node has been held by frame-to-frame LK alone
         sig_prev = np.full(n, cfg.sigma_floor_px)
@@ -370,7 +370,10 @@ class LKTracker(NodeDecision, Measurement, Frame0Setup):
                     if refine is not None:
                         out = refine.result() if pool is not None else self._refine(gray0, ga, q0, new_est,
                                                                                      new_vis, fb_max)
+                        soft = how == 4
+                        sig_soft = sig[soft]
                         self._apply_refine(out, new_est, new_vis, sig, preds, counts, wide)
+                        sig[soft] = np.maximum(sig[soft], sig_soft)  # a re-match does not lift the checks it failed
                     hh, ww = gray.shape
                     new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
                     new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)
