@@ -62,7 +62,8 @@ def traced_tracker():
                    "f2f": fr.f2f[i].copy() if fr.f2f_ok[i] else None}
             if m is not None:
                 xy, score, fb, s_lk, second, n_eff, xy2 = m
-                rec.update(match=np.array(xy), score=score, fb=fb, margin=(score - second) * math.sqrt(n_eff))
+                rec.update(match=np.array(xy), score=score, fb=fb, margin=(score - second) * math.sqrt(n_eff),
+                           match2=None if xy2 is None else np.array(xy2), pred_in=fr.preds[i].copy(), wide=fr.wide[i])
             if s is not None:
                 rec.update(seg=np.array(s[0]), seg_ncc=s[2])
             self.trace.append(rec)
@@ -111,6 +112,18 @@ def summarise(trace, ref, res, label: str) -> None:
                 print(f"    ncc {lo:4.1f}-{hi:4.2f}: n {k.sum():4d}, median {np.median(de[k]):6.2f} px, "
                       f"share < 1 px {np.mean(de[k] < 1):.2f}, < 2 px {np.mean(de[k] < 2):.2f}, "
                       f"fb median {np.median(fb[k]):.2f}, peak margin median {np.median(mg[k]):.1f}")
+        amb = np.array([r["why"] == "rejected_ambiguous" and r["match2"] is not None for r in ms])
+        if amb.any():
+            near = np.array([r["match2"] is not None and np.hypot(*(r["match"] - r["pred_in"]))
+                             < np.hypot(*(r["match2"] - r["pred_in"])) for r in ms])
+            wide = np.array([bool(r["wide"]) for r in ms])
+            print("  rejected for an indistinct second peak: distance of the best peak")
+            for lab, k in [("best nearer the prediction, narrow search", amb & near & ~wide),
+                           ("best nearer the prediction, wide search", amb & near & wide),
+                           ("second nearer the prediction", amb & ~near)]:
+                if k.any():
+                    print(f"    {lab:42s} n {k.sum():4d}, median {np.median(de[k]):6.2f} px, p90 "
+                          f"{np.percentile(de[k], 90):6.2f} px, share > 3 px {np.mean(de[k] > 3):.2f}")
         soft = np.array([r["why"] in SOFT for r in ms]) & (sc >= MIN_NCC)
         print(f"  rejected only by {', '.join(SOFT)} (ncc >= {MIN_NCC}, peaks distinct): distance by forward-backward error")
         for lo, hi in [(0, 0.5), (0.5, 1), (1, 2), (2, 4), (4, 1e9)]:

@@ -104,6 +104,13 @@ never recovers after an occlusion. This tracker uses frame-to-frame pyramidal LK
    follows a fluttering leaf now and then (seed 0; without it 0.926). Not kept (measured on plant 2): predicting
    a lost node from where it was last seen moved as its nearest seen ancestor (p90 distance 13-19 px in two
    windows), and requiring the recent template to agree with the segment search (visible 41-67 %).
+3c. **Sigma instead of dropping** (``LKConfig.soft_reject``): a frame-0 match that passed ``min_ncc`` and the
+   distinctness tests but failed only the forward-backward limit, the parent check or the segment length is reported
+   with sigma >= ``fallback_sigma_px`` instead of lost (measured with ``benchmarks/bench_lost_positions.py``: such
+   matches were right to median 0.4-1.1 px, p90 1.5-2.5 px; see ``LKConfig``). **Bridge**
+   (``LKConfig.bridge``, :mod:`~rce_gtsam.track.lk_bridge`): after the refinement pass, a node still lost between a
+   seen ancestor and a seen descendant is predicted by the similarity that moved those two and searched in the
+   narrow window with every re-acquisition test.
 4. **Uncertainty**: ``sigma_px = sqrt(s_lk^2 + (fb/2)^2 + sigma_floor_px^2)`` with the LK
    least-squares standard error ``s_lk = sqrt(residual_variance / lambda_min(G))`` (G = structure
    tensor of the template, residual = template minus the matched patch, so appearance change counts)
@@ -113,7 +120,8 @@ Modules: this one holds :class:`LKTracker` and its frame loop (frame-to-frame LK
 result); :mod:`~rce_gtsam.track.lk_config` its settings (:class:`LKConfig`, the constants' reasons) and :data:`HOW`;
 :mod:`~rce_gtsam.track.lk_frame0` the frame-0 set-up (topology, branch band, colour mask, strips, templates);
 :mod:`~rce_gtsam.track.lk_measure` the measurements (frame-0 match, segment search, refinement pass, recent
-template); :mod:`~rce_gtsam.track.lk_node` the first pass's decision at one node (steps 1-3b);
+template); :mod:`~rce_gtsam.track.lk_node` the first pass's decision at one node (steps 1-3b, 3c's soft rejection);
+:mod:`~rce_gtsam.track.lk_bridge` the bridge step (3c);
 :mod:`~rce_gtsam.track.match_kernels` the compiled kernels.
 
 Camera nuisances (``benchmarks/bench_track_nuisance.py``, seeds 0-2, 400 frames, ``rce_gtsam.sim.nuisance``):
@@ -210,6 +218,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..graph import BranchGraph
+from .lk_bridge import Bridge
 from .lk_config import HOW, LKConfig
 from .lk_frame0 import Frame0Setup
 from .lk_measure import Measurement
@@ -259,7 +268,7 @@ class _Progress:
                 raise RuntimeError("the first pass was abandoned")
 
 
-class LKTracker(NodeDecision, Measurement, Frame0Setup):
+class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
     """Drift-free Lucas-Kanade tracker (see module docstring). ``LKTracker(LKConfig()).track(src, pts, graph)``.
 
     Its methods live in one module per job: the frame-0 set-up (:class:`~rce_gtsam.track.lk_frame0.Frame0Setup`),
@@ -300,7 +309,7 @@ class LKTracker(NodeDecision, Measurement, Frame0Setup):
         counts = {"anchored": 0, "invisible": 0, "rejected_ncc": 0, "rejected_fb": 0, "rejected_length": 0,
                   "lost_match": 0, "predicted_from_graph": 0, "rejected_ambiguous": 0,
                   "predicted_from_segment": 0, "from_segment": 0, "rejected_unanchored": 0,
-                  "rejected_refine": 0, "held": 0, "recent_template": 0, "soft": 0}
+                  "rejected_refine": 0, "held": 0, "recent_template": 0, "soft": 0, "bridged": 0}
         recent = [None] * n  # per node: (crop of its last frame-0-anchored frame, that position, its sigma)
         held = np.zeros(n, int)  # consecutive frames each node has been held by frame-to-frame LK alone
         sig_prev = np.full(n, cfg.sigma_floor_px)
@@ -374,6 +383,8 @@ class LKTracker(NodeDecision, Measurement, Frame0Setup):
                         sig_soft = sig[soft]
                         self._apply_refine(out, new_est, new_vis, sig, preds, counts, wide)
                         sig[soft] = np.maximum(sig[soft], sig_soft)  # a re-match does not lift the checks it failed
+                    if cfg.bridge and self._band is not None:
+                        self._bridge(gray0, ga, q0, new_est, new_vis, sig, how, counts, fb_max)
                     hh, ww = gray.shape
                     new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
                     new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)

@@ -1,0 +1,76 @@
+"""The default tracker's bridge step: re-find a lost node between two seen ones (issue 38; see
+:mod:`rce_gtsam.track.lk`, step 3c).
+
+In a gust the distal part of a branch swings far from frame 0, and a node lost there is predicted from its parent
+alone (the parent's position plus its frame-0 segment vector, turned by a borrowed rotation): along a chain of
+lost nodes that prediction compounds every unmeasured bend, and lands 10-20 px off on plant 2, where the wide
+search then finds two indistinguishable peaks or none. But a node further down the branch is often still seen
+(re-found by its own match, or kept by ``LKConfig.soft_reject``). Between the nearest seen ancestor a and the
+nearest seen descendant d, the branch moved, to first order, by the similarity (rotation, scale, shift) that
+takes a's and d's frame-0 positions to their positions now: the lost node is predicted there, its articulated
+template turned by that rotation, and it is searched in the narrow window (the patch radius h) with every test of
+a re-acquisition (``min_ncc``, distinct peaks, forward-backward limit, segment length to a seen parent).
+
+:class:`Bridge` is a mixin of :class:`~rce_gtsam.track.lk.LKTracker`. Positions in pixels, angles in radians.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+#: A bridge is used only when the similarity's scale is within this factor of 1 (the branch does not stretch;
+#: beyond it a or d is not where the branch is, and the prediction would be wrong).
+_MAX_SCALE_CHANGE = 1.25
+
+
+class Bridge:
+    """Bridge step of :class:`~rce_gtsam.track.lk.LKTracker` (see the module docstring)."""
+
+    def _seen_descendant(self, i: int, vis: np.ndarray) -> int:
+        """The nearest (fewest edges) visible descendant of node i, or -1."""
+        level = list(self.children[i])
+        while level:
+            for c in level:
+                if vis[c]:
+                    return c
+            level = [g for c in level for g in self.children[c]]
+        return -1
+
+    def _bridge(self, gray0, ga, q0, est, vis, sig, how, counts, fb_max) -> None:
+        """Re-find each lost node (in graph order) between a seen ancestor and a seen descendant; writes ``est``,
+        ``vis``, ``sig`` and ``how`` (5) in place for the nodes found."""
+        cfg, h = self.config, self.h
+        for i in self.order:
+            if vis[i]:
+                continue
+            a = self.parent[i]
+            while a >= 0 and not vis[a]:
+                a = self.parent[a]
+            d = self._seen_descendant(i, vis) if a >= 0 else -1
+            if d < 0:
+                continue
+            v0, v1 = q0[d] - q0[a], est[d] - est[a]
+            n0 = math.hypot(*v0)
+            if n0 < 1e-6:
+                continue
+            scale = math.hypot(*v1) / n0
+            if not 1 / _MAX_SCALE_CHANGE <= scale <= _MAX_SCALE_CHANGE:
+                continue
+            phi = math.atan2(v1[1], v1[0]) - math.atan2(v0[1], v0[0])
+            c, s = scale * math.cos(phi), scale * math.sin(phi)
+            r0 = q0[i] - q0[a]
+            pred = est[a] + np.array([c * r0[0] - s * r0[1], s * r0[0] + c * r0[1]])
+            thetas = [phi] * len(self._inc[i])
+            m = self._anchor(gray0, ga, i, q0[i], pred, phi, h, thetas if self._band is not None else None)
+            if m is None:
+                continue
+            xy, score, fb, s_lk, second, n_eff, xy2 = m
+            if (score < cfg.min_ncc or fb > fb_max or second > score - cfg.distinct_sigmas / math.sqrt(n_eff)
+                    or not self._length_ok(i, xy, est, vis)):
+                continue
+            est[i], vis[i] = xy, True
+            sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
+            how[i] = 5
+            counts["bridged"] += 1
