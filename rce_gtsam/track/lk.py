@@ -384,7 +384,8 @@ class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
                         self._apply_refine(out, new_est, new_vis, sig, preds, counts, wide)
                         sig[soft] = np.maximum(sig[soft], sig_soft)  # a re-match does not lift the checks it failed
                     if cfg.bridge and self._band is not None:
-                        self._bridge(gray0, ga, q0, new_est, new_vis, sig, how, counts, fb_max)
+                        self._bridge(gray0, ga, q0, new_est, new_vis, sig, how, held, counts, fb_max,
+                                     hold_max)
                     hh, ww = gray.shape
                     new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
                     new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)
