@@ -7,7 +7,9 @@ lost nodes that prediction compounds every unmeasured bend, and lands 10-20 px o
 search then finds two indistinguishable peaks or none. But a node further down the branch is often still seen
 (re-found by its own match, or kept by ``LKConfig.soft_reject``). Between the nearest seen ancestor a and the
 nearest seen descendant d, the branch moved, to first order, by the similarity (rotation, scale, shift) that
-takes a's and d's frame-0 positions to their positions now: the lost node is predicted there, its articulated
+takes a's and d's frame-0 positions to their positions now (used only when its scale is within the segment-length
+limits, ``min_length_fraction`` to ``1 + max_stretch``: a branch foreshortens but does not stretch, so beyond them a
+or d is not where the branch is): the lost node is predicted there, its articulated
 template turned by that rotation, and it is searched in the narrow window (the patch radius h) with every test of
 a re-acquisition: ``min_ncc`` and distinct peaks; the forward-backward limit and the segment length to a seen
 parent as ``LKConfig.soft_reject`` treats them (a failure widens sigma, it does not drop the node). A bridged node
@@ -26,11 +28,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-#: A bridge is used only when the similarity's scale is within this factor of 1 (the branch does not stretch;
-#: beyond it a or d is not where the branch is, and the prediction would be wrong).
-_MAX_SCALE_CHANGE = 1.25
-
 
 class Bridge:
     """Bridge step of :class:`~rce_gtsam.track.lk.LKTracker` (see the module docstring)."""
@@ -64,7 +61,7 @@ class Bridge:
             if n0 < 1e-6:
                 continue
             scale = math.hypot(*v1) / n0
-            if not 1 / _MAX_SCALE_CHANGE <= scale <= _MAX_SCALE_CHANGE:
+            if not cfg.min_length_fraction <= scale <= 1 + cfg.max_stretch:
                 continue
             phi = math.atan2(v1[1], v1[0]) - math.atan2(v0[1], v0[0])
             c, s = scale * math.cos(phi), scale * math.sin(phi)

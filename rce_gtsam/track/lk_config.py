@@ -115,7 +115,7 @@ class LKConfig:
     bridge: after the refinement pass, re-find each lost node that has a seen ancestor and a seen descendant from the
         similarity that moves those two (:mod:`~rce_gtsam.track.lk_bridge`; ``HOW`` 5), with every re-acquisition
         test. On plant 2's gust windows (frames 120-359) it raised the visible share of TAPIR's rows 89/82/82/96 ->
-        90/87/87/96 % at the same p90 distance to TAPIR (1.4-2.1 px); on the simulator's renders (seeds 0/1/3) the
+        91/90/90/99 % at the same p90 distance to TAPIR (1.4-2.1 px); on the simulator's renders (seeds 0/1/3) the
         figures moved within the tracker's own jitter resolution.
     threads: 2 = the refinement pass runs in a second thread, node by node right behind the first pass (a node
         is re-matched as soon as the first pass has finished it, its parent and its children, and after its
