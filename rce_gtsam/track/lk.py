@@ -104,6 +104,21 @@ never recovers after an occlusion. This tracker uses frame-to-frame pyramidal LK
    follows a fluttering leaf now and then (seed 0; without it 0.926). Not kept (measured on plant 2): predicting
    a lost node from where it was last seen moved as its nearest seen ancestor (p90 distance 13-19 px in two
    windows), and requiring the recent template to agree with the segment search (visible 41-67 %).
+3c. **Sigma instead of dropping** (``LKConfig.soft_reject``): a frame-0 match that passed ``min_ncc`` and the
+   distinctness tests but failed only the forward-backward limit, the parent check or the segment length is reported
+   with sigma >= ``fallback_sigma_px`` instead of lost (measured with ``benchmarks/bench_lost_positions.py``: such
+   matches were right to median 0.4-1.1 px, p90 1.5-2.5 px; see ``LKConfig``). **Bridge**
+   (``LKConfig.bridge``, :mod:`~rce_gtsam.track.lk_bridge`): after the refinement pass, a node still lost between a
+   seen ancestor and a seen descendant is predicted by the similarity that moved those two and searched in the
+   narrow window with every re-acquisition test. Both against revision cec59db in one run
+   (``bench_track_plant2.py --kappa --baseline cec59db``): plant 2, frames 120-359 by 60-frame window, visible share
+   of TAPIR's rows 85/75/64/90 -> 91/90/90/99 % (240-299: 89.7 %), p90 distance 1.5-1.7 -> 1.4-2.1 px, tip visible
+   38 -> 96 %; kappa against the TAPIR run's Spearman 0.82 -> 0.74, log-RMS 0.51 -> 0.49, inside its CI 15 -> 15
+   of 23 (kappa moves with which gust frames count, and TAPIR is not the truth); texture bed (seeds 0-4, none /
+   delay) visible in the fastest 30 % of frames 99.3 / 99.1 -> 99.9 / 99.8 %, kappa log-RMSE 0.87 / 0.89 -> 0.85
+   / 0.86 (limited by the bed's 0.49-degree bending: the true tracks plus white noise of 0.1 px per axis give
+   0.28 on seeds 0-1); simulator renders (seeds 0-4) within the tracker's own jitter except seed 3's largest
+   visible error 9.8 -> 13.4 px.
 4. **Uncertainty**: ``sigma_px = sqrt(s_lk^2 + (fb/2)^2 + sigma_floor_px^2)`` with the LK
    least-squares standard error ``s_lk = sqrt(residual_variance / lambda_min(G))`` (G = structure
    tensor of the template, residual = template minus the matched patch, so appearance change counts)
@@ -113,7 +128,8 @@ Modules: this one holds :class:`LKTracker` and its frame loop (frame-to-frame LK
 result); :mod:`~rce_gtsam.track.lk_config` its settings (:class:`LKConfig`, the constants' reasons) and :data:`HOW`;
 :mod:`~rce_gtsam.track.lk_frame0` the frame-0 set-up (topology, branch band, colour mask, strips, templates);
 :mod:`~rce_gtsam.track.lk_measure` the measurements (frame-0 match, segment search, refinement pass, recent
-template); :mod:`~rce_gtsam.track.lk_node` the first pass's decision at one node (steps 1-3b);
+template); :mod:`~rce_gtsam.track.lk_node` the first pass's decision at one node (steps 1-3b, 3c's soft rejection);
+:mod:`~rce_gtsam.track.lk_bridge` the bridge step (3c);
 :mod:`~rce_gtsam.track.match_kernels` the compiled kernels.
 
 Camera nuisances (``benchmarks/bench_track_nuisance.py``, seeds 0-2, 400 frames, ``rce_gtsam.sim.nuisance``):
@@ -210,6 +226,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..graph import BranchGraph
+from .lk_bridge import Bridge
 from .lk_config import HOW, LKConfig
 from .lk_frame0 import Frame0Setup
 from .lk_measure import Measurement
@@ -259,7 +276,7 @@ class _Progress:
                 raise RuntimeError("the first pass was abandoned")
 
 
-class LKTracker(NodeDecision, Measurement, Frame0Setup):
+class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
     """Drift-free Lucas-Kanade tracker (see module docstring). ``LKTracker(LKConfig()).track(src, pts, graph)``.
 
     Its methods live in one module per job: the frame-0 set-up (:class:`~rce_gtsam.track.lk_frame0.Frame0Setup`),
@@ -300,7 +317,7 @@ class LKTracker(NodeDecision, Measurement, Frame0Setup):
         counts = {"anchored": 0, "invisible": 0, "rejected_ncc": 0, "rejected_fb": 0, "rejected_length": 0,
                   "lost_match": 0, "predicted_from_graph": 0, "rejected_ambiguous": 0,
                   "predicted_from_segment": 0, "from_segment": 0, "rejected_unanchored": 0,
-                  "rejected_refine": 0, "held": 0, "recent_template": 0}
+                  "rejected_refine": 0, "held": 0, "recent_template": 0, "soft": 0, "bridged": 0}
         recent = [None] * n  # per node: (crop of its last frame-0-anchored frame, that position, its sigma)
         held = np.zeros(n, int)  # consecutive frames each node has been held by frame-to-frame LK alone
         sig_prev = np.full(n, cfg.sigma_floor_px)
@@ -370,7 +387,13 @@ class LKTracker(NodeDecision, Measurement, Frame0Setup):
                     if refine is not None:
                         out = refine.result() if pool is not None else self._refine(gray0, ga, q0, new_est,
                                                                                      new_vis, fb_max)
+                        soft = how == 4
+                        sig_soft = sig[soft]
                         self._apply_refine(out, new_est, new_vis, sig, preds, counts, wide)
+                        sig[soft] = np.maximum(sig[soft], sig_soft)  # a re-match does not lift the checks it failed
+                    if cfg.bridge and self._band is not None:
+                        self._bridge(gray0, ga, q0, new_est, new_vis, sig, how, held, counts, fb_max,
+                                     hold_max)
                     hh, ww = gray.shape
                     new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
                     new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)

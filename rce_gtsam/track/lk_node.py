@@ -110,6 +110,7 @@ class NodeDecision:
         preds[i], wide[i] = pred, r > h
         m = self._anchor(gray0, ga, i, q0[i], pred, theta, r, thetas)
         ok = m is not None
+        soft = False  # rejected only by the forward-backward, parent or length check (``LKConfig.soft_reject``)
         if not ok:
             counts["lost_match"] += 1
         else:
@@ -136,19 +137,19 @@ class NodeDecision:
                 ok = False
                 counts["rejected_ambiguous"] += 1
             elif fb > fb_max:
-                ok = False
+                ok, soft = False, True
                 counts["rejected_fb"] += 1
             elif p >= 0 and reacquiring and not new_vis[p]:
                 # re-acquiring while the parent is lost too: nothing checks the match's
                 # geometry (a tip re-found next to a leaf edge 18 px off, then followed
                 # to 67 px, on simulator seed 0); wait until the parent is seen again
-                ok = False
+                ok, soft = False, True
                 counts["rejected_unanchored"] += 1
             elif p >= 0 and new_vis[p]:
                 d = math.hypot(xy[0] - new_est[p, 0], xy[1] - new_est[p, 1])
                 l0 = self.rest_len[i]
                 if d > (1 + cfg.max_stretch) * l0 + cfg.length_tol_px or d < cfg.min_length_fraction * l0 - cfg.length_tol_px:
-                    ok = False
+                    ok, soft = False, True
                     counts["rejected_length"] += 1
         if ok:
             new_est[i], new_vis[i] = xy, True
@@ -173,6 +174,17 @@ class NodeDecision:
             seg_rot[i] = seg[1]
             counts["from_segment"] += 1
             how[i] = 3
+        elif (cfg.soft_reject and soft
+              and (s_soft := math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.fallback_sigma_px ** 2)) <= hold_max):
+            # a distinct frame-0 match above ``min_ncc`` that failed only the forward-backward, parent or length
+            # check is mostly right (see ``LKConfig.soft_reject``): keep it with a sigma of at least
+            # ``fallback_sigma_px``; finding the node next frame counts as a re-acquisition (strict checks)
+            new_est[i], new_vis[i], sig[i] = xy, True, s_soft
+            if p >= 0:
+                seg_rot[i] = _turn(new_est[p], xy, ang0[i])
+            held[i] += 1
+            counts["soft"] += 1
+            how[i] = 4
         elif (cfg.recent_template and recent[i] is not None and r <= h and i not in self._tips
               and (rm := self._match_recent(gray, recent[i], pred, r, fb_max, i, new_est, new_vis))
               is not None):
