@@ -45,6 +45,8 @@ from ..graph import BranchGraph
 from ..jsonutil import jsonable as _jsonable
 from ..tracks import Tracks, write_table_atomic
 from .artifacts import ArtifactConfig, apply_artifacts, branch_tangents
+from .tracker_noise import add_tracker_noise  # noqa: F401 (re-exported: beam.py, tests)
+from .three_d import DEFAULT_SHARE, GEOMETRIC_EFFECTS, MEANING as _OOP_MEANING, Scene3D, Truth3D
 
 #: Names of the physical effects the simulator can switch on (and the diagnosis looks for).
 EFFECTS: tuple[str, ...] = ("delay", "dynamics", "second_mode", "offset", "nonlinear")
@@ -58,6 +60,7 @@ EFFECT_DEFAULTS: dict[str, float] = {
     "second_mode": 0.25, # RMS of the second-mode term mu_e*w_t divided by RMS of kappa_e*z_t
     "offset": 0.3,       # RMS of the offset+creep term c_e + d_e*t/T divided by RMS of kappa_e*z_t
     "nonlinear": 3.0,    # q / y_s: largest linear deflection q (99th pct of |kappa_e z_t|) over saturation y_s
+    "out_of_plane": DEFAULT_SHARE,  # share of the wind swinging the branch out of its plane (sim/three_d.py)
 }
 
 EFFECT_MEANING: dict[str, str] = {
@@ -66,6 +69,7 @@ EFFECT_MEANING: dict[str, str] = {
     "second_mode": "RMS(mu_e w_t) / RMS(kappa_e z_t): independent second excitation with its own pattern",
     "offset": "RMS(c_e + d_e t/T) / RMS(kappa_e z_t): constant offset and linear creep per edge",
     "nonlinear": "q / y_s: saturation y_e = y_s tanh(kappa_e z_t / y_s), q = 99th percentile of |kappa_e z_t|",
+    "out_of_plane": _OOP_MEANING,
 }
 
 
@@ -166,6 +170,7 @@ class SimulationConfig:
     segment_px: tuple[float, float] = (12.0, 28.0)
     root_sway_deg: float = 0.0
     artifacts: ArtifactConfig = field(default_factory=ArtifactConfig)
+    scene3d: Scene3D | None = None  # the 3-D scene (sim/three_d.py); None: 3-D only with out_of_plane
 
     def strength(self, effect: str) -> float:
         """The strength of ``effect`` (override or default)."""
@@ -188,11 +193,11 @@ class SimulationConfig:
             raise InputError(src, f"n_frames must be an integer >= 10, got {self.n_frames!r}")
         if not self.fps > 0:
             raise InputError(src, f"fps must be > 0, got {self.fps!r}")
-        unknown = [e for e in self.effects if e not in EFFECTS]
+        unknown = [e for e in self.effects if e not in EFFECTS + GEOMETRIC_EFFECTS]
         if unknown:
             raise InputError(src, f"unknown effect(s) {unknown}; known: {', '.join(EFFECTS)}")
         for k, v in (self.effect_strength or {}).items():
-            if k not in EFFECTS:
+            if k not in EFFECTS + GEOMETRIC_EFFECTS:
                 raise InputError(src, f"effect_strength names an unknown effect {k!r}; known: {', '.join(EFFECTS)}")
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise InputError(src, f"effect_strength[{k!r}] must be a finite number >= 0, got {v!r}")
@@ -202,6 +207,7 @@ class SimulationConfig:
             if v not in EFFECT_FORMS[k]:
                 raise InputError(src, f"effect_form[{k!r}] must be one of {', '.join(EFFECT_FORMS[k])}, got {v!r}")
         self.artifacts.validate()
+        (self.scene3d or Scene3D()).validate(self.image_size)
         w, h = self.image_size
         if w < 64 or h < 64:
             raise InputError(src, f"image_size must be at least 64x64, got {self.image_size}")
@@ -482,61 +488,9 @@ def place_in_image(pos: np.ndarray, image_size, rng, margin: float = 30.0) -> tu
     return p + root_px, float(rot), root_px
 
 
-# ----------------------------------------------------------------------------------------------------------
-# Noise
-# ----------------------------------------------------------------------------------------------------------
-
-#: the branch direction at each node (kept under its old name for the tests that use it)
+#: the branch direction at each node (kept under its old name for the tests that use it); the tracker noise is
+#: :func:`rce_gtsam.sim.tracker_noise.add_tracker_noise`
 _tangents = branch_tangents
-
-
-def add_tracker_noise(graph: BranchGraph, true_xy: np.ndarray, s_node: np.ndarray, noise: NoiseConfig,
-                      fps: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Noisy positions (N, F, 2) with NaN at occlusion gaps, and the nominal white-noise sigma (N,) in px.
-
-    Per node i with normalised root distance s_i: white noise with sigma_across = sigma_across_px *
-    (1 + (tip_factor - 1) s_i) across the branch and along_ratio times that along it; plus an AR(1) drift
-    (correlation time drift_time_s, stationary sigma drift_px along / drift_px/along_ratio across, also
-    growing toward the tip); plus jumps; then occlusion gaps (see :class:`NoiseConfig`).
-    """
-    N, F, _ = true_xy.shape
-    if not noise.enabled:
-        return true_xy.copy(), np.full(N, np.nan)
-    grow = 1 + (noise.tip_factor - 1) * s_node  # (N,)
-    s_across = noise.sigma_across_px * grow
-    s_along = s_across * noise.along_ratio
-    tan = _tangents(graph, true_xy)
-    nrm = np.stack([-tan[..., 1], tan[..., 0]], axis=-1)
-    along = rng.standard_normal((N, F)) * s_along[:, None]
-    across = rng.standard_normal((N, F)) * s_across[:, None]
-    rho = math.exp(-1.0 / (noise.drift_time_s * fps))
-    innov = math.sqrt(1 - rho ** 2)
-    e = rng.standard_normal((N, F, 2))
-    # stationary AR(1): x[0] = e[0], x[t] = rho x[t-1] + sqrt(1 - rho^2) e[t]
-    drift = signal.lfilter([innov], [1.0, -rho], e, axis=1, zi=e[:, :1] * (1 - innov))[0]
-    drift_along = drift[..., 0] * noise.drift_px * grow[:, None]
-    drift_across = drift[..., 1] * noise.drift_px / noise.along_ratio * grow[:, None]
-    xy = true_xy + (along + drift_along)[..., None] * tan + (across + drift_across)[..., None] * nrm
-    # jumps
-    starts = rng.uniform(size=(N, F)) < noise.jump_prob
-    for i, f in zip(*np.nonzero(starts)):
-        L = int(rng.integers(1, 4))
-        ang = rng.uniform(0, 2 * np.pi)
-        mag = rng.uniform(*noise.jump_px)
-        xy[i, f:f + L] += mag * np.array([math.cos(ang), math.sin(ang)])
-    # occlusion gaps
-    for i in range(N):
-        rate = noise.gap_rate * (0.2 + 1.6 * s_node[i]) * F / (30.0 * fps)
-        for _ in range(rng.poisson(rate)):
-            L = int(np.clip(round(noise.gap_median_frames * math.exp(1.1 * rng.standard_normal())), 1,
-                            noise.gap_max_frames))
-            f0 = int(rng.integers(0, F))
-            xy[i, f0:f0 + L] = np.nan
-    # frame 0 is the user's annotation: the tracker returns the query point there exactly (as TAPIR does
-    # on the real plant 2), so every node is observed, noise-free, in frame 0.
-    xy[:, 0] = true_xy[:, 0]
-    sigma = np.sqrt((s_along ** 2 + s_across ** 2) / 2)
-    return xy, sigma
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -569,6 +523,7 @@ class Simulation:
     segment_px: dict = field(default_factory=dict)
     root_px: tuple[float, float] = (0.0, 0.0)
     artifact_params: dict = field(default_factory=dict)
+    three_d: Truth3D | None = None  # the 3-D truth (sim/three_d.py) when the scene is 3-D
 
     def truth_json(self) -> dict:
         """Ground truth as a JSON-ready dict: kappa_true keyed "parent->child", z_true, response_true
@@ -597,6 +552,8 @@ class Simulation:
             "root_px": [float(v) for v in self.root_px],
             "config": _jsonable(cfg),
         }
+        if self.three_d is not None:
+            out.update(self.three_d.truth_json(self.graph))
         if self.config.artifacts.active:
             from .artifacts import preset_provenance
             out["artifacts"] = {"families": list(self.config.artifacts.families),
@@ -606,8 +563,9 @@ class Simulation:
                                 "provenance": preset_provenance(self.config.artifacts.preset)}
         return out
 
-    def write(self, out_dir: str | Path, video: bool = False, render=None) -> dict[str, Path]:
-        """Write tracks.csv, true_tracks.csv, graph.json, truth.json, annotations.json (+ video.mp4).
+    def write(self, out_dir: str | Path, video: bool = False, render=None, depth: bool = False) -> dict[str, Path]:
+        """Write tracks.csv, true_tracks.csv, graph.json, truth.json, annotations.json (+ video.mp4; with
+        ``depth`` also recording.db3 with colour and aligned depth, :mod:`rce_gtsam.sim.recording`).
 
         ``render``: camera nuisances of the video (:class:`~rce_gtsam.sim.nuisance.RenderConfig`; None = the
         clean render). With camera shake, true_tracks.csv and tracks.csv hold positions in the image
@@ -641,9 +599,9 @@ class Simulation:
             row = {nid: i for i, nid in enumerate(self.tracks.node_ids)}
             pts = [[round(float(v), 4) for v in self.true_xy[row[n], 0]] for n in sorted(row)]
             (tmp / "annotations.json").write_text(json.dumps({"points": pts}) + "\n")
-            if video:
-                from .render import render_video
-                render_video(self, tmp / "video.mp4", config=render)
+            if video or depth:
+                from .recording import write_media
+                write_media(self, tmp, render=render, depth=depth)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
@@ -652,7 +610,8 @@ class Simulation:
 
 
 #: Files :meth:`Simulation.write` may write.
-WRITTEN_FILES = ("tracks.csv", "true_tracks.csv", "graph.json", "truth.json", "annotations.json", "video.mp4")
+WRITTEN_FILES = ("tracks.csv", "true_tracks.csv", "graph.json", "truth.json", "annotations.json", "video.mp4",
+                 "recording.db3")
 
 
 def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
@@ -686,6 +645,10 @@ def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
     if not np.isclose(np.linalg.norm(true_xy[1, 0] - true_xy[0, 0]), lengths[graph.edges[0]]):
         scale = np.linalg.norm(true_xy[1, 0] - true_xy[0, 0]) / lengths[graph.edges[0]]
         lengths = {e: L * scale for e, L in lengths.items()}
+    three = None
+    if config.scene3d is not None or "out_of_plane" in config.effects:  # 3-D scene, projected (sim/three_d.py)
+        from .three_d import simulate_3d
+        true_xy, three, lengths = simulate_3d(graph, true_xy, root_px, kappa, z, config, lengths)
     s_node = np.array([dist[n] / dmax for n in graph.nodes])
     tracked, artifact_params = true_xy, {}
     if config.artifacts.active:
@@ -703,7 +666,7 @@ def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
     return Simulation(config=config, graph=graph, tracks=tracks, true_xy=true_xy,
                       kappa_true={b.edge: float(k) for b, k in zip(bends, kappa)}, z_true=z,
                       response_true=y, effect_params=params, rest_turn_deg=rest, segment_px=lengths,
-                      root_px=(float(root_px[0]), float(root_px[1])), artifact_params=artifact_params)
+                      root_px=(float(root_px[0]), float(root_px[1])), artifact_params=artifact_params, three_d=three)
 
 
 # ----------------------------------------------------------------------------------------------------------
