@@ -29,14 +29,15 @@ def fig_swing_vs_bending(d3):
         fixed_margins(fig, left=0.55, top=0.3, bottom=0.75, wspace=0.7, ncols=2)
         ax = axes[0]
         top = float(np.nanmax(np.r_[k.bend_rms_deg, k.swing_rms_deg, 1e-3])) * 1.15
+        ytop = max(top, floor * 1.3) if np.isfinite(floor) else top
         if np.isfinite(floor):
-            ax.axhspan(0, floor, color="0.85", zorder=0, label=f"swing noise floor ({floor:.2f}°)")
-        ax.plot([0, top], [0, top], color="0.4", ls="--", lw=0.8, label="swing = bending")
+            ax.axhspan(0, floor, color="0.88", zorder=0, label=f"within 1 σ of swing noise ({floor:.2f}°/frame)")
+        ax.plot([0, ytop], [0, ytop], color="0.4", ls="--", lw=0.8, label="swing = bending")
         ax.scatter(k.bend_rms_deg, k.swing_rms_deg, s=14, color="tab:purple", zorder=3)
         for x, y, s in zip(k.bend_rms_deg, k.swing_rms_deg, labels):
             ax.annotate(s, (x, y), xytext=(3, 2), textcoords="offset points", fontsize=6)
         ax.set_xlim(0, top)
-        ax.set_ylim(0, top)
+        ax.set_ylim(0, ytop)
         ax.set_xlabel("in-plane bending RMS θ (deg)")
         ax.set_ylabel("out-of-plane swing RMS ψ (deg)")
         ax.set_title(f"(a) Swing vs bending (plane tilt {k.tilt_deg:.0f}°)")
@@ -49,9 +50,10 @@ def fig_swing_vs_bending(d3):
         ax.plot(x + 0.12, d3.kappa_2d, "s", ms=3, color="tab:orange", label="κ from 2-D image")
         ax.axhline(1.0, color="0.4", ls="--", lw=0.8)
         ax.set_yscale("log")
-        from matplotlib.ticker import FuncFormatter
-        for axis_fmt in (ax.yaxis.set_major_formatter, ax.yaxis.set_minor_formatter):
-            axis_fmt(FuncFormatter(lambda v, _pos: f"{v:g}"))
+        from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+        ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:g}"))
+        ax.yaxis.set_minor_formatter(NullFormatter())
         ax.set_xticks(x)
         ax.set_xticklabels(labels, rotation=60, fontsize=6)
         ax.set_xlabel("segment, root → tip")
