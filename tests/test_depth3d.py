@@ -94,3 +94,33 @@ def test_3d_angles_recover_the_model_and_kappa(chain):
     assert _log_rmse(k3.kappa, kappa) < 0.1
     assert np.all(k3.ci_low <= k3.kappa) and np.all(k3.kappa <= k3.ci_high)
     assert (k3.swing_rms_deg > 0.3).all() and len(k3.as_dict()["segments"]) == N - 2
+
+
+def test_analyze_3d_writes_tables_figure_and_recording(chain, tmp_path):
+    import json
+
+    import pandas as pd
+    from rerun.chunk import RrdReader
+
+    from rce_gtsam.depth_pipeline import analyze_3d, format_3d, write_3d
+    from rce_gtsam.pipeline import analyze
+    from rce_gtsam.tracks import Tracks
+    from rce_gtsam.viz.figures3d import swing_vs_bending_figure
+    from rce_gtsam.viz.rerun3d import save_3d_recording
+
+    pos, kappa, _, xy, zm, zs = chain
+    res = analyze(Tracks(node_ids=np.arange(N), xy=xy, sigma_px=np.full((N, F), 0.3)), chain_graph(N), "default",
+                  n_boot=30)
+    d3 = analyze_3d(res, zm, zs, CAM)
+    assert d3.depth_coverage == pytest.approx(np.isfinite(zm).mean())
+    files = write_3d(d3, tmp_path)
+    table = pd.read_csv(files[0])
+    assert list(table.edge) == [f"{j}->{c}" for j, c in res.response.edges]
+    assert np.allclose(table.kappa_2d, res.fit.kappa)  # the 2-D kappa beside the 3-D one, row for row
+    rep = json.loads(files[1].read_text())
+    assert rep["smoother_3d"]["n_depth"] == int(np.isfinite(zm).sum()) and len(rep["segments"]) == N - 2
+    assert "kappa_3d" in format_3d(d3)
+    assert swing_vs_bending_figure(d3, tmp_path / "s.png").stat().st_size > 10_000
+    rrd = save_3d_recording(d3, tmp_path / "x.3d.rrd")
+    paths = {str(ch.entity_path) for ch in RrdReader(str(rrd)).stream()}
+    assert {"/world/skeleton", "/world/nodes", "/world/plane_normal", "/bending3d/1-2"} <= paths
