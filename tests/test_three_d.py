@@ -124,3 +124,44 @@ def test_bad_scene_is_an_input_error():
         simulate(SimulationConfig(n_frames=30, scene3d=Scene3D(rho=1.5)))
     with pytest.raises(InputError, match="effect_strength"):
         simulate(SimulationConfig(n_frames=30, effects=("out_of_plane",), effect_strength={"out_of_plane": -1.0}))
+
+
+def _r2(y, x):
+    X = np.c_[np.ones_like(x), x]
+    res = y.T - X @ np.linalg.lstsq(X, y.T, rcond=None)[0]
+    return 1 - (res ** 2).sum() / ((y.T - y.T.mean(0)) ** 2).sum()
+
+
+def test_at_tilt_0_the_swing_shortens_segments_to_second_order_but_for_perspective():
+    """Tilt 0: seen orthographically the swing shortens segments by L (1 - cos a), second order in z_o; the
+    pinhole adds a first-order term (a point nearer the camera moves away from the principal point)."""
+    sim = _sim(seed=0, n_frames=600, effects=("out_of_plane",), scene3d=Scene3D(tilt_deg=0))
+    t3 = sim.three_d
+    row = {n: i for i, n in enumerate(sim.graph.nodes)}
+
+    def dlen(xy):
+        L = np.stack([np.linalg.norm(xy[row[c]] - xy[row[p]], axis=-1) for p, c in sim.graph.edges])
+        return L - L[:, :1]
+    ortho = dlen(t3.positions_mm[..., :2])
+    assert np.all(ortho <= 1e-9)                      # only ever shorter
+    assert _r2(ortho, t3.z_o ** 2) > 0.9 and _r2(ortho, t3.z_o) < 0.3
+    assert _r2(dlen(sim.true_xy), t3.z_o) > 0.8
+
+
+def test_stem_width_in_colour_matches_the_depth_tube():
+    """The renderer's bark width (planar width x width_factor) is the tube's image width 2 r f / z at frame 0."""
+    from rce_gtsam.sim.three_d import stem_widths_px
+    flat = _sim(seed=2, n_frames=20, scene3d=Scene3D())
+    assert all(flat.three_d.width_factor(e, flat.graph) == 1.0 for e in flat.graph.edges)
+    sim = _sim(seed=2, n_frames=20, effects=("out_of_plane",))
+    t3, g = sim.three_d, sim.graph
+    planar = simulate(SimulationConfig(n_frames=20, seed=2, noise=CLEAN))
+    w0 = stem_widths_px(g, planar.segment_px)
+    row = {n: i for i, n in enumerate(g.nodes)}
+    factors = []
+    for e in g.edges:
+        z_mid = t3.positions_mm[[row[e[0]], row[e[1]]], 0, 2].mean()
+        expect = 2 * t3.stem_radius_mm[e] * t3.camera.fx / z_mid
+        assert w0[e] * t3.width_factor(e, g) == pytest.approx(expect, rel=1e-9)
+        factors.append(t3.width_factor(e, g))
+    assert min(factors) < 0.95                     # the upper branch leans away: thinner in the image

@@ -10,7 +10,9 @@ Writes a simulated recording with its ground truth: tracks.csv (noisy, tracker-l
 of the video (``rce_gtsam.sim.nuisance.REALISM``: clean = the crisp default render; outdoor = motion blur,
 drifting light, a moving soft shadow, ~1 px camera shake, crf 28). ``--artifacts FAMILY[,FAMILY]`` (or ``all``)
 adds tracker artifacts to tracks.csv (``rce_gtsam.sim.artifacts``: errors that follow the motion, at the sizes
-measured on the project's tracker and the real plants' tracks, times ``--artifact-scale``).
+measured on the project's tracker and the real plants' tracks, times ``--artifact-scale``). ``--effect
+out_of_plane`` swings the branch out of its plane (``--oop-share``, ``--tilt-deg``; :mod:`rce_gtsam.sim.three_d`);
+``--depth`` adds aligned depth and ``recording.db3`` (:mod:`rce_gtsam.sim.depth`, :mod:`rce_gtsam.sim.recording`).
 """
 
 from __future__ import annotations
@@ -219,7 +221,9 @@ def run(args: argparse.Namespace) -> int:
     if sim.three_d is not None:
         t3 = sim.three_d
         eff += (f"; 3-D scene: branch plane tilted {t3.tilt_deg:g} deg, root at {t3.root_depth_mm:.0f} mm, "
-                f"out-of-plane share {t3.share:g}")
+                f"out-of-plane share {t3.share:g}"
+                + (f"; the branch was shrunk to {100 * t3.fit_scale:.0f} % of its planar size to stay in view"
+                   if t3.fit_scale < 0.995 else ""))
     obs = sim.tracks.observed
     art = (f"tracker artifacts: {', '.join(artifacts.families)} at {artifacts.scale:g}x the measured size; "
            if artifacts.active else "")

@@ -143,6 +143,8 @@ def build_scene(sim, n_leaves: int | None = None) -> tuple[np.ndarray, list[_Spr
     for p, c in sorted(g.edges, key=lambda e: dist[e[0]]):
         s = dist[p] / dmax
         w = 10.0 - 5.0 * s
+        if getattr(sim, "three_d", None) is not None:   # a 3-D scene: the stem's width follows its depth
+            w *= sim.three_d.width_factor((p, c), g)
         bgra, u0, v0 = _stem_sprite(rng, sim.segment_px[(p, c)], w, knot=True)
         sprites.append(_Sprite((p, c), bgra, u0, v0, length=float(sim.segment_px[(p, c)])))
     distal = [e for e in g.edges if dist[e[1]] / dmax > 0.45]

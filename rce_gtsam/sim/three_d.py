@@ -38,6 +38,7 @@ import numpy as np
 
 from ..camera import CameraIntrinsics
 from ..errors import InputError
+from .kinematics import turning_angles_deg
 
 #: Effects of the 3-D geometry (not laws on the in-plane response): switched on like the others.
 GEOMETRIC_EFFECTS: tuple[str, ...] = ("out_of_plane",)
@@ -128,6 +129,21 @@ class Truth3D:
     segment_mm: dict
     stem_radius_mm: dict
 
+    @property
+    def fit_scale(self) -> float:
+        """Size of the branch relative to the planar layout (1 = as the planar simulator draws it; below 1 the
+        branch was shrunk so that its tilted, swinging image stays in view)."""
+        return self.mm_per_px * self.camera.fx / self.root_depth_mm
+
+    def width_factor(self, edge, graph) -> float:
+        """The stem's image width at frame 0 over its width in the planar layout for segment ``edge``: the tube
+        (radius ``stem_radius_mm``) seen at its mid-point's depth, so the colour and the depth images agree.
+        Exactly 1 for a flat scene (tilt 0, no swing)."""
+        row = {n: i for i, n in enumerate(graph.nodes)}
+        z_mid = 0.5 * (self.positions_mm[row[edge[0]], 0, 2] + self.positions_mm[row[edge[1]], 0, 2])
+        k = self.fit_scale * self.root_depth_mm / z_mid
+        return 1.0 if abs(k - 1.0) < 1e-9 else float(k)
+
     def truth_json(self, graph) -> dict:
         """The 3-D entries of truth.json (keys ``kappa_true_3d``, ``kappa_true_image``, ``positions_mm`` and
         ``three_d``: the scene, the camera, the angles), edges keyed "parent->child"."""
@@ -143,7 +159,7 @@ class Truth3D:
                                           "graph.nodes order", "angles": "degrees", "camera": "px"},
                 "node_order": [int(n) for n in graph.nodes],
                 "camera": {**self.camera.to_dict(), "model": "pinhole, no distortion", "units": "px"}, "tilt_deg": self.tilt_deg, "share": self.share, "rho": self.rho,
-                "root_depth_mm": self.root_depth_mm, "mm_per_px": self.mm_per_px,
+                "root_depth_mm": self.root_depth_mm, "mm_per_px": self.mm_per_px, "fit_scale": self.fit_scale,
                 "plane_normal": r(self.plane_normal, 6), "z_o": r(self.z_o, 6), "z_prime": r(self.z_prime, 6),
                 "segment_mm": {key(e): float(v) for e, v in self.segment_mm.items()},
                 "stem_radius_mm": {key(e): float(v) for e, v in self.stem_radius_mm.items()},
@@ -167,7 +183,6 @@ def chain_3d(graph, planar: np.ndarray, psi_deg: np.ndarray) -> np.ndarray:
     root headings, in-plane turning angles and segment lengths are kept. ``psi_deg`` (E, F): out-of-plane bend per
     joint (rows in graph.bends order). See the module docstring for the kinematics.
     """
-    from .simulate import turning_angles_deg
     N, F, _ = planar.shape
     row = {n: i for i, n in enumerate(graph.nodes)}
     theta = np.radians(turning_angles_deg(planar, graph.nodes, graph.bends))
@@ -243,7 +258,7 @@ def out_of_plane_excitation(z: np.ndarray, share: float, rho: float, fps: float,
                             rms_deg: float) -> tuple[np.ndarray, np.ndarray]:
     """(z_o, z') in degrees: ``z_o = share * (rho z + sqrt(1 - rho^2) z')``, ``z'`` drawn by
     :func:`~rce_gtsam.sim.simulate.make_excitation` (RMS ``rms_deg``) from its own seed stream."""
-    from .simulate import make_excitation
+    from .bend_laws import make_excitation
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x0B3D]))
     z2 = make_excitation(len(z), fps, rng, rms_deg=rms_deg)
     return share * (rho * z + math.sqrt(max(0.0, 1 - rho ** 2)) * z2), z2
@@ -282,7 +297,6 @@ def simulate_3d(graph, planar_xy: np.ndarray, root_px, kappa: np.ndarray, z: np.
 
 
 def _image_turn(xy: np.ndarray, graph) -> np.ndarray:
-    from .simulate import turning_angles_deg
     return turning_angles_deg(xy, graph.nodes, graph.bends)
 
 
