@@ -124,3 +124,21 @@ def test_analyze_3d_writes_tables_figure_and_recording(chain, tmp_path):
     rrd = save_3d_recording(d3, tmp_path / "x.3d.rrd")
     paths = {str(ch.entity_path) for ch in RrdReader(str(rrd)).stream()}
     assert {"/world/skeleton", "/world/nodes", "/world/plane_normal", "/bending3d/1-2"} <= paths
+
+
+def test_run_3d_says_why_it_skips_a_recording_without_depth_at_the_nodes(chain, tmp_path):
+    import pandas as pd
+
+    from rce_gtsam.cli.depth3d import run_3d
+    from rce_gtsam.pipeline import analyze
+    from rce_gtsam.tracks import Tracks
+
+    _, _, _, xy, _, _ = chain
+    tracks = Tracks(node_ids=np.arange(N), xy=xy, sigma_px=np.full((N, F), 0.3))
+    res = analyze(tracks, chain_graph(N), "default", n_boot=0)
+    table = tracks.to_frame().assign(visible=1, z_mm=np.nan, z_sigma_mm=np.nan)
+    table.to_csv(tmp_path / "tracks.csv", index=False)
+    text = run_3d(res, tmp_path / "tracks.csv", CAM, tmp_path / "out", figures=False, rerun=None, video=None)
+    assert text.startswith("3-D analysis skipped") and "no node has a depth" in text
+    pd.DataFrame(table.drop(columns=["z_mm", "z_sigma_mm"])).to_csv(tmp_path / "t2.csv", index=False)
+    assert "no depth columns" in run_3d(res, tmp_path / "t2.csv", CAM, tmp_path / "out", False, None, None)

@@ -25,12 +25,16 @@ def run_3d(result, tracks_csv: Path, cam, out_dir: Path, figures: bool, rerun: P
     """The 3-D analysis of ``result`` with the depth columns of ``tracks_csv``; writes its files into ``out_dir``
     and returns the text to print."""
     from ..depth_pipeline import analyze_3d, format_3d, write_3d
+    from ..errors import InputError
     from ..track.depth_tracks import read_depth_columns
 
     depth = read_depth_columns(tracks_csv, result.tracks)
     if depth is None:
         return "3-D: the tracks have no depth columns; 3-D analysis skipped"
-    d3 = analyze_3d(result, *depth, cam)
+    try:
+        d3 = analyze_3d(result, *depth, cam)
+    except InputError as exc:  # e.g. no node has a depth: the 2-D results stand, written already
+        return f"3-D analysis skipped: {exc}"
     files = write_3d(d3, out_dir)
     if figures:
         from ..viz.figures3d import swing_vs_bending_figure
