@@ -62,6 +62,7 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
     from ..validate import check_bends_observed, check_clip_length, check_command_options, check_graph_has_bend
     from .analyze import (FiguresInBackground, first_video_frame, format_summary, print_lost_nodes,
                           quality_exit_code, record_wall_time, save_recording)
+    from .depth3d import maybe_add_depth, run_3d
     from .live_args import live_from_args
     from .track import print_visibility, send_live_video, track_with_progress, warn_annotations
 
@@ -83,6 +84,7 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
         send_live_video(live, src)
         tracked = track_with_progress(tracker, src, points, graph, args.max_frames, show=show, command="run",
                                       on_frame=live.frame if live else None)
+    tracked, depth_cam = maybe_add_depth(args.video, tracked)  # a recording with depth: z_mm per node
     t_track = time.perf_counter() - t0
     print_visibility(tracked.visible)
     check_bends_observed(tracked.to_frame(), graph, f"tracks of {args.video}", preset.compliance.block_length)
@@ -133,7 +135,11 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
                                  extra_writers=[write_tracks, *([figures.writer(bar)] if figures else [])])
             if args.rerun is not None:
                 bar.start("recording")
-                save_recording(args, result, video=args.video, diagnosis=view, announce=False)
+                # a RealSense recording is no video file Rerun's AssetVideo can hold: its tracks only
+                save_recording(args, result, diagnosis=view, announce=False,
+                               video=None if Path(args.video).suffix.lower() in (".bag", ".db3") else args.video)
+        text_3d = None if depth_cam is None else run_3d(result, tracks_csv, depth_cam, args.out,
+                                                        not args.no_figures, args.rerun, args.video)
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
         if figures:
@@ -145,6 +151,8 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
     print()
     print(cli_wording(diagnosis.report()))
     print("\n" + read_together(result, diagnosis))
+    if text_3d:
+        print("\n" + text_3d)
     if args.rerun is not None:
         from ..viewer import open_command
         print(f"\nwrote Rerun recording {args.rerun} (open it with: {open_command(args.rerun)})")

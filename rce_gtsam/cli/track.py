@@ -59,6 +59,8 @@ def run_track(args: argparse.Namespace) -> int:
         send_live_video(live, src)
         result = track_with_progress(tracker, src, points, graph, args.max_frames, show=progress_mode(args.quiet),
                                      on_frame=live.frame if live else None)
+    from .depth3d import maybe_add_depth
+    result, _ = maybe_add_depth(args.video, result)  # a recording with depth: z_mm, z_sigma_mm columns
     if corrections is None:
         result.write_csv(args.out)
     else:

@@ -29,6 +29,8 @@ class TrackResult:
     sigma_px: (P, F) float -- 1-sigma position uncertainty per axis, pixels, > 0.
     fps: frames per second of the source video.
     info: free-form diagnostics of the tracker (counts, timings).
+    z_mm, z_sigma_mm: (P, F) float or None -- depth of each point (mm, NaN = none) and its 1-sigma (mm), from a
+    recording with depth (:mod:`rce_gtsam.track.depth_tracks`); written as CSV columns ``z_mm, z_sigma_mm``.
     """
 
     point_ids: np.ndarray
@@ -37,6 +39,8 @@ class TrackResult:
     sigma_px: np.ndarray
     fps: float
     info: dict = field(default_factory=dict)
+    z_mm: np.ndarray | None = None
+    z_sigma_mm: np.ndarray | None = None
 
     def __post_init__(self):
         p = len(self.point_ids)
@@ -58,14 +62,17 @@ class TrackResult:
         return self.xy.shape[1]
 
     def to_frame(self) -> pd.DataFrame:
-        """Long table ``point_id, frame, x, y, visible (0/1), sigma_px``; one row per point and frame."""
+        """Long table ``point_id, frame, x, y, visible (0/1), sigma_px[, z_mm, z_sigma_mm]``; one row per point and
+        frame (depth columns only with depth; empty where a point has no depth)."""
         p, f = self.visible.shape
         pid = np.repeat(np.asarray(self.point_ids, dtype=np.int64), f)
         frame = np.tile(np.arange(f, dtype=np.int64), p)
         return pd.DataFrame({"point_id": pid, "frame": frame,
                              "x": self.xy[:, :, 0].ravel(), "y": self.xy[:, :, 1].ravel(),
                              "visible": self.visible.ravel().astype(np.int64),
-                             "sigma_px": self.sigma_px.ravel()})
+                             "sigma_px": self.sigma_px.ravel(),
+                             **({} if self.z_mm is None else {"z_mm": self.z_mm.ravel(),
+                                                               "z_sigma_mm": self.z_sigma_mm.ravel()})})
 
     def write_csv(self, path: str | Path) -> Path:
         """Write :meth:`to_frame` atomically at full precision (``rce run`` analyses exactly this file, so

@@ -1,0 +1,149 @@
+"""kappa from depth against kappa from the 2-D image, on simulated out-of-plane recordings (issue #39).
+
+Per seed: ``rce simulate --effect out_of_plane --depth`` (default share 0.5, tilt 30 deg), then as a user would
+``rce run recording.db3 ...`` (the RealSense recording: tracks the colour stream, reads the depth, reports
+kappa_3d and, beside it, the 2-D kappa of the same tracks) and ``rce run video.mp4 ...`` (the 2-D pipeline on the
+H.264 video). Scored: kappa log-RMSE (geometric-mean-free) against truth.json's ``kappa_true_3d``, for
+
+* ``2d_video``: compliance_summary.csv of the mp4 run; ``2d_rec``: kappa_2d of the recording run;
+* ``3d``: kappa_3d of the recording run (the code's default depth smoothing); ``3d_in``: its in-plane-only fit;
+* ``3d@F``: kappa_3d re-fitted from the recording run's tracks.csv with the depth axis' acceleration factor F
+  (``smooth_tracks_3d(z_accel_factor=F)``; ``cv`` = chosen by held-out depth);
+* ``ceiling``: kappa_true_image (a perfect 2-D tracker) against kappa_true_3d.
+
+Timings: the 3-D smoother's and the 2-D smoother's seconds on the same recording (depth3d.json).
+
+Usage: OMP_NUM_THREADS=1 python benchmarks/bench_depth3d.py --seeds 20 --frames 300 [--factors cv,1,0.5,0.25]
+       [--no-video2d] [--out bench_depth3d.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+
+def log_rmse(kappa: dict, truth: dict) -> float:
+    keys = [k for k in truth if k in kappa and np.isfinite(kappa[k]) and kappa[k] > 0]
+    d = np.log([kappa[k] for k in keys]) - np.log([truth[k] for k in keys])
+    d -= d.mean()
+    return float(np.sqrt(np.mean(d ** 2)))
+
+
+def rce(*args, cwd) -> None:
+    env = dict(os.environ, PYTHONPATH=str(ROOT), OMP_NUM_THREADS="1")
+    r = subprocess.run([sys.executable, "-m", "rce_gtsam.cli", *args], cwd=cwd, env=env, capture_output=True, text=True)
+    if r.returncode not in (0, 3):  # 3 = quality flags, outputs written
+        raise RuntimeError(f"rce {' '.join(args)} exited {r.returncode}: {r.stderr[-2000:]}")
+
+
+def refit(d: Path, factors) -> dict:
+    from rce_gtsam.bending.angles3d import compute_bending_3d
+    from rce_gtsam.camera import CameraIntrinsics
+    from rce_gtsam.graph import load_graph
+    from rce_gtsam.model.kappa3d import fit_kappa_3d
+    from rce_gtsam.pipeline import analyze
+    from rce_gtsam.presets import get_preset
+    from rce_gtsam.smoothing.smoother3d import smooth_tracks_3d
+    from rce_gtsam.track.depth_tracks import read_depth_columns
+    from rce_gtsam.tracks import load_tracks
+
+    truth = json.loads((d / "truth.json").read_text())
+    g = load_graph(d / "graph.json")
+    tr = load_tracks(d / "run3d" / "tracks.csv", g)
+    pre = get_preset("default").with_(compliance={"n_boot": 0})
+    res = analyze(tr, g, pre)
+    z, zs = read_depth_columns(d / "run3d" / "tracks.csv", tr)
+    cam = CameraIntrinsics.coerce(truth["three_d"]["camera"])
+    out = {}
+    for fac in factors:
+        sm = smooth_tracks_3d(tr.xy, tr.sigma_px, z, zs, tr.node_ids, g, cam, pre.smoother, z_accel_factor=fac)
+        b3 = compute_bending_3d(sm.xyz_mm, tr.node_ids, g, pre.bending, sm.frame_cov, observed=sm.observed)
+        k3 = fit_kappa_3d(b3, res.geometry, pre)
+        out[f"3d@{fac}"] = log_rmse({f"{j}->{c}": v for (j, c), v in zip(k3.edges, k3.kappa)}, truth["kappa_true_3d"])
+        if fac == "cv":
+            out["cv_factor"] = sm.report.z_accel_factor
+    return out
+
+
+def one_seed(seed: int, frames: int, work: Path, factors, video2d: bool) -> dict:
+    import pandas as pd
+    d = work / f"s{seed}"
+    rce("simulate", "--out", str(d), "--effect", "out_of_plane", "--depth", "--frames", str(frames),
+        "--seed", str(seed), cwd=work)
+    truth = json.loads((d / "truth.json").read_text())
+    t0 = time.perf_counter()
+    rce("run", "recording.db3", "annotations.json", "graph.json", "--out", "run3d", "--no-figures",
+        "--bootstrap", "100", "--no-progress", "--seed", "0", cwd=d)
+    row = {"seed": seed, "seconds_run3d": time.perf_counter() - t0}
+    k3 = pd.read_csv(d / "run3d" / "kappa_3d.csv")
+    rep = json.loads((d / "run3d" / "depth3d.json").read_text())
+    kt = truth["kappa_true_3d"]
+    row["3d"] = log_rmse(dict(zip(k3.edge, k3.kappa_3d)), kt)
+    row["3d_in"] = log_rmse(dict(zip(k3.edge, k3.kappa_in_plane)), kt)
+    row["2d_rec"] = log_rmse(dict(zip(k3.edge, k3.kappa_2d)), kt)
+    row["ceiling"] = log_rmse(truth["kappa_true_image"], kt)
+    row["smooth_3d_s"] = rep["timings_s"]["smooth_3d"]
+    row["smooth_2d_s"] = rep["timings_s"]["smooth_2d"]
+    row["depth_coverage"] = rep["depth_coverage"]
+    if video2d:
+        rce("run", "video.mp4", "annotations.json", "graph.json", "--out", "run2d", "--no-figures",
+            "--bootstrap", "100", "--no-progress", "--seed", "0", cwd=d)
+        cs = pd.read_csv(d / "run2d" / "compliance_summary.csv")
+        row["2d_video"] = log_rmse({f"{p}->{c}": k for p, c, k in zip(cs.parent, cs.child, cs.kappa)}, kt)
+    (d / "recording.db3").unlink(missing_ok=True)  # ~0.7 MB per frame
+    if factors:
+        row.update(refit(d, factors))
+    return row
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seeds", type=int, default=20)
+    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--frames", type=int, default=300)
+    ap.add_argument("--factors", default="cv,1,0.5,0.25")
+    ap.add_argument("--no-video2d", action="store_true")
+    ap.add_argument("--out", type=Path, default=Path("bench_depth3d.json"))
+    args = ap.parse_args(argv)
+    factors = [f if f == "cv" else float(f) for f in args.factors.split(",") if f]
+    work = Path(tempfile.mkdtemp(prefix="bench_depth3d_"))
+    rows = []
+    try:
+        for s in range(args.first_seed, args.first_seed + args.seeds):
+            try:
+                rows.append(one_seed(s, args.frames, work, factors, not args.no_video2d))
+            except Exception as exc:  # noqa: BLE001 - a failed seed is reported, the others go on
+                rows.append({"seed": s, "error": str(exc)[-500:]})
+            print(json.dumps(rows[-1]), flush=True)
+            args.out.write_text(json.dumps(rows, indent=1) + "\n")
+            shutil.rmtree(work / f"s{s}", ignore_errors=True)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    ok = [r for r in rows if "error" not in r]
+    if ok:
+        keys = [k for k in ok[0] if k not in ("seed", "cv_factor")]
+        print(f"\n{len(ok)} of {len(rows)} seeds, {args.frames} frames; median (and mean) over seeds:")
+        for k in keys:
+            v = np.array([r[k] for r in ok if k in r], float)
+            print(f"  {k:>14}: median {np.median(v):.3f}  mean {np.mean(v):.3f}")
+        if "2d_video" in ok[0]:
+            ratio = np.array([r["3d"] / r["2d_video"] for r in ok])
+            print(f"  3d / 2d_video: median {np.median(ratio):.2f}; 3d <= 0.5 x 2d_video in {np.sum(ratio <= 0.5)} of {len(ok)}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
