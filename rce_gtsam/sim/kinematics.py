@@ -27,7 +27,7 @@ def turning_angles_deg(xy: np.ndarray, node_ids, bends) -> np.ndarray:
     return np.degrees(np.arctan2(cross, dot))
 
 
-def _build_graph(cfg: "SimulationConfig", rng: np.random.Generator) -> tuple[BranchGraph, dict[tuple[int, int], float]]:
+def build_graph(cfg: "SimulationConfig", rng: np.random.Generator) -> tuple[BranchGraph, dict[tuple[int, int], float]]:
     """Topology and the rest turning angle (degrees) of every non-root edge."""
     n = cfg.n_nodes
     if cfg.branch_layout == "chain":
@@ -71,7 +71,7 @@ def forward_kinematics(graph: BranchGraph, lengths: dict, root_heading_rad: np.n
     return pos
 
 
-def _root_distance(graph: BranchGraph, lengths: dict) -> dict[int, float]:
+def root_distances(graph: BranchGraph, lengths: dict) -> dict[int, float]:
     d = {graph.root: 0.0}
     for c in graph.nodes[1:]:
         d[c] = d[graph.parent[c]] + lengths[(graph.parent[c], c)]

@@ -47,7 +47,7 @@ from .artifacts import ArtifactConfig, apply_artifacts, branch_tangents
 # they are re-exported here, the simulator's one import path
 from .bend_laws import (EFFECT_DEFAULTS, EFFECT_FORMS, EFFECT_MEANING, EFFECTS, bend_response,  # noqa: F401
                         default_form, delayed, make_excitation, oscillator_response)
-from .kinematics import (_build_graph, _root_distance, forward_kinematics, place_in_image,  # noqa: F401
+from .kinematics import (build_graph, root_distances, forward_kinematics, place_in_image,  # noqa: F401
                          turning_angles_deg)
 from .three_d import GEOMETRIC_EFFECTS, Scene3D, Truth3D
 from .tracker_noise import add_tracker_noise  # noqa: F401
@@ -300,11 +300,11 @@ def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
     ss = np.random.SeedSequence(config.seed)
     r_geom, r_kappa, r_z, r_eff, r_noise, r_place = (np.random.default_rng(s) for s in ss.spawn(6))
     F = config.n_frames
-    graph, rest = _build_graph(config, r_geom)
+    graph, rest = build_graph(config, r_geom)
     lo, hi = config.segment_px
     mid, half = (np.log(lo) + np.log(hi)) / 2, (np.log(hi) - np.log(lo)) / 2
     lengths = {e: float(np.exp(np.clip(r_geom.normal(mid, half / 1.5), mid - half, mid + half))) for e in graph.edges}
-    dist = _root_distance(graph, lengths)
+    dist = root_distances(graph, lengths)
     dmax = max(dist.values())
     bends = graph.bends
     s_edge = np.array([dist[b.child] / dmax for b in bends])

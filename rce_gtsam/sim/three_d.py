@@ -38,6 +38,7 @@ import numpy as np
 
 from ..camera import CameraIntrinsics
 from ..errors import InputError
+from .excitation import make_excitation
 from .kinematics import turning_angles_deg
 
 #: Effects of the 3-D geometry (not laws on the in-plane response): switched on like the others.
@@ -258,7 +259,6 @@ def out_of_plane_excitation(z: np.ndarray, share: float, rho: float, fps: float,
                             rms_deg: float) -> tuple[np.ndarray, np.ndarray]:
     """(z_o, z') in degrees: ``z_o = share * (rho z + sqrt(1 - rho^2) z')``, ``z'`` drawn by
     :func:`~rce_gtsam.sim.simulate.make_excitation` (RMS ``rms_deg``) from its own seed stream."""
-    from .bend_laws import make_excitation
     rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x0B3D]))
     z2 = make_excitation(len(z), fps, rng, rms_deg=rms_deg)
     return share * (rho * z + math.sqrt(max(0.0, 1 - rho ** 2)) * z2), z2

@@ -17,12 +17,12 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernels_sampling import _bilinear, sample_patch, weighted_lk
+from .kernels_sampling import bilinear, sample_patch, weighted_lk
 
 #: sha256 (first 16 hex digits) of each kernel file this module's compiled functions call into. numba's cache
 #: checks only a function's own file (numba issue 1833), so an edit there must change this file too, or its
 #: cached kernels keep the old code; ``tests/test_track_kernels.py`` checks the digests.
-CALLS_INTO = {"kernels_sampling.py": "44fa8f4ac7a48d1d"}
+CALLS_INTO = {"kernels_sampling.py": "902913666eddb75f"}
 
 
 @njit(cache=True, nogil=True)
@@ -253,7 +253,7 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
                     g = ((1 - fx) * (1 - fy) * fg[o] + fx * (1 - fy) * fg[o + one]
                          + (1 - fx) * fy * fg[o + uw] + fx * fy * fg[o + uw + one])
                 else:
-                    g = _bilinear(gray0, gx, gy)  # image: replicated border
+                    g = bilinear(gray0, gx, gy)  # image: replicated border
                 if round_out:
                     g = math.floor(g + 0.5)
                 gf = np.float32(g)

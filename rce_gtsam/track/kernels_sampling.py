@@ -6,7 +6,7 @@
   gradients by the 3x3 Sobel with reflect-101 borders, scale 1/8, as ``cv2.Sobel``).
 
 Positions in pixels of the array passed in (pixel centres at integers). The other kernel modules call
-:func:`_bilinear`, :func:`sample_patch` and :func:`weighted_lk`: an edit here must update their ``CALLS_INTO``
+:func:`bilinear`, :func:`sample_patch` and :func:`weighted_lk`: an edit here must update their ``CALLS_INTO``
 digests (``tests/test_track_kernels.py`` says so), or numba would keep their cached code compiled with the old one.
 """
 
@@ -24,7 +24,7 @@ def _clamp(i: int, n: int) -> int:
 
 
 @njit(cache=True, nogil=True)
-def _bilinear(img, x, y):
+def bilinear(img, x, y):
     """``img`` at (x, y) px, bilinear, replicated borders."""
     H, W = img.shape
     fx0, fy0 = math.floor(x), math.floor(y)

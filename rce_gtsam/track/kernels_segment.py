@@ -11,12 +11,12 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernels_sampling import _bilinear
+from .kernels_sampling import bilinear
 
 #: sha256 (first 16 hex digits) of each kernel file this module's compiled functions call into. numba's cache
 #: checks only a function's own file (numba issue 1833), so an edit there must change this file too, or its
 #: cached kernels keep the old code; ``tests/test_track_kernels.py`` checks the digests.
-CALLS_INTO = {"kernels_sampling.py": "44fa8f4ac7a48d1d"}
+CALLS_INTO = {"kernels_sampling.py": "902913666eddb75f"}
 
 
 @njit(cache=True, nogil=True)
@@ -98,7 +98,7 @@ def segment_ncc(img, x0, y0, ex, ey, uu, vv, strip, round_out):
             sv = sa * v
             cv = ca * v
             for iu in range(U):
-                p = _bilinear(img, float((cu[iu] - sv) + fx0), float((su[iu] + cv) + fy0))
+                p = bilinear(img, float((cu[iu] - sv) + fx0), float((su[iu] + cv) + fy0))
                 if round_out:
                     p = math.floor(p + 0.5)
                 p -= 128.0

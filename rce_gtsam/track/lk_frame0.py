@@ -57,7 +57,7 @@ class Frame0Setup:
         self.h = h
         self._margin = self._rematch_radius()
         # segments incident to each node (the parent's first), and each segment's frame-0 direction (radians, by its
-        # child: ``_turn``)
+        # child: ``turn``)
         self._inc = [([(self.parent[i], i)] if self.parent[i] >= 0 else []) + [(i, c) for c in self.children[i]]
                      for i in range(n)]
         self._ang0 = [math.atan2(q[c][1] - q[p][1], q[c][0] - q[p][0]) if p >= 0 else 0.0

@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 
-def _f2f_ncc(prev_gray: np.ndarray, gray: np.ndarray, a, b, h: int) -> float:
+def f2f_ncc(prev_gray: np.ndarray, gray: np.ndarray, a, b, h: int) -> float:
     """Normalised correlation of the (2h+1)^2 patch of ``prev_gray`` at ``a`` with that of ``gray`` at ``b``
     (px; sub-pixel crops): whether frame-to-frame LK followed the same appearance (a node covered by a leaf or a
     blank patch correlates poorly). 0 for a flat patch."""
@@ -36,7 +36,7 @@ def _rotation_about(cx: float, cy: float, theta: float, dx: float, dy: float) ->
     return np.array([[a, b, (1 - a) * cx - b * cy + dx], [-b, a, b * cx + (1 - a) * cy + dy]])
 
 
-def _turn(a, b, ang0: float) -> float:
+def turn(a, b, ang0: float) -> float:
     """Rotation (radians, wrapped to (-pi, pi]) of the vector a->b relative to the direction ``ang0`` (radians,
     ``atan2`` of the frame-0 vector: ``LKTracker._ang0``)."""
     d = math.atan2(b[1] - a[1], b[0] - a[0]) - ang0
@@ -127,10 +127,10 @@ class Measurement:
         cfg = self.config
         p = self.parent[i]
         ang0 = self._ang0
-        tp = _turn(est[p], est[i], ang0[i]) if p >= 0 else 0.0
+        tp = turn(est[p], est[i], ang0[i]) if p >= 0 else 0.0
         thetas = [tp] if p >= 0 else []
         for ch in self.children[i]:
-            thetas.append(_turn(est[i], est[ch], ang0[ch]) if vis[ch] else tp)
+            thetas.append(turn(est[i], est[ch], ang0[ch]) if vis[ch] else tp)
         m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, self._margin, thetas)
         if m is not None and m[1] >= cfg.min_ncc and m[2] <= fb_max:
             xy, _, fb, s_lk = m[:4]

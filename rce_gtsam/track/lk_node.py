@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .lk_measure import _f2f_ncc, _turn
+from .lk_measure import f2f_ncc, turn
 
 
 @dataclass(eq=False)
@@ -99,11 +99,11 @@ class NodeDecision:
             pred, r = (f2f[i] if f2f_ok[i] else prev_est[i]), 2 * h
         thetas = None  # rotations of the segments at node i (``self._inc[i]``)
         if self._band is not None:
-            tp = _turn(new_est[p], pred, ang0[i]) if p >= 0 else theta
+            tp = turn(new_est[p], pred, ang0[i]) if p >= 0 else theta
             thetas = [tp] if p >= 0 else []
             for ch in self.children[i]:
                 # a child not followed: assume the branch continues straight
-                thetas.append(_turn(pred, f2f[ch], ang0[ch]) if f2f_ok[ch] and prev_vis[ch] else tp)
+                thetas.append(turn(pred, f2f[ch], ang0[ch]) if f2f_ok[ch] and prev_vis[ch] else tp)
         # a wide search (no frame-to-frame or segment prediction to trust) is a re-acquisition
         # whatever the previous frame said: the same ambiguity and geometry checks apply
         reacquiring = not prev_vis[i] or r > h or held[i] > 0
@@ -156,7 +156,7 @@ class NodeDecision:
             how[i] = 0
             anchored_now[i] = score >= cfg.recent_min_ncc
             if p >= 0:
-                seg_rot[i] = _turn(new_est[p], xy, ang0[i])
+                seg_rot[i] = turn(new_est[p], xy, ang0[i])
                 if new_vis[p]:
                     bend_rot[i] = seg_rot[i] - seg_rot[p]
             sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
@@ -181,7 +181,7 @@ class NodeDecision:
             # ``fallback_sigma_px``; finding the node next frame counts as a re-acquisition (strict checks)
             new_est[i], new_vis[i], sig[i] = xy, True, s_soft
             if p >= 0:
-                seg_rot[i] = _turn(new_est[p], xy, ang0[i])
+                seg_rot[i] = turn(new_est[p], xy, ang0[i])
             held[i] += 1
             counts["soft"] += 1
             how[i] = 4
@@ -194,7 +194,7 @@ class NodeDecision:
             new_est[i], new_vis[i] = rm[0], True
             sig[i] = math.sqrt(recent[i][2] ** 2 + rm[1] ** 2 + cfg.fallback_sigma_px ** 2)
             if p >= 0:
-                seg_rot[i] = _turn(new_est[p], rm[0], ang0[i])
+                seg_rot[i] = turn(new_est[p], rm[0], ang0[i])
             held[i] += 1  # off its frame-0 template: finding it there again is a re-acquisition
             counts["recent_template"] += 1
             how[i] = 1
@@ -204,14 +204,14 @@ class NodeDecision:
               <= hold_max and self._length_ok(i, f2f[i], new_est, new_vis)
               and (p < 0 or (seg is not None and seg[2] >= cfg.min_ncc
                              and math.hypot(*(f2f[i] - seg[0])) <= cfg.hold_agree_px))
-              and _f2f_ncc(prev_gray, gray, prev_est[i], f2f[i], h) >= cfg.hold_min_ncc):
+              and f2f_ncc(prev_gray, gray, prev_est[i], f2f[i], h) >= cfg.hold_min_ncc):
             # the frame-0 template does not fit here now (blur, a leaf, a pose far from frame 0),
             # but frame-to-frame LK followed the node from a measured (or held) position: keep it
             # visible with a sigma that grows as a random walk (``hold_step_px`` a frame plus the
             # round trip's own error) until the template fits again or sigma passes ``hold_max``
             new_est[i], new_vis[i], sig[i] = f2f[i], True, s_hold
             if p >= 0:
-                seg_rot[i] = _turn(new_est[p], f2f[i], ang0[i])
+                seg_rot[i] = turn(new_est[p], f2f[i], ang0[i])
             held[i] += 1
             counts["held"] += 1
             how[i] = 2
