@@ -374,7 +374,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     # share moved the score tests' threshold from 0.005 to 0.0042 and lost borderline lags: dynamics 0.75x seed
     # 1, delay p = 0.0050). The nominal family-wise bound becomes (n_candidates / n_findings) alpha (6 % for six
     # candidates of five findings); measured on effect-free pipeline data: 0 of 40 verdicts (bench_diagnose)
-    n_c = max(len({e.verdict_name for e in cands}), 1)
+    # an effect judged by its own test at its own level (own_family: OutOfPlane's length channel) is no share of it
+    n_c = max(len({e.verdict_name for e in cands if not e.own_family}), 1)
     t_crit = float(stats.t.ppf(1 - alpha / n_c, max(int(used.sum()) - 1, 1)))
     # an effect with a full-data score test has two tests, each at half its share of alpha (Bonferroni)
     t_crit_split = float(stats.t.ppf(1 - alpha / (2 * n_c), max(int(used.sum()) - 1, 1)))
@@ -446,6 +447,10 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                           "significant_by_fold_t": significant})
             significant = bool(null.p <= alpha or (shared_for_drift is not None and shared_for_drift <= p_crit_score)
                                or (pattern is not None and pattern.p <= alpha))
+        own = eff.own_family_test(base, seed=seed) if eff.own_family else None
+        if eff.own_family:  # its own family: its own test at its own level (the bend residuals' tests do not apply)
+            extra.update(own or {})
+            significant = bool(own is not None and own["p"] <= own["alpha"])
         extra["significant"] = significant
         if starts:
             extra["start_cross_prediction_sse"] = starts["errors"]
@@ -457,6 +462,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         extra["implausible"] = list(reasons)
         supported = bool(significant and not reasons
                          and earns_its_place(rmse, b_rmse, daic, gain_share, resolution, calibrated))
+        if eff.own_family:  # named from its own channel: the bend model with it must not predict worse held out
+            supported = bool(significant and not reasons and ev > -t_support)
         results.append(CandidateResult(effect=eff.name, fit=full, heldout_rmse=rmse, fold_mse=mse, evidence=ev,
                                        improvement_pct=imp, delta_aic=daic, delta_bic=dbic, supported=supported,
                                        statistics=stats_all.get(eff.name, {}), extra=extra,
@@ -471,7 +478,10 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     if node_disjoint:
         results = support_a_richer_form(results, Y, W, s, halves, seed, b_rmse, resolution, p_crit_score)
         test_the_lowest_against_simpler(results, Y, W, s, halves, seed, t_crit, p_crit_score)
-    verdict_effect, parsimony = choose_verdict(results, t_crit, p_pair=p_crit_score)
+    # an own-family effect (read from another channel) is the verdict only where no bend-residual candidate is
+    verdict_effect, parsimony = choose_verdict([c for c in results if not own_family(c)], t_crit, p_pair=p_crit_score)
+    if verdict_effect is None:
+        verdict_effect, parsimony = choose_verdict([c for c in results if own_family(c)], t_crit)
     # the finding a verdict reports: another form of a library effect reports that effect (resonances: dynamics)
     named = None if verdict_effect is None else next(c for c in results if c.effect == verdict_effect)
     verdict = None if named is None else finding_of(named)
@@ -515,6 +525,11 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     object.__setattr__(diag, "explanation", explain(diag) + tracker_text(settings["residual_power_near_gaps"],
                                                                          labels))
     return diag
+
+
+def own_family(c: CandidateResult) -> bool:
+    """Whether candidate ``c``'s effect is judged by its own test (:attr:`~rce_gtsam.effects.Effect.own_family`)."""
+    return any(e.own_family for e in c.fit.model.effects if e.name == c.effect)
 
 
 def effective_sample(fit: ModelFit) -> dict:

@@ -89,6 +89,9 @@ class Effect:
     #: and/or "upper")}: a fit there is plausible (:mod:`rce_gtsam.diagnosis.plausibility`; e.g. a natural
     #: frequency at its top bound is a quasi-static joint).
     natural_limits: ClassVar[dict] = {}
+    #: True: the diagnosis judges this effect by :meth:`own_family_test` at that test's own level, outside the
+    #: Bonferroni family the bend-residual tests share (an effect read from another channel, OutOfPlane's lengths)
+    own_family: ClassVar[bool] = False
 
     @property
     def verdict_name(self) -> str:
@@ -234,6 +237,11 @@ class Effect:
         its range is checked for every effect already (:func:`~rce_gtsam.diagnosis.plausibility.implausibility`);
         an implausible fit is never named."""
         return []
+
+    def own_family_test(self, fit, seed: int = 0) -> dict | None:
+        """For an :attr:`own_family` effect: {"p": p-value, "alpha": its level, ...statistics} of its own test on the
+        baseline ``fit``, or None (no test: never named). Default None."""
+        return None
 
     def explain(self, summary: dict, statistics: dict) -> str:
         """One or two sentences with the fitted numbers behind a verdict for this effect. ``summary``: the
