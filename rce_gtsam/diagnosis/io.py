@@ -68,9 +68,11 @@ def diagnose_inputs(result, effects=None, seed: int = 0, n_folds: int | None = N
     names = parse_effect_names(effects, source="effects")
     resp, cfg = result.response, result.preset.compliance
     kw = {} if n_folds is None else {"n_folds": int(n_folds)}
-    from ..effects.out_of_plane import with_length_channel
+    from ..effects import CANDIDATES
     return dict(Y=resp.Y, weights=resp.weights if cfg.weighted else None, root_distance=resp.root_distance,
-                effects=with_length_channel(names, result), seed=int(seed),
+                # each candidate as it reads this recording (Effect.for_analysis: the lengths, for one)
+                effects=[CANDIDATES[n].for_analysis(result) for n in (effect_names() if names is None else names)],
+                seed=int(seed),
                 block_length=cfg.block_length, config=cfg,
                 edge_labels=resp.edge_labels, frames=resp.frames,
                 edge_nodes=result.bending.nodes_of(resp.bend_rows),

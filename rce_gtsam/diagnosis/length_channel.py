@@ -89,9 +89,9 @@ def length_channel(xy: np.ndarray, node_ids, graph, frames) -> LengthChannel:
 def length_channel_of(result) -> LengthChannel:
     """The length channel of an :class:`~rce_gtsam.pipeline.AnalysisResult`: smoothed positions at the frames the
     tracker observed (the positions the bend angles come from), at the bend response's frames."""
-    from ..pipeline import observed_positions
-    return length_channel(observed_positions(result.smoothed), result.tracks.node_ids, result.graph,
-                          result.response.frames)
+    xy = np.array(result.smoothed.tracks.xy, float)
+    xy[~result.smoothed.observed] = np.nan
+    return length_channel(xy, result.tracks.node_ids, result.graph, result.response.frames)
 
 
 def excitation_columns(z: np.ndarray) -> np.ndarray:

@@ -238,6 +238,13 @@ class Effect:
         an implausible fit is never named."""
         return []
 
+    @classmethod
+    def for_analysis(cls, result) -> "Effect":
+        """The term as the diagnosis of an analysis ``result`` (:class:`~rce_gtsam.pipeline.AnalysisResult`) tries
+        it: an effect that reads more of the recording than the bend matrix takes its data here (OutOfPlane: the
+        segments' lengths). Default: ``cls()``."""
+        return cls()
+
     def own_family_test(self, fit, seed: int = 0) -> dict | None:
         """For an :attr:`own_family` effect: {"p": p-value, "alpha": its level, ...statistics} of its own test on the
         baseline ``fit``, or None (no test: never named). Default None."""

@@ -170,6 +170,16 @@ class OutOfPlane(Effect):
                 "length_same_sign_share": test.same_sign_share, "length_tip_growth": test.tip_growth,
                 "rms_residual_on_course_deg": float(np.sqrt(np.mean(g ** 2)))}
 
+    @classmethod
+    def for_analysis(cls, result) -> "OutOfPlane":
+        """The term with the recording's length channel and the analysis' excitation (its rank-1 fit's z, the
+        diagnosis baseline's); without data where the fit has no excitation over the response's frames."""
+        from ..diagnosis.length_channel import length_channel_of
+        z = getattr(result.fit, "z", None)
+        if z is None or len(z) != result.response.Y.shape[1]:
+            return cls()
+        return cls(length_channel_of(result), z)
+
     def own_family_test(self, fit, seed: int = 0) -> dict | None:
         """The diagnosis' test of this effect, its own family: {"p", "alpha", ...} or None (no length channel, or
         too few segments for two node-disjoint sets). ``fit``: the rank-1 baseline (unused: the course and the test
@@ -189,18 +199,3 @@ class OutOfPlane(Effect):
                 f"{statistics.get('length_tip_growth', 0):+.2f}); that course adds "
                 f"{statistics.get('rms_residual_on_course_deg', 0):.2f} deg RMS to the bend residuals.")
 
-
-def with_length_channel(effects, result) -> list | None:
-    """The diagnosis' candidate list for an analysis ``result`` (names, or None for all) with ``out_of_plane``
-    given the recording's length channel and the analysis' excitation; other names are kept as names. None
-    stays None where the length channel cannot be measured."""
-    from .. import effects as registry
-    from ..diagnosis.length_channel import length_channel_of
-    names = list(registry.names()) if effects is None else list(effects)
-    if OutOfPlane.name not in names:
-        return None if effects is None else names
-    z = getattr(result.fit, "z", None)
-    if z is None or len(z) != result.response.Y.shape[1]:
-        return None if effects is None else names
-    eff = OutOfPlane(length_channel_of(result), z)
-    return [eff if n == OutOfPlane.name else n for n in names]
