@@ -2,7 +2,7 @@
 
 A segment that swings out of the branch plane (rotates toward or away from the camera) changes its length in the
 image, whereas planar bending in the image plane keeps it. The diagnosis' bend angles never read that channel;
-this module does (:class:`LengthChannel`, from the pipeline's smoothed node positions at their observed frames).
+this module does (:class:`LengthChannel`, from the pipeline's pre-smoothed node positions at their observed frames).
 
 **Statistic.** Each segment's relative length change l_e(t) = L_e(t) / median L_e - 1 is first projected off the
 columns [1, t, z, z^2, dz/dt] (z the rank-1 fit's excitation, deg): a tilted branch plane foreshortens a segment
@@ -87,9 +87,15 @@ def length_channel(xy: np.ndarray, node_ids, graph, frames) -> LengthChannel:
 
 
 def length_channel_of(result) -> LengthChannel:
-    """The length channel of an :class:`~rce_gtsam.pipeline.AnalysisResult`: smoothed positions at the frames the
-    tracker observed (the positions the bend angles come from), at the bend response's frames."""
-    xy = np.array(result.smoothed.tracks.xy, float)
+    """The length channel of an :class:`~rce_gtsam.pipeline.AnalysisResult`: the moving-average pre-smoothed
+    positions (each node on its own) at the frames the tracker observed, at the bend response's frames.
+
+    Not the factor-graph smoother's positions, which the bend angles come from: its edge factors hand part of a
+    node's along-stem error to its neighbours, so segments that share no node no longer carry independent errors.
+    Measured on planar recordings (20 seeds, 450 frames, p <= 0.01): along-stem coloured noise at 2x its measured
+    size fired the test on 4/20 with smoothed positions, 0/20 pre-smoothed; drift 2x 2/20 and 0/20; a swing at the
+    default strength was found on 20/20 and 19/20."""
+    xy = np.array(result.smoothed.presmoothed.xy, float)
     xy[~result.smoothed.observed] = np.nan
     return length_channel(xy, result.tracks.node_ids, result.graph, result.response.frames)
 
