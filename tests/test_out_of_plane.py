@@ -18,6 +18,7 @@ from rce_gtsam.diagnosis.diagnose import diagnose
 from rce_gtsam.diagnosis.io import diagnose_result
 from rce_gtsam.diagnosis.length_channel import ALPHA_OOP, LengthChannel, out_of_plane_test, swing_course
 from rce_gtsam.effects.out_of_plane import OutOfPlane
+from rce_gtsam.model import ResponseModel
 from rce_gtsam.pipeline import analyze
 from rce_gtsam.sim.artifacts import ArtifactConfig
 from rce_gtsam.sim.foreshorten import foreshortened, swing_excitation
@@ -87,10 +88,12 @@ def test_without_lengths_the_term_is_zero_and_never_named():
     Y = kappa[:, None] * z[None] + 0.2 * rng.standard_normal((E, T))
     eff = effects.make("out_of_plane")
     assert isinstance(eff, OutOfPlane) and eff.own_family and eff.own_family_test(None) is None
+    assert not eff.available and eff.evidence(None) == {}
     d = diagnose(Y, effects=["offset", eff], n_folds=8)
-    c = d.candidate("out_of_plane")
-    assert not c.supported and d.verdict != "out_of_plane"
-    assert np.allclose(c.fit.predict(), d.baseline.predict(), atol=1e-6)
+    assert [c.effect for c in d.candidates] == ["offset"] and d.verdict != "out_of_plane"
+    base = ResponseModel().fit(Y)
+    ext = (ResponseModel() + eff).fit(Y)
+    np.testing.assert_allclose(ext.predict(), base.predict(), atol=1e-6)
 
 
 def test_with_lengths_the_term_predicts_the_bending_and_keeps_the_others_alpha():

@@ -585,4 +585,4 @@ def _resolve_effects(effects, n_edges):
     out = []
     for e in effects:
         out.append(effects_mod.make(e) if isinstance(e, str) else e)
-    return [e for e in out if n_edges >= e.min_rows]
+    return [e for e in out if n_edges >= e.min_rows and e.available]

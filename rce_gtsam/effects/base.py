@@ -94,6 +94,12 @@ class Effect:
     own_family: ClassVar[bool] = False
 
     @property
+    def available(self) -> bool:
+        """Whether the term has what it reads (default True): OutOfPlane without the recording's lengths has not,
+        and the diagnosis leaves such a term out of its candidates."""
+        return True
+
+    @property
     def verdict_name(self) -> str:
         """The name a verdict for this effect reports: its :attr:`finding`, else its own name."""
         return self.finding or self.name

@@ -63,6 +63,11 @@ class OutOfPlane(Effect):
         self._w: np.ndarray | None = None
         self._tests: dict = {}
 
+    @property
+    def available(self) -> bool:
+        """Only with a length channel (and the excitation to compute the course with)."""
+        return self.channel is not None and self._z is not None
+
     def __repr__(self) -> str:
         return "OutOfPlane()" if self.channel is None else f"OutOfPlane(<{len(self.channel.segments)} segments>)"
 
