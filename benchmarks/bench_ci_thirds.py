@@ -71,7 +71,8 @@ def log_se(ci) -> np.ndarray:
 def surrogate_null(full, n_boot: int, n: int, seed: int = 0) -> dict:
     """The thirds check on ``n`` model-exact surrogates of the analysed recording ``full`` (an AnalysisResult
     with intervals; see the module docstring), and on its own data at the same (Y-level) computation."""
-    from rce_gtsam.model.compliance import bootstrap_kappa, phase_randomised_residuals
+    from rce_gtsam.model.surrogates import phase_randomised_residuals
+    from rce_gtsam.model.uncertainty import bootstrap_kappa
     from rce_gtsam.model import ResponseModel
     from rce_gtsam.model.time_split import block_z
 

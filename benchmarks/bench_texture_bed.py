@@ -13,7 +13,7 @@ motion blur, sensor noise, flicker and H.264; videos and truth are cached in ``-
 * the physical floor: the bend-angle noise sqrt(2..6) e / L (rad) a tracker error of e px gives on the median
   segment of L px, against the RMS of the bending to measure.
 
-``--baseline REV`` also runs ``rce_gtsam/track/lk.py`` of that revision on the same videos (before/after).
+``--baseline REV`` also runs the default tracker (``rce_gtsam/track/lk*.py``) of that revision on the same videos (before/after).
 Needs ``../shared/data/plant_2`` beside the repository.
 
 Usage: python benchmarks/bench_texture_bed.py [--seeds 0,1,2,3,4] [--frames 300] [--baseline REV] [--n-boot 100]
@@ -107,7 +107,7 @@ def main():
     ap.add_argument("--tip-px", type=float, default=60.0)
     ap.add_argument("--n-boot", type=int, default=100, help="bootstrap resamples of each analysis")
     ap.add_argument("--conditions", default="none,delay", help="comma list: none and/or effect names")
-    ap.add_argument("--baseline", default=None, help="git revision of rce_gtsam/track/lk.py to run as well")
+    ap.add_argument("--baseline", default=None, help="git revision of the default tracker (rce_gtsam/track/lk*.py) to run as well")
     ap.add_argument("--cache", type=Path, default=None)
     args = ap.parse_args()
     cv2.setNumThreads(1)

@@ -1,8 +1,9 @@
 """Default tracker: speed and accuracy against a baseline revision of it, in the same run (prints figures; not a test).
 
-The baseline is ``rce_gtsam/track/lk.py`` as it was at ``--baseline`` (git revision, default 7f3b223: before the
-speed-up), loaded from ``git show`` into a module of its own (with that revision's ``match_kernels.py``, when it has
-one), so both trackers run on the same frames in the same process.
+The baseline is the default tracker as it was at ``--baseline`` (git revision, default 7f3b223: before the
+speed-up), loaded from ``git show`` into a module of its own (``rce_gtsam/track/lk.py`` with that revision's
+``match_kernels.py``, when it has one; from the split of ``lk.py`` on, the revision's whole ``rce_gtsam/track``
+package), so both trackers run on the same frames in the same process.
 
 1. Speed, on the simulator's 640x480 render (seed 0, 20 nodes, ``--frames`` frames, H.264 as ``rce simulate
    --video`` writes it): decode time (``open_video``, frames to RGB) on its own; then tracking time alone on the
@@ -64,12 +65,19 @@ def _load(name: str, path: Path):
 
 
 def baseline_tracker(rev: str, tmp: Path):
-    """``LKTracker`` class of ``rce_gtsam/track/lk.py`` at git revision ``rev`` (its own module, same package), with
-    the compiled kernels of that revision (``match_kernels.py``, when it has them: their signatures change between
-    revisions; compiled afresh in ``tmp``, which takes a while)."""
+    """``LKTracker`` class of the default tracker at git revision ``rev``, with that revision's compiled kernels
+    (their signatures change between revisions; compiled afresh in ``tmp``, which takes a while).
+
+    Up to the split of ``lk.py`` into ``lk_*.py`` modules the tracker was that one file: it is loaded as a module of
+    its own (``rce_gtsam.track.lk_baseline``, with ``match_kernels.py`` as ``match_kernels_baseline`` when the
+    revision has one). From the split on, every ``rce_gtsam/track/*.py`` of the revision is written to
+    ``tmp/track_<rev>/`` and loaded as the package ``rce_gtsam.track_baseline`` (its ``..`` imports are this
+    checkout's ``rce_gtsam``), and its ``lk.LKTracker`` returned."""
     src = _git_show(rev, "rce_gtsam/track/lk.py")
     if src is None:
         raise SystemExit(f"no rce_gtsam/track/lk.py at revision {rev}")
+    if _git_show(rev, "rce_gtsam/track/lk_node.py") is not None:  # the tracker of several modules
+        return _baseline_package(rev, tmp).lk.LKTracker
     kernels = _git_show(rev, "rce_gtsam/track/match_kernels.py")
     if kernels is not None:
         (tmp / "match_kernels_baseline.py").write_text(kernels)
@@ -78,6 +86,26 @@ def baseline_tracker(rev: str, tmp: Path):
     path = tmp / f"lk_{rev}.py"
     path.write_text(src)
     return _load("rce_gtsam.track.lk_baseline", path).LKTracker
+
+
+def _baseline_package(rev: str, tmp: Path):
+    """The package ``rce_gtsam/track`` (and any sub-package of it) of revision ``rev``, loaded as
+    ``rce_gtsam.track_baseline`` from ``tmp/track_<rev>/``, with its ``lk`` module imported."""
+    files = subprocess.run(["git", "-C", str(ROOT), "ls-tree", "-r", "--name-only", rev, "rce_gtsam/track/"],
+                           capture_output=True, text=True, check=True).stdout.split()
+    pkg = tmp / f"track_{rev}"
+    for name in files:
+        if name.endswith(".py"):
+            out = pkg / Path(name).relative_to("rce_gtsam/track")
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_text(_git_show(rev, name))
+    spec = importlib.util.spec_from_file_location("rce_gtsam.track_baseline", pkg / "__init__.py",
+                                                  submodule_search_locations=[str(pkg)])
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod
+    spec.loader.exec_module(mod)
+    importlib.import_module("rce_gtsam.track_baseline.lk")
+    return mod
 
 
 def clip(seed: int, n_frames: int, cache: Path):

@@ -6,7 +6,7 @@ that our tracker marks visible, and the 90th percentile of the distance to TAPIR
 truth (its dots are drawn into the video, too; nothing here is tuned to them): this is one tracker against another.
 Also: the root node's distance from its annotated position (the root is fixed), the tip node's visible share, and
 with ``--kappa`` kappa of both runs through ``rce_gtsam.analyze`` (default preset): Spearman, log-RMS of the ratio,
-and how many of ours lie inside the TAPIR run's CI. ``--baseline REV`` runs ``track/lk.py`` of that revision on the
+and how many of ours lie inside the TAPIR run's CI. ``--baseline REV`` runs the default tracker (``track/lk*.py``) of that revision on the
 same frames in the same process (before/after). Speed: the tracker on the decoded frames against plain OpenCV
 pyramidal LK (``cv2.calcOpticalFlowPyrLK``, 21x21, 3 levels, frame to frame) on the same points, one core.
 
@@ -118,7 +118,7 @@ def report(name, res, q, graph, tap, kappa: bool):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--baseline", default=None, help="git revision of rce_gtsam/track/lk.py to run as well")
+    ap.add_argument("--baseline", default=None, help="git revision of the default tracker (rce_gtsam/track/lk*.py) to run as well")
     ap.add_argument("--kappa", action="store_true", help="also compare kappa with the TAPIR run's (bootstrap)")
     ap.add_argument("--frames", type=int, default=None, help="only the first N frames")
     args = ap.parse_args()

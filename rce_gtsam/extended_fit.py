@@ -10,16 +10,16 @@ predict(), iterations, converged) so every table, figure and recording of an ana
 resample (warm-started from the full-data fit):
 
 * ``"phase"`` (default preset): the fitted extended model plus phase-randomised residuals
-  (:func:`rce_gtsam.model.compliance.phase_randomised_residuals`, the same surrogates as the rank-1 CIs); the
+  (:func:`rce_gtsam.model.surrogates.phase_randomised_residuals`, the same surrogates as the rank-1 CIs); the
   log-kappa deviations are widened for the few independent noise samples (``small_sample_factor`` of
   ``excitation_dof``) and for shrunk edges, exactly as for the rank-1 model;
-* ``"block"`` (paper preset): the moving blocks of :func:`rce_gtsam.model.compliance.block_bootstrap_indices`
+* ``"block"`` (paper preset): the moving blocks of :func:`rce_gtsam.model.uncertainty.block_bootstrap_indices`
   (same seed, block length and count) applied as *frame multiplicities* (weight and sample size of frame t
   = how many times the resample drew it) instead of concatenated columns: the effects depend on the time
   axis (a delay or a resonance acts on neighbouring frames, an offset's creep on the time since the start),
   which concatenation would scramble at every block join.
 
-Either way the interval is placed about the point estimate (:func:`rce_gtsam.model.compliance.interval_about`:
+Either way the interval is placed about the point estimate (:func:`rce_gtsam.model.uncertainty.interval_about`:
 deviations from the resamples' median), so it contains it. The shared nonlinear parameters of the operator
 effects (delay's lag, dynamics' frequencies and damping: <= 3 numbers) are refitted only when
 ``refit_shared`` is True; by default they are kept at the full-data fit because their search costs seconds
@@ -32,9 +32,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .model.compliance import (BootstrapCI, block_bootstrap_indices, centred_observed, excitation_dof,
-                               interval_about, phase_randomised_residuals, posterior_widening,
-                               small_sample_factor)
+from .model.surrogates import centred_observed, phase_randomised_residuals
+from .model.uncertainty import (BootstrapCI, block_bootstrap_indices, excitation_dof, interval_about,
+                                posterior_widening, small_sample_factor)
 from .model import ResponseModel, validate_inputs
 from .model.row_sets import node_disjoint_split, shared_node_matrix
 from .model.starts import solve_from_starts
@@ -193,7 +193,7 @@ def bootstrap_extended(fit: ExtendedFit, config: ComplianceConfig, refit_shared:
         low, high, placed = interval_about(np.abs(mf.kappa), samples, factor * posterior_widening(shrink))
         ci = BootstrapCI(low=low, high=high, samples=placed, block_length=0, seed=config.seed, method="phase",
                          effective_samples=n_eff, width_factor=factor)
-        scheme = (f"the fitted extended model plus phase-randomised residuals (compliance.phase_randomised_residuals, "
+        scheme = (f"the fitted extended model plus phase-randomised residuals (surrogates.phase_randomised_residuals, "
                   f"seed {config.seed}; their spectrum restored for the noise the effect terms absorb), refitted; "
                   f"widened x{factor:.2f} for {n_eff:.1f} effective noise samples and for shrunk edges, placed "
                   "about the estimate")
@@ -208,7 +208,7 @@ def bootstrap_extended(fit: ExtendedFit, config: ComplianceConfig, refit_shared:
             not_conv += nc
         low, high, placed = interval_about(np.abs(mf.kappa), samples, 1.0)
         ci = BootstrapCI(low=low, high=high, samples=placed, block_length=L, seed=config.seed)
-        scheme = (f"moving blocks of {L} frames (compliance.block_bootstrap_indices, seed {config.seed}) applied "
+        scheme = (f"moving blocks of {L} frames (uncertainty.block_bootstrap_indices, seed {config.seed}) applied "
                   "as frame multiplicities (weights and sample sizes), so the time axis the effects act on is "
                   "kept; placed about the estimate")
     has_shared = any(not p.per_edge for e in model.effects for p in e.parameters(E))

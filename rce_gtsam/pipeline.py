@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from .bending.angles import BendingResult, compute_bending
-from .model.compliance import BootstrapCI, Rank1Fit, bootstrap_kappa, fit_rank1, frame_precisions
+from .model.compliance import Rank1Fit, fit_rank1, frame_precisions
+from .model.uncertainty import BootstrapCI, bootstrap_kappa
 from .extended_fit import ExtendedBootstrapInfo, ExtendedFit, bootstrap_extended, fit_extended
 from .bending.geometry import Geometry, compute_geometry, edge_lengths
 from .graph import BranchGraph, load_graph

@@ -123,10 +123,10 @@ class ComplianceConfig:
     bootstrap: how resampled data sets are made. ``"block"`` (paper): moving blocks of ``block_length``
         frames of the data. ``"phase"``: the fitted model kappa_hat z_hat plus phase-randomised residuals
         (multivariate Fourier surrogates: every residual row keeps its spectrum, every pair of rows its
-        cross-spectrum; see :func:`~rce_gtsam.model.compliance.phase_randomised_residuals`). Slow tracker
+        cross-spectrum; see :func:`~rce_gtsam.model.surrogates.phase_randomised_residuals`). Slow tracker
         drift (correlated over seconds) enters kappa's error but is longer than any usable block. The
         intervals are then widened for the few independent samples the error rests on
-        (:func:`~rce_gtsam.model.compliance.small_sample_factor`). Needs the signed response. The effects
+        (:func:`~rce_gtsam.model.uncertainty.small_sample_factor`). Needs the signed response. The effects
         fit (``rce analyze --effects``) always resamples blocks.
     n_boot, block_length: bootstrap resamples and block length (frames); seed: RNG seed.
     time_split_blocks: K > 1 widens the intervals by how much kappa varies between K disjoint blocks of

@@ -7,7 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rce_gtsam.model.compliance import (block_bootstrap_indices, bootstrap_kappa, fit_rank1, fit_rank1_batch)
+from rce_gtsam.model.compliance import fit_rank1, fit_rank1_batch
+from rce_gtsam.model.uncertainty import block_bootstrap_indices, bootstrap_kappa
 from rce_gtsam.presets import ComplianceConfig
 
 PAPER = ComplianceConfig()
@@ -155,3 +156,23 @@ def test_batch_with_a_shared_mask_fits_each_resample_as_alone():
         alone = fit_rank1_batch(Y[b:b + 1], cfg, W[b:b + 1])
         for x, y in zip(batch, alone):
             assert np.array_equal(x[b], y[0])
+
+
+def test_names_that_moved_out_of_compliance_are_still_importable_from_it():
+    """The bootstraps (model/uncertainty.py) and the phase surrogates (model/surrogates.py) were part of
+    compliance.py; code that imports them from there (the diagnosis, notebooks, users' scripts) gets the very
+    same objects, and an unknown name is still an AttributeError."""
+    from rce_gtsam.model import compliance, surrogates, uncertainty
+    from rce_gtsam.model.compliance import (BootstrapCI, bootstrap_kappa, draw_phases,  # noqa: F401
+                                            residual_spectrum, surrogate_slice)
+
+    for name in ("BootstrapCI", "BOOTSTRAP_CHUNK_ELEMENTS", "block_bootstrap_indices", "iter_block_bootstrap_indices",
+                 "bootstrap_chunk", "excitation_dof", "small_sample_factor", "bootstrap_kappa",
+                 "posterior_widening", "interval_about"):
+        assert getattr(compliance, name) is getattr(uncertainty, name), name
+    for name in ("phase_randomised_residuals", "draw_phases", "residual_spectrum", "centred_observed",
+                 "surrogate_residuals", "surrogate_slice"):
+        assert getattr(compliance, name) is getattr(surrogates, name), name
+    assert "bootstrap_kappa" in dir(compliance)
+    with pytest.raises(AttributeError, match="no_such_name"):
+        compliance.no_such_name

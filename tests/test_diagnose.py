@@ -197,6 +197,22 @@ def test_oracle_is_a_ceiling_that_does_not_fire_without_an_effect():
     assert o["knows_z"]["improvement_pct"] > 0  # knowing z beats estimating it, effect or not
 
 
+def test_the_oracle_obeys_the_verdicts_intersection_rule():
+    """The oracle is the verdict's own test with the true parameters, so its full-data score test names nothing
+    without the fold t's support either (the rule of :func:`~rce_gtsam.diagnosis.score_test.is_significant`).
+    Without that the beam's modal oracle counted 4/5 at x2 on score p alone, fold t -2.7 to 3.1."""
+    from rce_gtsam.diagnosis.oracle import oracle_test
+    Y, s, _, _, y = synth("delay", seed=0, E=16)
+    d = diagnose(Y, root_distance=s, effects=FAST, edge_nodes=[{i} for i in range(16)])
+    o = oracle_test(d, Y, y, "delay")
+    assert o["score_p"] is not None and o["score_p"] <= d.settings["score_threshold_p"]
+    d.settings["evidence_threshold_t"] = d.settings["evidence_threshold_t_split"] = o["t"] + 1.0  # fold t: no
+    d.settings["support_threshold_t"] = o["t"] + 0.5  # nor does it support the score test
+    assert not oracle_test(d, Y, y, "delay")["supported"]
+    d.settings["support_threshold_t"] = o["t"] - 0.5  # now it does
+    assert oracle_test(d, Y, y, "delay")["supported"]
+
+
 def test_the_oracle_scores_along_the_effects_signature_not_the_whole_truth():
     """The oracle's full-data test direction is what of the noise-free truth no rank-1 model explains: nothing for
     a rank-1 response on any reference pose (per-row constants), the effect's own part otherwise. Scoring along

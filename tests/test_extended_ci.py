@@ -14,7 +14,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from rce_gtsam.model.compliance import bootstrap_kappa, fit_rank1
+from rce_gtsam.model.compliance import fit_rank1
+from rce_gtsam.model.uncertainty import bootstrap_kappa
 from rce_gtsam.extended_fit import absorption_spectrum, bootstrap_extended, fit_extended
 from rce_gtsam.model import validate_inputs
 from rce_gtsam.presets import get_preset

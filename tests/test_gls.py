@@ -8,7 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rce_gtsam.bending.angles import compute_bending
-from rce_gtsam.model.compliance import bootstrap_kappa, fit_rank1, frame_precisions
+from rce_gtsam.model.compliance import fit_rank1, frame_precisions
+from rce_gtsam.model.uncertainty import bootstrap_kappa
 from rce_gtsam.graph import BranchGraph
 from rce_gtsam.presets import BendingConfig, ComplianceConfig
 

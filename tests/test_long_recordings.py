@@ -9,9 +9,10 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from rce_gtsam.model import compliance
-from rce_gtsam.model.compliance import (BOOTSTRAP_CHUNK_ELEMENTS, block_bootstrap_indices, bootstrap_chunk, bootstrap_kappa,
-                                  fit_rank1, iter_block_bootstrap_indices)
+from rce_gtsam.model import uncertainty
+from rce_gtsam.model.compliance import fit_rank1
+from rce_gtsam.model.uncertainty import (BOOTSTRAP_CHUNK_ELEMENTS, block_bootstrap_indices, bootstrap_chunk,
+                                         bootstrap_kappa, iter_block_bootstrap_indices)
 from rce_gtsam.errors import InputError
 from rce_gtsam.graph import BranchGraph
 from rce_gtsam.presets import get_preset
@@ -139,7 +140,7 @@ def test_bootstrap_does_not_depend_on_its_batch_size(monkeypatch, method):
     cfg = dataclasses.replace(get_preset("default").compliance, n_boot=70, bootstrap=method)
     fit = fit_rank1(Y, cfg)
     ref = bootstrap_kappa(Y, cfg, fit=fit)
-    monkeypatch.setattr(compliance, "BOOTSTRAP_CHUNK_ELEMENTS", 3 * E * T)  # batches of 3 resamples
+    monkeypatch.setattr(uncertainty, "BOOTSTRAP_CHUNK_ELEMENTS", 3 * E * T)  # batches of 3 resamples
     assert bootstrap_chunk(64, E, T) == 3
     small = bootstrap_kappa(Y, cfg, fit=fit)
     np.testing.assert_array_equal(small.samples, ref.samples)

@@ -9,8 +9,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import signal
 
-from rce_gtsam.model.compliance import (bootstrap_kappa, excitation_dof, fit_rank1, phase_randomised_residuals,
-                                  small_sample_factor)
+from rce_gtsam.model.compliance import fit_rank1
+from rce_gtsam.model.surrogates import phase_randomised_residuals
+from rce_gtsam.model.uncertainty import bootstrap_kappa, excitation_dof, small_sample_factor
 from rce_gtsam.presets import DEFAULT
 from rce_gtsam.sim.simulate import make_excitation
 

@@ -14,7 +14,7 @@ import pytest
 
 from rce_gtsam import analyze
 from rce_gtsam.cli import main
-from rce_gtsam.model.compliance import BootstrapCI
+from rce_gtsam.model.uncertainty import BootstrapCI
 from rce_gtsam.quality import COMPLIANT_ABOVE, STIFF_BELOW, assess_quality, informative_line, quality_report
 
 SAMPLE = Path(__file__).resolve().parents[1] / "data" / "sample"

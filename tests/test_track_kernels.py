@@ -123,3 +123,26 @@ def test_tracker_accuracy_on_a_rendered_clip(tmp_path):
     assert np.median(err) < 0.06
     assert np.percentile(err, 90) < 0.25
     assert res.visible.mean() > 0.92
+
+
+def test_kernel_modules_record_the_digest_of_every_kernel_file_they_call_into():
+    """numba's cache checks only a compiled function's own source file (numba issue 1833): were ``match_node`` in
+    kernels_match.py to keep its cached machine code after an edit of ``weighted_lk`` in kernels_sampling.py, the
+    tracker would run the old LK while the kernel's own test ran the new one. So every kernel module that imports
+    from another records that file's digest (``CALLS_INTO``): an edit there fails this test until the digest, and so
+    the calling module's file (which makes numba recompile it), is updated."""
+    import hashlib
+    import importlib
+    import re
+    from pathlib import Path
+
+    here = Path(mk.__file__).parent
+    for path in sorted(here.glob("kernels_*.py")):
+        imports = set(re.findall(r"^from \.(kernels_\w+) import", path.read_text(), flags=re.M))
+        module = importlib.import_module(f"rce_gtsam.track.{path.stem}")
+        recorded = getattr(module, "CALLS_INTO", {})
+        assert set(recorded) == {f"{name}.py" for name in imports}, f"{path.name}: CALLS_INTO must list {sorted(imports)}"
+        for name, digest in recorded.items():
+            now = hashlib.sha256((here / name).read_bytes()).hexdigest()[:16]
+            assert digest == now, (f"{name} changed: set CALLS_INTO[{name!r}] = {now!r} in {path.name} (so numba "
+                                   f"recompiles its cached kernels, which call into {name})")

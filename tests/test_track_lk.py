@@ -227,9 +227,9 @@ def test_tip_is_not_visible_beside_the_stem_on_simulator_seed0(tmp_path, monkeyp
     assert res.visible.mean() > 0.94
     assert res.visible[11].mean() > 0.4  # the tip is still followed where it can be (0.51 -> 0.49 -> 0.71)
 
-    from rce_gtsam.track import lk as lk_module
+    from rce_gtsam.track import lk_frame0
 
-    monkeypatch.setattr(lk_module, "_TIP_MIN_BAND_PX", math.inf)  # the tip matched with its full patch
+    monkeypatch.setattr(lk_frame0, "_TIP_MIN_BAND_PX", math.inf)  # the tip matched with its full patch
     res, err = _track_video(sim, video)
     assert err[res.visible].max() < 3.0
     assert res.visible[11].mean() > 0.4

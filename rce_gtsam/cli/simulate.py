@@ -10,7 +10,9 @@ Writes a simulated recording with its ground truth: tracks.csv (noisy, tracker-l
 of the video (``rce_gtsam.sim.nuisance.REALISM``: clean = the crisp default render; outdoor = motion blur,
 drifting light, a moving soft shadow, ~1 px camera shake, crf 28). ``--artifacts FAMILY[,FAMILY]`` (or ``all``)
 adds tracker artifacts to tracks.csv (``rce_gtsam.sim.artifacts``: errors that follow the motion, at the sizes
-measured on the project's tracker and the real plants' tracks, times ``--artifact-scale``).
+measured on the project's tracker and the real plants' tracks, times ``--artifact-scale``). ``--effect
+out_of_plane`` swings the branch out of its plane (``--oop-share``, ``--tilt-deg``; :mod:`rce_gtsam.sim.three_d`);
+``--depth`` adds aligned depth and ``recording.db3`` (:mod:`rce_gtsam.sim.depth`, :mod:`rce_gtsam.sim.recording`).
 """
 
 from __future__ import annotations
@@ -49,7 +51,8 @@ def _effect_names(simulator: str) -> tuple[str, ...]:
         from ..sim.beam import BEAM_EFFECTS
         return BEAM_EFFECTS
     from ..sim.simulate import EFFECTS
-    return EFFECTS
+    from ..sim.three_d import GEOMETRIC_EFFECTS
+    return EFFECTS + GEOMETRIC_EFFECTS
 
 
 def _strengths(values: list[str] | None, simulator: str = "branch") -> dict[str, float] | None:
@@ -102,8 +105,9 @@ def _artifacts(text: str | None, scale: float | None):
 def _effects_epilog() -> str:
     from ..sim.beam import BEAM_EFFECT_DEFAULTS, BEAM_EFFECT_MEANING, BEAM_EFFECTS
     from ..sim.simulate import EFFECT_DEFAULTS, EFFECT_FORMS, EFFECT_MEANING, EFFECTS
+    from ..sim.three_d import GEOMETRIC_EFFECTS
     return ("effects of --simulator branch and the meaning of their strengths: " + "; ".join(
-        f"{k} (default {EFFECT_DEFAULTS[k]:g}: {EFFECT_MEANING[k]})" for k in EFFECTS)
+        f"{k} (default {EFFECT_DEFAULTS[k]:g}: {EFFECT_MEANING[k]})" for k in EFFECTS + GEOMETRIC_EFFECTS)
         + ". Forms (--form NAME=FORM): " + "; ".join(
             f"{k}: " + ", ".join(f"{f} ({d})" for f, d in forms.items()) for k, forms in EFFECT_FORMS.items())
         + ". Effects of --simulator beam (a finite-element beam in wind, rce_gtsam.sim.beam): " + "; ".join(
@@ -150,6 +154,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--artifact-scale", type=float, default=None, metavar="X",
                    help="strength multiplier of the artifacts (default 1 = the measured size)")
     p.add_argument("--video", action="store_true", help="also render video.mp4 (H.264, 640x480)")
+    p.add_argument("--oop-share", type=float, default=None, metavar="X",
+                   help="with --effect out_of_plane: share of the wind that swings the branch out of its plane "
+                        "(its strength, default 0.5; same as --strength out_of_plane=X)")
+    p.add_argument("--tilt-deg", type=float, default=None, metavar="DEG",
+                   help="tilt of the branch's rest plane about the image x axis, degrees in [-75, 75] (default 30 "
+                        "with --effect out_of_plane, else 0: the planar simulator's images)")
+    p.add_argument("--depth", action="store_true",
+                   help="also render aligned depth (D435i-like errors, rce_gtsam.sim.depth) and write "
+                        "recording.db3 (RealSense rgb8 colour + z16 depth, 1.5 MB per frame) beside video.mp4, "
+                        "which it implies; truth.json then carries the 3-D truth")
     p.add_argument("--realism", choices=("clean", "outdoor"), default="clean",
                    help="camera nuisances of the video: clean (default; crisp, still, constant light) or outdoor "
                         "(180-degree-shutter motion blur, light drift and a moving soft shadow, ~1 px tripod "
@@ -159,7 +173,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from ..sim.nuisance import REALISM
-    from ..sim.simulate import NoiseConfig, SimulationConfig, default_form, simulate
+    from ..sim.simulate import EFFECT_FORMS, NoiseConfig, SimulationConfig, default_form, simulate
 
     from ..validate import check_output_dir, check_seed
 
@@ -182,21 +196,34 @@ def run(args: argparse.Namespace) -> int:
     noise = NoiseConfig(enabled=not args.clean, emit_sigma=args.sigma)
     if args.z_rms is not None and not args.z_rms > 0:
         raise InputError("--z-rms", f"must be > 0 degrees, got {args.z_rms}")
-    if args.realism != "clean" and not args.video:
+    if args.realism != "clean" and not (args.video or args.depth):
         raise InputError("--realism", "only applies to the rendered video: add --video")
     if args.simulator == "beam":
+        for option, given in (("--oop-share", args.oop_share), ("--tilt-deg", args.tilt_deg),
+                              ("--depth", args.depth or None)):
+            if given is not None:
+                raise InputError(option, "applies to --simulator branch only")
         return _run_beam(args, effects, strengths, noise)
+    from .three_d_args import scene_from_args
+    strengths, scene = scene_from_args(args, effects, strengths)
     cfg = SimulationConfig(n_nodes=args.nodes, n_frames=args.frames, effects=effects, effect_strength=strengths,
                            effect_form=forms, noise=noise, seed=args.seed, branch_layout=args.layout,
-                           artifacts=artifacts)
+                           artifacts=artifacts, scene3d=scene)
     if args.z_rms is not None:
         cfg = replace(cfg, z_rms_deg=args.z_rms)
     t0 = time.perf_counter()
     sim = simulate(cfg)
-    files = sim.write(args.out, video=args.video, render=REALISM[args.realism])
+    files = sim.write(args.out, video=args.video or args.depth, render=REALISM[args.realism], depth=args.depth)
     eff = ", ".join(f"{e} (strength {cfg.strength(e):g}"
-                    + ("" if cfg.form(e) == default_form(e) else f", held-out form {cfg.form(e)}") + ")"
+                    + ("" if e not in EFFECT_FORMS or cfg.form(e) == default_form(e)
+                       else f", held-out form {cfg.form(e)}") + ")"
                     for e in cfg.effects) or "none"
+    if sim.three_d is not None:
+        t3 = sim.three_d
+        eff += (f"; 3-D scene: branch plane tilted {t3.tilt_deg:g} deg, root at {t3.root_depth_mm:.0f} mm, "
+                f"out-of-plane share {t3.share:g}"
+                + (f"; the branch was shrunk to {100 * t3.fit_scale:.0f} % of its planar size to stay in view"
+                   if t3.fit_scale < 0.995 else ""))
     obs = sim.tracks.observed
     art = (f"tracker artifacts: {', '.join(artifacts.families)} at {artifacts.scale:g}x the measured size; "
            if artifacts.active else "")

@@ -155,7 +155,10 @@ def _scored_test(diag: "Diagnosis", Y: np.ndarray, prediction: np.ndarray, thres
     imp = 100.0 * (1 - math.sqrt(np.mean(loss[both]) / np.mean(base[both]))) if both.any() else float("nan")
     tv = st.get("heldout_total_variance", 0.0)
     share = float(np.mean(base[both]) - np.mean(loss[both])) / tv if both.any() and tv > 0 else 0.0
-    ok = bool(is_significant(t, crit, score_p, score_threshold_p) and imp > 0 and share >= st.get("resolution", 0.0))
+    # the verdict's own rule, its intersection included: a full-data test names nothing without the fold t's support
+    support = st.get("support_threshold_t", -np.inf)
+    ok = bool(is_significant(t, crit, score_p, score_threshold_p, support)
+              and imp > 0 and share >= st.get("resolution", 0.0))
     # per fold, pooled over the fold's scored entries as the candidates' fold_mse are (to pair with theirs)
     pooled = np.array([sse_t[a:b].sum() / max(cnt_t[a:b].sum(), 1) for a, b in st["fold_blocks"]])
     return {"t": t, "threshold_t": crit, "supported": ok, "score_p": score_p, "full_data_t": dm["t"],

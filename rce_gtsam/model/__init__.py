@@ -29,7 +29,9 @@ Modules (imports only point down this list; nothing here imports :mod:`rce_gtsam
 * :mod:`~rce_gtsam.model.report` — :func:`render_fit_report`;
 * :mod:`~rce_gtsam.model.inputs` — :func:`validate_inputs`.
 
-The rank-1 core itself is :mod:`rce_gtsam.model.compliance` (ALS / GLS with shrinkage of log kappa, bootstraps).
+The rank-1 core itself is :mod:`rce_gtsam.model.compliance` (ALS / GLS with shrinkage of log kappa), its
+bootstrap CIs :mod:`rce_gtsam.model.uncertainty`, and the phase surrogates they and the diagnosis draw
+:mod:`rce_gtsam.model.surrogates`.
 Units: degrees (Y, z, predictions), frames.
 """
 

@@ -1,10 +1,10 @@
-"""Rank-1 relative compliance: y[e, t] ~ kappa_e * z_t.
+"""Rank-1 relative compliance: y[e, t] ~ kappa_e * z_t (the fit; its uncertainty is :mod:`.uncertainty`).
 
 kappa_e is the relative compliance of edge e (dimensionless; geometric mean over edges = 1) and z_t the
 shared wind excitation (degrees). Fitted by alternating least squares with log-space shrinkage toward
 kappa = 1 (kappa = kappa_hat ** (n / (n + lambda)), n = frames with usable excitation) and geometric-mean
-normalisation after every kappa step. Confidence intervals come from a moving-block bootstrap over
-frames that refits everything (all edges at once, so the cross-edge structure is kept).
+normalisation after every kappa step; with per-frame precisions (:func:`frame_precisions`), by generalised
+least squares in both steps.
 
 The fit is vectorised over a leading batch axis, so the bootstrap's refits run as one array program.
 
@@ -12,16 +12,22 @@ Two response conventions:
 * ``"abs"`` (paper): y = |delta|, z >= 0, kappa > 0;
 * ``"signed"``: y = delta, z signed; kappa_e may come out negative (the joint bends against the common
   direction); its magnitude |kappa_e| is the compliance and the sign is reported as ``direction``.
+
+The confidence intervals (moving-block and phase-randomised bootstraps, :class:`BootstrapCI`,
+:func:`bootstrap_kappa`) are :mod:`rce_gtsam.model.uncertainty`; the phase surrogates they and the diagnosis
+draw (:func:`draw_phases`, :func:`residual_spectrum`, :func:`surrogate_slice`, ...) are
+:mod:`rce_gtsam.model.surrogates`. Both were part of this module: their names are still importable from here
+(resolved on first use, :func:`__getattr__`), so ``from rce_gtsam.model.compliance import bootstrap_kappa``
+keeps working.
 """
 
 from __future__ import annotations
 
-import math
+import importlib
 import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import special  # t and normal quantiles; scipy.stats would add ~0.8 s of import to every run
 
 from ..presets import ComplianceConfig
 
@@ -53,32 +59,6 @@ class Rank1Fit:
     def predict(self) -> np.ndarray:
         """(E, T) model prediction kappa_e * direction_e * z_t in degrees."""
         return (self.kappa * self.direction)[:, None] * self.z[None, :]
-
-
-@dataclass(frozen=True, eq=False)
-class BootstrapCI:
-    """Percentile bootstrap intervals of kappa.
-
-    low, high: (E,) 2.5th / 97.5th percentiles; samples: (n_boot, E) the resampled kappa (for the
-    ``"phase"`` bootstrap already widened about kappa_hat by ``width_factor``, so that their percentiles
-    are the interval); block_length: frames per block (0: no blocks); seed: the RNG seed; n_boot: resamples.
-    method: ``"block"`` or ``"phase"``. effective_samples: for ``"phase"``, the effective number of
-    independent noise samples kappa's error rests on (:func:`excitation_dof`); width_factor: how much the
-    resampled log-kappa deviations were widened for it (1 = not at all).
-    """
-
-    low: np.ndarray
-    high: np.ndarray
-    samples: np.ndarray
-    block_length: int
-    seed: int
-    method: str = "block"
-    effective_samples: float | None = None
-    width_factor: float = 1.0
-
-    @property
-    def n_boot(self) -> int:
-        return self.samples.shape[0]
 
 
 def initial_z(Y: np.ndarray, W: np.ndarray) -> np.ndarray:
@@ -404,262 +384,39 @@ def fit_rank1(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray | Non
     least squares that also uses the correlation between rows (it takes precedence over ``weights``).
     """
     Y = np.asarray(Y, dtype=float)
-    k, z, n, it, conv, ch, sh = _fit_batch(Y[None], config, None if weights is None else weights[None], precision)
+    k, z, n, it, conv, ch, sh = fit_batch(Y[None], config, None if weights is None else weights[None], precision)
     k, z = k[0], z[0]
     direction = np.where(k < 0, -1.0, 1.0)
     return Rank1Fit(kappa=np.abs(k), direction=direction, z=z, n_used=n[0], shrinkage=sh[0], iterations=int(it[0]),
                     converged=bool(conv[0]), max_log_change=float(ch[0]))
 
 
-def _fit_batch(Yb, config: ComplianceConfig, Wb, precision):
+def fit_batch(Yb, config: ComplianceConfig, Wb, precision):
     """One batch of fits: generalised least squares when a precision is given, else (weighted) ALS."""
     if precision is not None:
         return fit_rank1_gls_batch(Yb, config, precision)
     return fit_rank1_batch(Yb, config, Wb)
 
 
-def block_bootstrap_indices(n_columns: int, block_length: int, n_boot: int,
-                            rng: np.random.Generator) -> np.ndarray:
-    """(n_boot, T) column indices of non-circular moving-block resamples.
-
-    Block starts are drawn uniformly from 0..T-L; blocks of L consecutive columns are concatenated
-    until at least T indices, then truncated to T.
-    """
-    parts = list(iter_block_bootstrap_indices(n_columns, block_length, n_boot, rng, max(n_boot, 1)))
-    return parts[0] if parts else np.empty((0, n_columns), dtype=int)
-
-
-def iter_block_bootstrap_indices(n_columns: int, block_length: int, n_boot: int, rng: np.random.Generator,
-                                 chunk: int):
-    """:func:`block_bootstrap_indices` streamed: yields (<= chunk, T) pieces of the same array (the same
-    random draws in the same order), so a long recording never holds all (n_boot, T) indices."""
-    T = n_columns
-    L = max(3, min(block_length, T))
-    n_blocks = int(np.ceil(T / L))
-    for s in range(0, n_boot, chunk):
-        out = np.empty((min(chunk, n_boot - s), T), dtype=int)
-        for b in range(out.shape[0]):
-            starts = rng.integers(0, T - L + 1, size=n_blocks)
-            out[b] = (starts[:, None] + np.arange(L)[None, :]).ravel()[:T]
-        yield out
+# Names that moved to :mod:`.uncertainty` and :mod:`.surrogates`, importable from here as before. Resolved on
+# first use (PEP 562) rather than imported at the top: :mod:`.uncertainty` imports this module's fit, so an
+# eager import would make the two modules' load order matter.
+_MOVED = {**{name: "uncertainty" for name in (
+    "BootstrapCI", "BOOTSTRAP_CHUNK_ELEMENTS", "block_bootstrap_indices", "iter_block_bootstrap_indices",
+    "bootstrap_chunk", "excitation_dof", "small_sample_factor", "bootstrap_kappa", "posterior_widening",
+    "interval_about")},
+          **{name: "surrogates" for name in (
+    "phase_randomised_residuals", "draw_phases", "residual_spectrum", "centred_observed", "surrogate_residuals",
+    "surrogate_slice")}}
 
 
-#: Largest resampled batch the bootstrap refits at once, in array elements per (B, E, T) array
-#: (float64: 8 MB; the fit holds about fifteen such arrays). Fewer resamples are batched on long
-#: recordings: 64 up to E x T = 16,384 (e.g. 20 segments x 800 frames), 1 at 18 x 50,000. The resamples
-#: and their random draws do not depend on the batch size.
-BOOTSTRAP_CHUNK_ELEMENTS = 2 ** 20
+def __getattr__(name: str):
+    """``compliance.<name>`` of a name that moved to :mod:`.uncertainty` or :mod:`.surrogates` (the same object)."""
+    module = _MOVED.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__package__}.{module}"), name)
 
 
-def bootstrap_chunk(chunk: int, n_edges: int, n_frames: int, per_resample_precision: bool = False) -> int:
-    """Resamples per batch: ``chunk``, fewer where a batch would exceed :data:`BOOTSTRAP_CHUNK_ELEMENTS`
-    (a per-resample (T, E, E) precision counts too), at least 1."""
-    per = n_edges * n_frames * (1 + (n_edges if per_resample_precision else 0))
-    return max(1, min(int(chunk), BOOTSTRAP_CHUNK_ELEMENTS // max(per, 1)))
-
-
-def phase_randomised_residuals(R: np.ndarray, n_boot: int, rng: np.random.Generator) -> np.ndarray:
-    """(n_boot, E, T) resampled zero-mean residual series of an (E, T) residual matrix R (NaN = 0).
-
-    Multivariate Fourier surrogates (Prichard & Theiler 1994): the rows (means removed) are Fourier
-    transformed, every frequency's phase is shifted by one random angle shared by all rows, and the
-    result is transformed back. Each row keeps its periodogram, so its (circular) autocovariance at every
-    lag, and every pair of rows keeps its cross-spectrum, so the anti-correlated noise of bends that share
-    a tracked node stays; only the phases, i.e. *when* the noise happens, are new. That is the structure
-    a drifting tracker leaves: correlated over seconds, longer than any usable frame block.
-
-    The mean of a residual row is a noise sample too (slow drift does not average out over a clip, and it
-    enters kappa through the excitation's mean): the surrogate's mean is drawn with the spectrum at the
-    lowest non-zero frequency as its variance, sqrt(2) Re(F_1 exp(i phi_0)), jointly across rows.
-    """
-    return surrogate_residuals(residual_spectrum(R), R.shape[1], *draw_phases(rng, n_boot, R.shape[1]))
-
-
-def draw_phases(rng: np.random.Generator, n_boot: int, n_frames: int) -> tuple[np.ndarray, np.ndarray | None]:
-    """The random draws of :func:`phase_randomised_residuals` for ``n_boot`` surrogates of ``n_frames``:
-    (n_boot, K) phases of the K = T // 2 + 1 frequencies, then (n_boot, 1) phases of the mean (radians)."""
-    K = n_frames // 2 + 1
-    phase = rng.uniform(0.0, 2 * np.pi, size=(n_boot, K))
-    dc_phase = rng.uniform(0.0, 2 * np.pi, size=(n_boot, 1)) if K > 1 else None
-    return phase, dc_phase
-
-
-def residual_spectrum(R: np.ndarray) -> np.ndarray:
-    """(E, K) Fourier transform of the rows of R (E, T; NaN = missing): each row's mean over its observed
-    frames removed, missing frames set to 0, and the row scaled by sqrt(T / n_observed).
-
-    Why the scale: every caller masks its surrogates again where R is missing. A zero-filled row's power is
-    spread by the phase randomisation over all T frames, so the n_observed frames that stay would carry only
-    n_observed / T of the row's power per frame, a null narrower than the noise it stands for (and a mean taken
-    over the zeros too left the filled frames a step of their own). The pipeline leaves a median 6.4 % of the
-    simulator's segment-frames missing (default preset, 900 frames); the second excitation's test between
-    node-disjoint sets gave p <= 0.05 on 6 of 80 effect-free recordings (1 at 0.005) before, 4 (0) with the
-    scale. A recording without missing frames gets the same surrogates as before."""
-    R = np.asarray(R, float)
-    n_obs = np.isfinite(R).sum(axis=1, keepdims=True)
-    return np.fft.rfft(centred_observed(R) * np.sqrt(R.shape[1] / np.maximum(n_obs, 1)), axis=1)
-
-
-def centred_observed(R: np.ndarray) -> np.ndarray:
-    """(E, T) rows of R (NaN = missing) less each row's mean over its observed frames, 0 where missing: the
-    zero-filled series a Fourier transform of residuals with gaps starts from (a mean taken over the filled
-    zeros too would leave the observed frames an offset and the gaps a step of their own). Units: those of R."""
-    R = np.asarray(R, float)
-    observed = np.isfinite(R)
-    n_obs = np.maximum(observed.sum(axis=1, keepdims=True), 1)
-    mean = np.where(observed, R, 0.0).sum(axis=1, keepdims=True) / n_obs
-    return np.where(observed, R - mean, 0.0)
-
-
-def surrogate_residuals(F: np.ndarray, n_frames: int, phase: np.ndarray, dc_phase: np.ndarray | None) -> np.ndarray:
-    """(len(phase), E, T) surrogates from a :func:`residual_spectrum` and :func:`draw_phases` draws
-    (any subset of their rows)."""
-    T, K = n_frames, F.shape[1]
-    Fs = F[None] * np.exp(1j * phase)[:, None, :]
-    if K > 1:
-        Fs[:, :, 0] = math.sqrt(2.0) * np.real(F[None, :, 1] * np.exp(1j * dc_phase))
-    if T % 2 == 0 and K > 1:
-        Fs[:, :, -1] = np.real(Fs[:, :, -1]) * math.sqrt(2.0)  # the Nyquist term must stay real
-    return np.fft.irfft(Fs, n=T, axis=2)
-
-
-def surrogate_slice(F: np.ndarray, n_frames: int, draws: tuple, sl: slice) -> np.ndarray:
-    """:func:`surrogate_residuals` for the surrogates ``sl`` of one :func:`draw_phases` result ``draws`` (its
-    phases and mean phases, the latter None for a single frame): how the batched callers take a slice."""
-    phase, dc_phase = draws
-    return surrogate_residuals(F, n_frames, phase[sl], None if dc_phase is None else dc_phase[sl])
-
-
-def excitation_dof(R: np.ndarray, z: np.ndarray) -> float:
-    """Effective number of independent noise samples that kappa's error rests on (>= 1).
-
-    kappa_hat_e - kappa_e = sum_t n_e(t) z_t / sum_t z_t^2 weighs the noise n_e at each frequency f by the
-    excitation's power |Z(f)|^2 there, so its variance is a sum over frequencies of w(f) = S_n(f) |Z(f)|^2.
-    When a few frequencies carry that sum (wind excitation is concentrated at the lowest frequencies, and
-    so is tracker drift), it is an average of few independent terms: n_eff = (sum w)^2 / sum w^2 (a
-    Satterthwaite count; w from the residual periodograms summed over edges, the mean excluded: those of
-    :func:`residual_spectrum`, the spectrum the surrogates are drawn from).
-    Measured (default preset): 2.1 on plant 2, 4.0 on plant 1.
-    """
-    S = (np.abs(residual_spectrum(R)) ** 2).sum(axis=0)
-    if len(S) > 1:
-        S[0] = S[1]  # the residual mean's noise power: the spectrum at the lowest frequency (as resampled)
-    w = S * np.abs(np.fft.rfft(np.asarray(z, float))) ** 2
-    tot = float(w.sum())
-    if not np.isfinite(tot) or tot <= 0:
-        return float(len(w)) if len(w) else 1.0
-    return max(1.0, tot * tot / float((w * w).sum()))
-
-
-def small_sample_factor(n_eff: float, level: float = 0.95) -> float:
-    """Widening of bootstrap log-kappa deviations for an error that rests on ``n_eff`` noise samples.
-
-    The resampled spread is an estimate from the residuals' periodogram; where n_eff frequencies carry
-    kappa's error it has about nu = 2 n_eff degrees of freedom (each frequency's periodogram ordinate is
-    a chi-square with 2), so an interval from it needs Student-t quantiles instead of normal ones:
-    t_nu(q) / z(q), q = (1 + level) / 2, nu floored at 1. It tends to 1 for broadband excitation.
-    """
-    nu = max(2.0 * float(n_eff), 1.0)
-    q = 0.5 * (1.0 + level)
-    return float(special.stdtrit(nu, q)) / float(special.ndtri(q))
-
-
-def bootstrap_kappa(Y: np.ndarray, config: ComplianceConfig, weights: np.ndarray | None = None,
-                    chunk: int = 64, fit: Rank1Fit | None = None,
-                    precision: np.ndarray | None = None) -> BootstrapCI | None:
-    """Bootstrap of the whole rank-1 fit; None when n_boot = 0 or T < 8 frames.
-
-    ``config.bootstrap == "block"``: moving blocks of frames of the data, refitted. ``"phase"``: the
-    fitted model (``fit``; computed here when not given) plus phase-randomised residuals
-    (:func:`phase_randomised_residuals`), refitted; each edge's resampled log-kappa deviations (from their
-    median) are widened by :func:`small_sample_factor` of :func:`excitation_dof` and by 1 / sqrt(s_e)
-    for an edge shrunk by s_e, then put around kappa_hat.
-
-    Calibration with a known truth. Spread of log kappa over 30 noise draws / mean resampled spread
-    before widening (12 edges, AR(1) noise of correlation time tau, the simulator's excitation): tau = 60
-    frames (2-s drift): block 2.05, phase 1.02-1.06; white: block 1.04, phase 1.13. Through the whole
-    pipeline on simulated tracks (20 seeds, 900 frames, 250 resamples), share of edges whose 95 %
-    interval covers kappa_true: block 82.8 %, phase 91.1 % (seeds 0-19); block 75.6 %, phase 86.4 %
-    (seeds 100-119).
-    """
-    E, T = Y.shape
-    if config.n_boot <= 0 or T < 8:
-        return None
-    if config.bootstrap == "phase":
-        if fit is None:
-            fit = fit_rank1(Y, config, weights, precision)
-        return _phase_bootstrap(Y, config, weights, chunk, fit, precision)
-    return _block_bootstrap(Y, config, weights, chunk, precision)
-
-
-def _block_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, precision=None) -> BootstrapCI:
-    """Moving blocks of ``config.block_length`` frames of the data, every resample refitted; the
-    resamples are drawn and refitted in batches of :func:`bootstrap_chunk` (memory bounded in T)."""
-    E, T = Y.shape
-    rng = np.random.default_rng(config.seed)
-    chunk = bootstrap_chunk(chunk, E, T, per_resample_precision=precision is not None)
-    samples = np.empty((config.n_boot, E))
-    s = 0
-    for cols in iter_block_bootstrap_indices(T, config.block_length, config.n_boot, rng, chunk):
-        Yb = np.transpose(Y[:, cols], (1, 0, 2))
-        Wb = None if weights is None else np.transpose(weights[:, cols], (1, 0, 2))
-        Pb = None if precision is None else precision[cols]
-        samples[s:s + len(cols)] = np.abs(_fit_batch(Yb, config, Wb, Pb)[0])
-        s += len(cols)
-    low, high = np.percentile(samples, [2.5, 97.5], axis=0)
-    return BootstrapCI(low=low, high=high, samples=samples,
-                       block_length=max(3, min(config.block_length, T)), seed=config.seed)
-
-
-def _phase_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, fit: Rank1Fit, precision=None) -> BootstrapCI:
-    """The fit plus phase-randomised residuals, refitted; deviations widened (see :func:`bootstrap_kappa`)."""
-    if config.response != "signed":
-        raise ValueError("the phase-randomised bootstrap needs the signed response (|delta| residuals "
-                         "are not a zero-mean series)")
-    E, T = Y.shape
-    rng = np.random.default_rng(config.seed)
-    batch = bootstrap_chunk(chunk, E, T)
-    mask = np.isfinite(Y)
-    pred = fit.predict()
-    R = np.where(mask, Y - pred, np.nan)
-    samples = np.empty((config.n_boot, E))
-    spectrum = residual_spectrum(R)
-    # phases are drawn ``chunk`` resamples at a time (so the random stream, and the result, do not depend
-    # on the recording's length); the surrogates are made and refitted ``batch`` at a time
-    for s in range(0, config.n_boot, chunk):
-        draws = draw_phases(rng, min(chunk, config.n_boot - s), T)
-        for b in range(0, len(draws[0]), batch):
-            Yb = pred[None] + surrogate_slice(spectrum, T, draws, slice(b, b + batch))
-            Yb[:, ~mask] = np.nan
-            Wb = None if weights is None else np.broadcast_to(weights, Yb.shape)
-            samples[s + b:s + b + len(Yb)] = np.abs(_fit_batch(Yb, config, Wb, precision)[0])
-    n_eff = excitation_dof(R, fit.z)
-    factor = small_sample_factor(n_eff)
-    # deviations from the resamples' own median: data made from an already shrunk kappa_hat and shrunk
-    # again sit further toward 1; that offset is the estimator's, not kappa's, uncertainty
-    low, high, samples = interval_about(fit.kappa, samples, factor * posterior_widening(fit.shrinkage))
-    return BootstrapCI(low=low, high=high, samples=samples, block_length=0, seed=config.seed,
-                       method="phase", effective_samples=n_eff, width_factor=factor)
-
-
-def posterior_widening(shrinkage: np.ndarray) -> np.ndarray:
-    """(E,) 1 / sqrt(s_e) for edges shrunk by s_e: a shrunk estimate s log kappa_hat varies s times as much as
-    log kappa_hat, while the posterior of the log-normal prior it comes from has sqrt(s) times its spread
-    (1 for well-measured edges; a stiff edge buried in noise is pulled toward 1 and gets the prior's width)."""
-    return 1.0 / np.sqrt(np.clip(shrinkage, 1e-6, 1.0))
-
-
-def interval_about(kappa_hat: np.ndarray, samples: np.ndarray, scale) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """95 % interval of kappa from resampled estimates, placed about the estimate ``kappa_hat`` (E,).
-
-    Each edge's resampled log-kappa deviations from the resamples' own median (data made from an already
-    shrunk kappa_hat and shrunk again sit further toward 1: that offset is the estimator's, not kappa's,
-    uncertainty) are multiplied by ``scale`` (scalar or (E,)) and put around kappa_hat. The median deviation
-    is 0, so the interval always contains kappa_hat. Returns (low (E,), high (E,), the placed samples
-    (n_boot, E))."""
-    dev = np.log(np.maximum(samples, EPS))
-    dev -= np.median(dev, axis=0)
-    placed = np.maximum(kappa_hat, EPS) * np.exp(scale * dev)
-    low, high = np.percentile(placed, [2.5, 97.5], axis=0)
-    return low, high, placed
-
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_MOVED])

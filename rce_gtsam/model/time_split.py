@@ -95,7 +95,7 @@ def time_split_check(Y: np.ndarray, weights, config, kappa: np.ndarray, low: np.
     full = ResponseModel(config=config).fit(Y, weights=weights)
     pred = full.predict()
     R = Y - pred
-    from .compliance import phase_randomised_residuals  # the phase bootstrap's own noise model
+    from .surrogates import phase_randomised_residuals  # the phase bootstrap's own noise model
 
     null = []
     for Rs in phase_randomised_residuals(R, int(n_null), np.random.default_rng(seed)):

@@ -55,6 +55,8 @@ class _Sprite:
     flutter_amp: float = 0.0
     flutter_hz: float = 0.0
     flutter_phase: float = 0.0
+    length: float = 0.0   # stem sprites: the drawn length (px); a segment that projects longer or shorter
+    #                       (out-of-plane swing, sim/three_d.py) stretches the sprite along it. 0 = never stretch
 
 
 def _smooth_noise(rng, shape, sigma) -> np.ndarray:
@@ -141,8 +143,10 @@ def build_scene(sim, n_leaves: int | None = None) -> tuple[np.ndarray, list[_Spr
     for p, c in sorted(g.edges, key=lambda e: dist[e[0]]):
         s = dist[p] / dmax
         w = 10.0 - 5.0 * s
+        if getattr(sim, "three_d", None) is not None:   # a 3-D scene: the stem's width follows its depth
+            w *= sim.three_d.width_factor((p, c), g)
         bgra, u0, v0 = _stem_sprite(rng, sim.segment_px[(p, c)], w, knot=True)
-        sprites.append(_Sprite((p, c), bgra, u0, v0))
+        sprites.append(_Sprite((p, c), bgra, u0, v0, length=float(sim.segment_px[(p, c)])))
     distal = [e for e in g.edges if dist[e[1]] / dmax > 0.45]
     if n_leaves is None:
         n_leaves = max(2, len(g.nodes) // 4)
@@ -171,6 +175,8 @@ def _blit(canvas: np.ndarray, sp: _Sprite, P: np.ndarray, C: np.ndarray, t_s: fl
     ey = np.array([-ex[1], ex[0]])                                   # sprite v axis
     origin = P + sp.at * L * d
     H, W = sp.bgra.shape[:2]
+    if sp.length > 0 and abs(L - sp.length) > 1e-9 * sp.length:
+        ex = ex * (L / sp.length)   # the segment's image length changed: the bark stretches with it
     t = origin - sp.u0 * ex - sp.v0 * ey
     M = np.array([[ex[0], ey[0], t[0]], [ex[1], ey[1], t[1]]])
     corners = np.array([[0, 0, 1], [W - 1, 0, 1], [0, H - 1, 1], [W - 1, H - 1, 1]], float) @ M.T

@@ -36,8 +36,6 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from scipy import signal
-from scipy.interpolate import make_interp_spline
 
 from ..errors import InputError
 from ..fileio import publish, temp_dir_beside
@@ -45,57 +43,14 @@ from ..graph import BranchGraph
 from ..jsonutil import jsonable as _jsonable
 from ..tracks import Tracks, write_table_atomic
 from .artifacts import ArtifactConfig, apply_artifacts, branch_tangents
-
-#: Names of the physical effects the simulator can switch on (and the diagnosis looks for).
-EFFECTS: tuple[str, ...] = ("delay", "dynamics", "second_mode", "offset", "nonlinear")
-
-#: Default strength of each effect and what the number means. The defaults are "modest": on clean
-#: data each effect's misfit to the best rank-1 model is about 0.2-0.3 of the bending signal's RMS
-#: (enforced by tests/test_simulate.py), i.e. visible in the residuals but small next to the signal.
-EFFECT_DEFAULTS: dict[str, float] = {
-    "delay": 15.0,       # tau_tip: lag of the most distal edge behind z, in frames (0.5 s at 30 fps)
-    "dynamics": 1.3,     # tip natural period T_tip in seconds (0.77 Hz); the root edge's period is T_tip / 3
-    "second_mode": 0.25, # RMS of the second-mode term mu_e*w_t divided by RMS of kappa_e*z_t
-    "offset": 0.3,       # RMS of the offset+creep term c_e + d_e*t/T divided by RMS of kappa_e*z_t
-    "nonlinear": 3.0,    # q / y_s: largest linear deflection q (99th pct of |kappa_e z_t|) over saturation y_s
-}
-
-EFFECT_MEANING: dict[str, str] = {
-    "delay": "tau_tip in frames: y_e(t) = kappa_e * z(t - tau_tip * s_e)",
-    "dynamics": "tip natural period in seconds: damped 2nd-order oscillator per edge driven by kappa_e * z",
-    "second_mode": "RMS(mu_e w_t) / RMS(kappa_e z_t): independent second excitation with its own pattern",
-    "offset": "RMS(c_e + d_e t/T) / RMS(kappa_e z_t): constant offset and linear creep per edge",
-    "nonlinear": "q / y_s: saturation y_e = y_s tanh(kappa_e z_t / y_s), q = 99th percentile of |kappa_e z_t|",
-}
-
-
-#: The form each effect takes in the simulator: the first is the default (the one the diagnosis' candidates are
-#: written in); the others are *held-out forms*, physics the candidates do not model exactly, so that the
-#: diagnosis can be checked on data it was not shaped on (``benchmarks/bench_diagnose.py --held-out``,
-#: ``rce simulate --form``). Never tune the diagnosis on them: they stand in for another simulator and for real
-#: plants.
-EFFECT_FORMS: dict[str, dict[str, str]] = {
-    "delay": {"linear": "lag tau_tip * s_e, linear in root distance",
-              "quadratic": "lag tau_tip * s_e^2: a bending wave that slows toward the thinner tip"},
-    "dynamics": {"graded": "natural period falling linearly from T_tip at the tip to T_tip/3 at the root; zeta "
-                           "uniform in [0.1, 0.3]",
-                 "scattered": "each joint's period log-uniform in [T_tip/3, T_tip] whatever its place on the "
-                              "branch; zeta uniform in [0.05, 0.5]"},
-    "second_mode": {"gusts": "w_t made like z (gusts and a slow sway); pattern a half-cosine along the branch "
-                             "plus per-joint variation",
-                    "flutter": "w_t a narrow-band flutter at 1.5-2.5 Hz (a leaf or a side shoot); pattern on the "
-                               "distal half of the branch only"},
-    "offset": {"linear": "c_e + d_e t/T: a constant and a linear creep",
-               "relaxation": "c_e + d_e (1 - exp(-t / (T/4))): a creep that relaxes toward a new rest"},
-    "nonlinear": {"symmetric": "y_s tanh(u / y_s): joints stiffen in both directions",
-                  "one_sided": "only deflections toward the prevailing wind saturate (the branch comes to rest "
-                               "against a stop or a neighbour)"},
-}
-
-
-def default_form(effect: str) -> str:
-    """The form of ``effect`` the diagnosis' candidates are written in: the first of :data:`EFFECT_FORMS`."""
-    return next(iter(EFFECT_FORMS[effect]))
+# the excitation and the effects' laws, the planar kinematics and the tracker noise live in their own modules;
+# they are re-exported here, the simulator's one import path
+from .bend_laws import (EFFECT_DEFAULTS, EFFECT_FORMS, EFFECT_MEANING, EFFECTS, bend_response,  # noqa: F401
+                        default_form, delayed, make_excitation, oscillator_response)
+from .kinematics import (_build_graph, _root_distance, forward_kinematics, place_in_image,  # noqa: F401
+                         turning_angles_deg)
+from .three_d import GEOMETRIC_EFFECTS, Scene3D, Truth3D
+from .tracker_noise import add_tracker_noise  # noqa: F401
 
 
 @dataclass(frozen=True)
@@ -166,6 +121,7 @@ class SimulationConfig:
     segment_px: tuple[float, float] = (12.0, 28.0)
     root_sway_deg: float = 0.0
     artifacts: ArtifactConfig = field(default_factory=ArtifactConfig)
+    scene3d: Scene3D | None = None  # the 3-D scene (sim/three_d.py); None: 3-D only with out_of_plane
 
     def strength(self, effect: str) -> float:
         """The strength of ``effect`` (override or default)."""
@@ -188,11 +144,11 @@ class SimulationConfig:
             raise InputError(src, f"n_frames must be an integer >= 10, got {self.n_frames!r}")
         if not self.fps > 0:
             raise InputError(src, f"fps must be > 0, got {self.fps!r}")
-        unknown = [e for e in self.effects if e not in EFFECTS]
+        unknown = [e for e in self.effects if e not in EFFECTS + GEOMETRIC_EFFECTS]
         if unknown:
             raise InputError(src, f"unknown effect(s) {unknown}; known: {', '.join(EFFECTS)}")
         for k, v in (self.effect_strength or {}).items():
-            if k not in EFFECTS:
+            if k not in EFFECTS + GEOMETRIC_EFFECTS:
                 raise InputError(src, f"effect_strength names an unknown effect {k!r}; known: {', '.join(EFFECTS)}")
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
                 raise InputError(src, f"effect_strength[{k!r}] must be a finite number >= 0, got {v!r}")
@@ -202,341 +158,15 @@ class SimulationConfig:
             if v not in EFFECT_FORMS[k]:
                 raise InputError(src, f"effect_form[{k!r}] must be one of {', '.join(EFFECT_FORMS[k])}, got {v!r}")
         self.artifacts.validate()
+        (self.scene3d or Scene3D()).validate(self.image_size)
         w, h = self.image_size
         if w < 64 or h < 64:
             raise InputError(src, f"image_size must be at least 64x64, got {self.image_size}")
 
 
-# ----------------------------------------------------------------------------------------------------------
-# Excitation
-# ----------------------------------------------------------------------------------------------------------
-
-def make_excitation(n_frames: int, fps: float, rng: np.random.Generator, rms_deg: float = 1.5,
-                    calm_s: float = 0.5, ramp_s: float = 1.0) -> np.ndarray:
-    """A signed wind excitation z[t] in degrees, RMS ``rms_deg``.
-
-    Sum of: gusts (smooth asymmetric bumps, fast rise ~0.3-1 s, slower decay, 80 % in the prevailing
-    direction, on average one every 6 s), a slow periodic sway (0.25-0.6 Hz, slowly amplitude-modulated) and
-    coloured noise (white noise through a 4th-order Butterworth low-pass at 1 Hz). The first ``calm_s``
-    seconds are exactly 0 (the branch is at rest there) and a raised-cosine ramp of ``ramp_s`` seconds
-    blends the wind in. Wind content is kept below ~1.5 Hz, as in the real plants' excitation.
-    """
-    t = np.arange(n_frames) / fps
-    dur = n_frames / fps
-    z = np.zeros(n_frames)
-    n_gusts = max(1, rng.poisson(dur / 6.0))
-    for _ in range(n_gusts):
-        t0 = rng.uniform(0, dur)
-        rise = rng.uniform(0.3, 1.0)
-        decay = rng.uniform(0.8, 2.5)
-        amp = rng.uniform(0.6, 1.4) * (1 if rng.uniform() < 0.8 else -1)
-        dt = t - t0
-        bump = np.where(dt < 0, np.exp(-0.5 * (dt / rise) ** 2), np.exp(-0.5 * (dt / decay) ** 2))
-        z += amp * bump
-    f0 = rng.uniform(0.25, 0.6)
-    mod = 1 + 0.5 * np.sin(2 * np.pi * t / rng.uniform(8, 20) + rng.uniform(0, 2 * np.pi))
-    z += 0.35 * mod * np.sin(2 * np.pi * f0 * t + rng.uniform(0, 2 * np.pi))
-    b, a = signal.butter(4, min(1.0 / (fps / 2), 0.99))
-    noise = signal.filtfilt(b, a, rng.standard_normal(n_frames + 200))[100:-100]
-    noise /= max(np.std(noise), 1e-12)
-    z += 0.3 * noise
-    n_calm = min(int(round(calm_s * fps)), n_frames - 1)
-    n_ramp = max(1, int(round(ramp_s * fps)))
-    t_ramp = np.arange(n_frames) - n_calm
-    env = np.where(t_ramp < 0, 0.0, np.where(t_ramp >= n_ramp, 1.0, 0.5 - 0.5 * np.cos(np.pi * t_ramp / n_ramp)))
-    z = (z - z[n_calm]) * env
-    rms = np.sqrt(np.mean(z ** 2))
-    return z * (rms_deg / rms) if rms > 0 else z
-
-
-# ----------------------------------------------------------------------------------------------------------
-# Effects
-# ----------------------------------------------------------------------------------------------------------
-
-def delayed(z: np.ndarray, tau: float) -> np.ndarray:
-    """z(t - tau) for a fractional delay ``tau`` >= 0 in frames (cubic-spline interpolation; z(t<0) = z(0))."""
-    t = np.arange(len(z), dtype=float)
-    spline = make_interp_spline(t, z, k=3)
-    return spline(np.clip(t - tau, 0.0, None))
-
-
-def oscillator_response(u: np.ndarray, omega: float, zeta: float) -> np.ndarray:
-    """Response of  y'' + 2 zeta omega y' + omega^2 y = omega^2 u  (time unit: frames, omega in rad/frame).
-
-    Discretised exactly for an input that is linear between frames (first-order hold,
-    ``scipy.signal.cont2discrete(method="foh")``), zero initial state. Static gain 1.
-    """
-    A = np.array([[0.0, 1.0], [-omega ** 2, -2 * zeta * omega]])
-    B = np.array([[0.0], [omega ** 2]])
-    C = np.array([[1.0, 0.0]])
-    D = np.array([[0.0]])
-    Ad, Bd, Cd, Dd, _ = signal.cont2discrete((A, B, C, D), dt=1.0, method="foh")
-    _, y, _ = signal.dlsim((Ad, Bd, Cd, Dd, 1.0), u.reshape(-1, 1))
-    return y[:, 0]
-
-
-def bend_response(kappa: np.ndarray, s: np.ndarray, z: np.ndarray, effects: tuple[str, ...],
-                  strength: dict[str, float], fps: float, rng: np.random.Generator,
-                  forms: dict[str, str] | None = None) -> tuple[np.ndarray, dict]:
-    """True bend responses y[e, t] in degrees and the parameters of every active effect.
-
-    ``forms``: per effect, one of :data:`EFFECT_FORMS` (default: the first, described below; the held-out forms
-    change the law as :data:`EFFECT_FORMS` says, at the same strength and in the same units).
-
-    Parameters: ``kappa`` (E,) compliance; ``s`` (E,) child's root distance normalised to [0, 1];
-    ``z`` (F,) excitation in degrees; ``strength`` per effect (see :data:`EFFECT_MEANING`).
-
-    Baseline: ``y[e,t] = kappa_e z_t``. Effects, applied in this order when several are on:
-
-    1. ``delay``:  the load reaches distal segments later:  ``u_e(t) = kappa_e z(t - tau_e)``,
-       ``tau_e = tau_tip * s_e`` frames (fractional, cubic interpolation).  Params: ``tau_frames`` per edge.
-    2. ``dynamics``: each edge is a damped 2nd-order oscillator driven by its quasi-static load u_e:
-       ``y'' + 2 zeta_e omega_e y' + omega_e^2 y = omega_e^2 u_e`` (frames; omega_e in rad/frame). The natural
-       period falls linearly from T_tip (strength, seconds) at the tip to T_tip/3 at the root; zeta_e is
-       uniform in [0.1, 0.3] (seeded). Params: ``omega_rad_per_frame``, ``freq_hz``, ``zeta`` per edge.
-    3. ``nonlinear``: large-deflection stiffening of each joint: ``y_e = y_s tanh(u_e / y_s)`` with a
-       saturation angle ``y_s = q / strength`` degrees, q = 99th percentile of |kappa_e z_t| (the larger
-       gusts). Note: a saturation of the *shared* z (kappa_e z_s tanh(z/z_s)) would still be exactly rank 1
-       and so invisible to any residual test; saturating each joint's own deflection is not rank 1, because
-       compliant joints saturate more. Params: ``y_s_deg``.
-    4. ``second_mode``: an independent second excitation w_t (crosswind / out-of-plane swing; generated
-       like z with its own seed, RMS 1 degree) with its own spatial pattern mu_e (a half-cosine along the
-       branch plus independent per-edge variation: not proportional to kappa):
-       ``y_e += mu_e w_t``, scaled so RMS(mu w) = strength * RMS(kappa z). Params: ``mu``, ``w``.
-    5. ``offset``: the true rest pose is not the first frame's pose and creeps (gravity sag, relaxation):
-       ``y_e += c_e + d_e t / T`` with T = n_frames, c_e and d_e independent normals of equal spread, scaled
-       so RMS(c + d t/T) = strength * RMS(kappa z). Params: ``c_deg``, ``d_deg`` per edge.
-    """
-    E, F = len(kappa), len(z)
-    params: dict[str, dict] = {}
-    base = np.outer(kappa, z)
-    u = base
-    form = {e: (forms or {}).get(e, default_form(e)) for e in EFFECTS}
-    for e, f in form.items():
-        if f not in EFFECT_FORMS[e]:
-            raise ValueError(f"form {f!r} of {e}: expected one of {', '.join(EFFECT_FORMS[e])}")
-    if "delay" in effects:
-        tau_tip = strength["delay"]
-        tau = tau_tip * (s ** 2 if form["delay"] == "quadratic" else s)
-        u = np.stack([kappa[e] * delayed(z, tau[e]) for e in range(E)])
-        params["delay"] = {"tau_tip_frames": tau_tip, "tau_frames": tau.tolist()}
-    if "dynamics" in effects:
-        T_tip = strength["dynamics"]
-        if form["dynamics"] == "scattered":
-            period_s = T_tip / 3 * np.exp(np.log(3.0) * rng.uniform(0, 1, E))
-            zeta = rng.uniform(0.05, 0.5, E)
-        else:
-            period_s = T_tip / 3 + (T_tip - T_tip / 3) * s
-            zeta = rng.uniform(0.1, 0.3, E)
-        if T_tip > 0:
-            omega = 2 * np.pi / (period_s * fps)
-            u = np.stack([oscillator_response(u[e], omega[e], zeta[e]) for e in range(E)])
-        else:
-            omega = np.full(E, np.inf)
-        params["dynamics"] = {"tip_period_s": T_tip, "omega_rad_per_frame": omega.tolist(),
-                              "freq_hz": (1 / period_s if T_tip > 0 else np.full(E, np.inf)).tolist(),
-                              "zeta": zeta.tolist()}
-    if "nonlinear" in effects:
-        ratio = strength["nonlinear"]
-        q = float(np.quantile(np.abs(base), 0.99))
-        if ratio > 0 and q > 0:
-            y_s = q / ratio
-            # one-sided: only deflections toward the prevailing wind (the sign of z's mean) saturate
-            side = np.sign(np.mean(base)) or 1.0
-            u = (np.where(side * u > 0, y_s * np.tanh(u / y_s), u) if form["nonlinear"] == "one_sided"
-                 else y_s * np.tanh(u / y_s))
-        else:
-            y_s = math.inf
-        params["nonlinear"] = {"q_deg": q, "y_s_deg": y_s, "ratio": ratio}
-    y = u
-    ref_rms = float(np.sqrt(np.mean(base ** 2)))
-    if "second_mode" in effects:
-        if form["second_mode"] == "flutter":
-            f0 = rng.uniform(1.5, 2.5)
-            w = signal.sosfiltfilt(signal.butter(2, [0.8 * f0, 1.25 * f0], "bandpass", fs=fps, output="sos"),
-                                   rng.standard_normal(F))
-            w /= max(float(np.sqrt(np.mean(w ** 2))), 1e-12)
-            mu = np.where(s > 0.5, 1.0 + 0.5 * rng.standard_normal(E), 0.0)
-        else:
-            w = make_excitation(F, fps, rng, rms_deg=1.0)
-            mu = np.cos(np.pi * s) + 0.5 * rng.standard_normal(E)
-        term = np.outer(mu, w)
-        r = np.sqrt(np.mean(term ** 2))
-        scale = strength["second_mode"] * ref_rms / r if r > 0 else 0.0
-        mu = mu * scale
-        y = y + np.outer(mu, w)
-        params["second_mode"] = {"ratio": strength["second_mode"], "mu": mu.tolist(), "w": w.tolist()}
-    if "offset" in effects:
-        c = rng.standard_normal(E)
-        d = rng.standard_normal(E)
-        tt = np.arange(F) / F
-        if form["offset"] == "relaxation":
-            tt = 1.0 - np.exp(-np.arange(F) / (F / 4))
-        term = c[:, None] + d[:, None] * tt[None, :]
-        r = np.sqrt(np.mean(term ** 2))
-        scale = strength["offset"] * ref_rms / r if r > 0 else 0.0
-        c, d = c * scale, d * scale
-        y = y + c[:, None] + d[:, None] * tt[None, :]
-        params["offset"] = {"ratio": strength["offset"], "c_deg": c.tolist(), "d_deg": d.tolist()}
-    for e in params:
-        params[e]["form"] = form[e]
-    return y, params
-
-
-# ----------------------------------------------------------------------------------------------------------
-# Geometry and kinematics
-# ----------------------------------------------------------------------------------------------------------
-
-def turning_angles_deg(xy: np.ndarray, node_ids, bends) -> np.ndarray:
-    """Signed turning angles (E, F) in degrees at each bend: atan2(cross(u, v), dot(u, v)),
-    u = p_j - p_g, v = p_c - p_j; ``xy`` is (N, F, 2) with rows in ``node_ids`` order. NaN propagates."""
-    row = {int(n): i for i, n in enumerate(node_ids)}
-    g = xy[[row[b.grandparent] for b in bends]]
-    j = xy[[row[b.joint] for b in bends]]
-    c = xy[[row[b.child] for b in bends]]
-    u, v = j - g, c - j
-    cross = u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-    dot = (u * v).sum(-1)
-    return np.degrees(np.arctan2(cross, dot))
-
-
-def _build_graph(cfg: SimulationConfig, rng: np.random.Generator) -> tuple[BranchGraph, dict[tuple[int, int], float]]:
-    """Topology and the rest turning angle (degrees) of every non-root edge."""
-    n = cfg.n_nodes
-    if cfg.branch_layout == "chain":
-        edges = [(i, i + 1) for i in range(n - 1)]
-        side: list[tuple[int, int]] = []
-    else:
-        k = max(2, n // 4)
-        m = n - k
-        edges = [(i, i + 1) for i in range(m - 1)]
-        attach = max(2, int(round(0.4 * m)))
-        side = [(attach, m)] + [(m + i, m + i + 1) for i in range(k - 1)]
-        edges += side
-    graph = BranchGraph.from_edges(0, edges, source="simulated branch")
-    bow = rng.uniform(15, 45) * rng.choice([-1, 1])  # total rest curvature of the main axis (degrees)
-    n_bends = len(graph.bends)
-    rest = {}
-    for b in graph.bends:
-        rest[b.edge] = bow / n_bends + rng.normal(0, 3.0)
-    if side:
-        rest[side[0]] = -np.sign(bow) * rng.uniform(25, 45)  # the side branch leaves at an angle
-    return graph, rest
-
-
-def forward_kinematics(graph: BranchGraph, lengths: dict, root_heading_rad: np.ndarray,
-                       turn_deg: dict) -> np.ndarray:
-    """Node positions (N, F, 2) in graph.nodes order, root at the origin.
-
-    ``root_heading_rad`` (F,): heading of every root edge (atan2 convention in image coordinates);
-    ``turn_deg[(j, c)]`` (F,): total turning angle (rest + deviation) of edge (j, c) relative to its
-    parent edge; ``lengths[(p, c)]``: segment length in pixels.
-    """
-    F = len(root_heading_rad)
-    row = {nid: i for i, nid in enumerate(graph.nodes)}
-    pos = np.zeros((len(graph.nodes), F, 2))
-    heading: dict[int, np.ndarray] = {}
-    for c in graph.nodes[1:]:
-        p = graph.parent[c]
-        h = root_heading_rad if p == graph.root else heading[p] + np.radians(turn_deg[(p, c)])
-        heading[c] = h
-        pos[row[c]] = pos[row[p]] + lengths[(p, c)] * np.stack([np.cos(h), np.sin(h)], axis=-1)
-    return pos
-
-
-def _root_distance(graph: BranchGraph, lengths: dict) -> dict[int, float]:
-    d = {graph.root: 0.0}
-    for c in graph.nodes[1:]:
-        d[c] = d[graph.parent[c]] + lengths[(graph.parent[c], c)]
-    return d
-
-
-def place_in_image(pos: np.ndarray, image_size, rng, margin: float = 30.0) -> tuple[np.ndarray, float, np.ndarray]:
-    """Rotate (about the root) and translate positions so that every frame fits the image.
-
-    Tries headings in 5-degree steps and keeps the fitting one closest to a seeded preferred direction
-    (upward-diagonal, like a branch leaving a stem); if none fits, the shape is scaled down.
-    Returns (positions, rotation in radians, root pixel position).
-    """
-    w, h = image_size
-    avail = np.array([w - 2 * margin, h - 2 * margin])
-    pref = np.radians(rng.uniform(-150, -30))  # image y is down: negative = upward
-    chord = pos[:, 0].mean(axis=0)
-    chord_ang = math.atan2(chord[1], chord[0]) if np.linalg.norm(chord) > 0 else 0.0
-    best = None
-    for rot in np.radians(np.arange(0, 360, 5)):
-        cr, sr = math.cos(rot), math.sin(rot)
-        p = pos @ np.array([[cr, sr], [-sr, cr]])
-        size = p.reshape(-1, 2).max(0) - p.reshape(-1, 2).min(0)
-        fit = float(np.min(avail / np.maximum(size, 1e-9)))
-        dang = abs((chord_ang + rot - pref + np.pi) % (2 * np.pi) - np.pi)
-        key = (min(fit, 1.0), -dang)
-        if best is None or key > best[0]:
-            best = (key, rot, p, fit)
-    _, rot, p, fit = best
-    if fit < 1.0:
-        p = p * fit
-    flat = p.reshape(-1, 2)
-    centre = (flat.max(0) + flat.min(0)) / 2
-    root_px = np.array([w / 2, h / 2]) - centre
-    return p + root_px, float(rot), root_px
-
-
-# ----------------------------------------------------------------------------------------------------------
-# Noise
-# ----------------------------------------------------------------------------------------------------------
-
-#: the branch direction at each node (kept under its old name for the tests that use it)
+#: the branch direction at each node (kept under its old name for the tests that use it); the tracker noise is
+#: :func:`rce_gtsam.sim.tracker_noise.add_tracker_noise`
 _tangents = branch_tangents
-
-
-def add_tracker_noise(graph: BranchGraph, true_xy: np.ndarray, s_node: np.ndarray, noise: NoiseConfig,
-                      fps: float, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Noisy positions (N, F, 2) with NaN at occlusion gaps, and the nominal white-noise sigma (N,) in px.
-
-    Per node i with normalised root distance s_i: white noise with sigma_across = sigma_across_px *
-    (1 + (tip_factor - 1) s_i) across the branch and along_ratio times that along it; plus an AR(1) drift
-    (correlation time drift_time_s, stationary sigma drift_px along / drift_px/along_ratio across, also
-    growing toward the tip); plus jumps; then occlusion gaps (see :class:`NoiseConfig`).
-    """
-    N, F, _ = true_xy.shape
-    if not noise.enabled:
-        return true_xy.copy(), np.full(N, np.nan)
-    grow = 1 + (noise.tip_factor - 1) * s_node  # (N,)
-    s_across = noise.sigma_across_px * grow
-    s_along = s_across * noise.along_ratio
-    tan = _tangents(graph, true_xy)
-    nrm = np.stack([-tan[..., 1], tan[..., 0]], axis=-1)
-    along = rng.standard_normal((N, F)) * s_along[:, None]
-    across = rng.standard_normal((N, F)) * s_across[:, None]
-    rho = math.exp(-1.0 / (noise.drift_time_s * fps))
-    innov = math.sqrt(1 - rho ** 2)
-    e = rng.standard_normal((N, F, 2))
-    # stationary AR(1): x[0] = e[0], x[t] = rho x[t-1] + sqrt(1 - rho^2) e[t]
-    drift = signal.lfilter([innov], [1.0, -rho], e, axis=1, zi=e[:, :1] * (1 - innov))[0]
-    drift_along = drift[..., 0] * noise.drift_px * grow[:, None]
-    drift_across = drift[..., 1] * noise.drift_px / noise.along_ratio * grow[:, None]
-    xy = true_xy + (along + drift_along)[..., None] * tan + (across + drift_across)[..., None] * nrm
-    # jumps
-    starts = rng.uniform(size=(N, F)) < noise.jump_prob
-    for i, f in zip(*np.nonzero(starts)):
-        L = int(rng.integers(1, 4))
-        ang = rng.uniform(0, 2 * np.pi)
-        mag = rng.uniform(*noise.jump_px)
-        xy[i, f:f + L] += mag * np.array([math.cos(ang), math.sin(ang)])
-    # occlusion gaps
-    for i in range(N):
-        rate = noise.gap_rate * (0.2 + 1.6 * s_node[i]) * F / (30.0 * fps)
-        for _ in range(rng.poisson(rate)):
-            L = int(np.clip(round(noise.gap_median_frames * math.exp(1.1 * rng.standard_normal())), 1,
-                            noise.gap_max_frames))
-            f0 = int(rng.integers(0, F))
-            xy[i, f0:f0 + L] = np.nan
-    # frame 0 is the user's annotation: the tracker returns the query point there exactly (as TAPIR does
-    # on the real plant 2), so every node is observed, noise-free, in frame 0.
-    xy[:, 0] = true_xy[:, 0]
-    sigma = np.sqrt((s_along ** 2 + s_across ** 2) / 2)
-    return xy, sigma
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -569,6 +199,7 @@ class Simulation:
     segment_px: dict = field(default_factory=dict)
     root_px: tuple[float, float] = (0.0, 0.0)
     artifact_params: dict = field(default_factory=dict)
+    three_d: Truth3D | None = None  # the 3-D truth (sim/three_d.py) when the scene is 3-D
 
     def truth_json(self) -> dict:
         """Ground truth as a JSON-ready dict: kappa_true keyed "parent->child", z_true, response_true
@@ -597,6 +228,8 @@ class Simulation:
             "root_px": [float(v) for v in self.root_px],
             "config": _jsonable(cfg),
         }
+        if self.three_d is not None:
+            out.update(self.three_d.truth_json(self.graph))
         if self.config.artifacts.active:
             from .artifacts import preset_provenance
             out["artifacts"] = {"families": list(self.config.artifacts.families),
@@ -606,8 +239,9 @@ class Simulation:
                                 "provenance": preset_provenance(self.config.artifacts.preset)}
         return out
 
-    def write(self, out_dir: str | Path, video: bool = False, render=None) -> dict[str, Path]:
-        """Write tracks.csv, true_tracks.csv, graph.json, truth.json, annotations.json (+ video.mp4).
+    def write(self, out_dir: str | Path, video: bool = False, render=None, depth: bool = False) -> dict[str, Path]:
+        """Write tracks.csv, true_tracks.csv, graph.json, truth.json, annotations.json (+ video.mp4; with
+        ``depth`` also recording.db3 with colour and aligned depth, :mod:`rce_gtsam.sim.recording`).
 
         ``render``: camera nuisances of the video (:class:`~rce_gtsam.sim.nuisance.RenderConfig`; None = the
         clean render). With camera shake, true_tracks.csv and tracks.csv hold positions in the image
@@ -641,9 +275,9 @@ class Simulation:
             row = {nid: i for i, nid in enumerate(self.tracks.node_ids)}
             pts = [[round(float(v), 4) for v in self.true_xy[row[n], 0]] for n in sorted(row)]
             (tmp / "annotations.json").write_text(json.dumps({"points": pts}) + "\n")
-            if video:
-                from .render import render_video
-                render_video(self, tmp / "video.mp4", config=render)
+            if video or depth:
+                from .recording import write_media
+                write_media(self, tmp, render=render, depth=depth)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise
@@ -652,7 +286,8 @@ class Simulation:
 
 
 #: Files :meth:`Simulation.write` may write.
-WRITTEN_FILES = ("tracks.csv", "true_tracks.csv", "graph.json", "truth.json", "annotations.json", "video.mp4")
+WRITTEN_FILES = ("tracks.csv", "true_tracks.csv", "graph.json", "truth.json", "annotations.json", "video.mp4",
+                 "recording.db3")
 
 
 def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
@@ -686,6 +321,10 @@ def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
     if not np.isclose(np.linalg.norm(true_xy[1, 0] - true_xy[0, 0]), lengths[graph.edges[0]]):
         scale = np.linalg.norm(true_xy[1, 0] - true_xy[0, 0]) / lengths[graph.edges[0]]
         lengths = {e: L * scale for e, L in lengths.items()}
+    three = None
+    if config.scene3d is not None or "out_of_plane" in config.effects:  # 3-D scene, projected (sim/three_d.py)
+        from .three_d import simulate_3d
+        true_xy, three, lengths = simulate_3d(graph, true_xy, root_px, kappa, z, config, lengths)
     s_node = np.array([dist[n] / dmax for n in graph.nodes])
     tracked, artifact_params = true_xy, {}
     if config.artifacts.active:
@@ -703,7 +342,7 @@ def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
     return Simulation(config=config, graph=graph, tracks=tracks, true_xy=true_xy,
                       kappa_true={b.edge: float(k) for b, k in zip(bends, kappa)}, z_true=z,
                       response_true=y, effect_params=params, rest_turn_deg=rest, segment_px=lengths,
-                      root_px=(float(root_px[0]), float(root_px[1])), artifact_params=artifact_params)
+                      root_px=(float(root_px[0]), float(root_px[1])), artifact_params=artifact_params, three_d=three)
 
 
 # ----------------------------------------------------------------------------------------------------------

@@ -109,22 +109,12 @@ never recovers after an occlusion. This tracker uses frame-to-frame pyramidal LK
    tensor of the template, residual = template minus the matched patch, so appearance change counts)
    and fb the forward-backward error. Invisible entries get sigma = the search radius.
 
-Constants and why they are what they are (none is tuned to a video):
-
-* patch radius h: ``clip(0.45 * median segment length, 6, 15)`` px -- large enough to hold texture (LK
-  windows below ~13 px are noise-dominated), small enough that the patch covers little more than the
-  node's own segment neighbourhood (which moves rigidly with it). Without a graph: 10 px (21x21, a
-  common LK window).
-* ``min_ncc = 0.5``: the template then explains >= 25 % of the patch variance, while an unrelated
-  patch of n pixels correlates at about +-1/sqrt(n) (< 0.08 for n >= 169), so this is far above chance
-  at every patch size used, yet tolerant of the lighting/rotation change a swinging branch shows.
-* ``max_fb_fraction = 0.1``: a well-posed LK round trip closes to << 0.1 px; a gap of a tenth of the
-  patch radius (~1 px for the typical 21 px window, the usual FB threshold in the literature) means the
-  match is not a stable minimum.
-* ``max_stretch = 0.25``, ``min_length_fraction = 0.4``, ``length_tol_px = 1.5``: relative to L0 so that
-  they hold at any zoom; the absolute tolerance covers two nodes' localisation error on short segments.
-* ``refine_consistency`` and ``distinct_follow`` add no constant: they re-use ``min_ncc``, the
-  forward-backward limit and ``distinct_sigmas``.
+Modules: this one holds :class:`LKTracker` and its frame loop (frame-to-frame LK, the refinement thread, the
+result); :mod:`~rce_gtsam.track.lk_config` its settings (:class:`LKConfig`, the constants' reasons) and :data:`HOW`;
+:mod:`~rce_gtsam.track.lk_frame0` the frame-0 set-up (topology, branch band, colour mask, strips, templates);
+:mod:`~rce_gtsam.track.lk_measure` the measurements (frame-0 match, segment search, refinement pass, recent
+template); :mod:`~rce_gtsam.track.lk_node` the first pass's decision at one node (steps 1-3b);
+:mod:`~rce_gtsam.track.match_kernels` the compiled kernels.
 
 Camera nuisances (``benchmarks/bench_track_nuisance.py``, seeds 0-2, 400 frames, ``rce_gtsam.sim.nuisance``):
 a drifting global gain/offset (even 3 % per frame), a 180-degree-shutter motion blur, a soft moving shadow
@@ -210,151 +200,24 @@ a node hidden from frame 0 onwards cannot be tracked.
 from __future__ import annotations
 
 import contextlib
-import math
 import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
 
 import cv2
 import numpy as np
 
 from ..errors import InputError
 from ..graph import BranchGraph
+from .lk_config import HOW, LKConfig
+from .lk_frame0 import Frame0Setup
+from .lk_measure import Measurement
+from .lk_node import FirstPassFrame, NodeDecision
 from .result import TrackResult
 from .sources import FrameSource, prefetched
 
-
-@dataclass(frozen=True)
-class LKConfig:
-    """Settings of :class:`LKTracker` (pixels unless stated; see the module docstring for the reasons).
-
-    patch_radius_px: template half-size h; None = ``clip(0.45 * median segment length, 6, 15)``
-        (10 without a graph).
-    pyr_levels: pyramid levels of the frame-to-frame prediction (motion up to ~h * 2**levels px/frame).
-    min_ncc: minimum normalised cross-correlation of the first-frame template at the match.
-    max_fb_fraction: forward-backward error limit as a fraction of h (never below ``min_fb_px``).
-    min_fb_px: floor of the forward-backward limit.
-    max_stretch, min_length_fraction, length_tol_px: segment-length plausibility (needs a graph).
-    sigma_floor_px: smallest reported 1-sigma (interpolation/quantisation limit).
-    rotate_templates: rotate the first-frame template by the branch's rotation (needs a graph).
-    mask_to_branch: weight template pixels by a band around the branch (the graph's segments in frame 0),
-        so the static background inside a patch does not pin the match (needs a graph).
-    band_margin_px: the band extends this far beyond the measured branch half-width, so the branch's
-        own edges (the strongest across-branch gradients) are inside it.
-    refine_pass: re-match visible nodes with segment rotations measured from this frame's matches.
-    segment_fallback: accept the hinged-segment position when a node's own patch fails (needs a graph).
-    min_segment_ncc: correlation of the whole segment strip required by ``segment_fallback`` (higher
-        than ``min_ncc``: the strip has many more pixels, and the position is not refined).
-    distinct_reacquire: when re-acquiring a node that was invisible in the previous frame, reject the
-        match if another correlation peak (outside h/2 of the best) comes within ``distinct_sigmas``
-        correlation standard errors (1/sqrt(weighted template pixels)) of it: on a self-similar stem the
-        neighbouring knot is then as good a match, and the node stays invisible rather than guessed.
-    distinct_sigmas: peak-separation threshold of ``distinct_reacquire`` in standard errors (2: two
-        peaks closer than that are not distinguishable from pixel noise).
-    mask_off_colour: drop from the branch bands the frame-0 pixels whose chromaticity is not the branch's
-        (leaves in front of the stem, background at the band's edges; see ``_branch_colour_mask``).
-    distinct_follow: also for a followed node (not re-acquired), reject a match with a second peak within
-        ``distinct_sigmas`` standard errors when that peak is nearer the prediction than the best one.
-    refine_consistency: mark a node found in the wide window (template posed by a borrowed rotation)
-        invisible when its second-pass re-match (rotations measured from this frame's matches) fails
-        ``min_ncc`` or the forward-backward limit, instead of keeping the first-pass match (see
-        ``LKTracker._refine``). Applied to every visible node it also dropped a few correct matches and
-        lowered Spearman of kappa on simulator seed 1 from 0.83 to 0.80.
-    anchor_highpass_px: 0 (default) = measure against frame 0 in the grey image. > 0 = in a locally
-        illumination-normalised image instead: log(grey + 8) minus its Gaussian blur of this standard
-        deviation (pixels), so a brightness gradient or a shadow edge slower than that scale drops out
-        (global gain and offset are already compensated by the normalised correlation and the
-        gain/bias-compensated LK). Measured at 4 px (``benchmarks/bench_track_nuisance.py``): a sharp
-        moving shadow (12 px penumbra, 50 % darker) no longer puts a visible point 26 px off (seed 1: max
-        26.3 -> 9.5 px, visible 0.78 -> 0.84), and on clean 600-frame clips visibility rises (seeds 0-4:
-        0.85/0.81/0.96/0.91/0.95 -> 0.93/0.85/0.98/0.97/0.97) but so does the tail (share of visible
-        errors > 2 px on seeds 2-4: 0.8/0.2/0.6 % -> 1.1/1.1/0.9 %), and under the soft 60-px shadow one
-        visible point was 201 px off (seed 0), so it is not the default.
-    hold: when a node's frame-0 match (and the recent template) fails but frame-to-frame pyramidal LK followed it
-        from a measured (or held) position -- round trip within the forward-backward limit, the (2h+1)^2 patch
-        correlating at least ``hold_min_ncc`` with the previous frame's (a covered node or a blank patch does not),
-        its parent visible in this frame (the root excepted), the segment to it within the stretch limits and
-        within ``hold_agree_px`` of where the hinged segment search (matched at >= ``min_ncc``) puts the node --
-        keep the node visible at the LK position with a sigma that grows as a random walk: sigma^2 =
-        max(sigma_prev, ``fallback_sigma_px``)^2 + (fb/2)^2 + ``hold_step_px``^2, until it passes
-        ``hold_max_sigma_px`` (None: h/2). A held node that the frame-0 template finds again counts as re-acquired
-        (the strict ``distinct_reacquire`` and parent checks apply), so a hold that drifted cannot re-anchor on a
-        neighbouring knot. Without the parent and segment conditions a held tip drifted 149 px off on the texture
-        bed (150 px excursion), and held points followed fluttering leaves on the simulator clips (p90 7.4 px).
-        ``hold_step_px`` (0.3 px a frame) is an assumption, not a calibration.
-    fallback_sigma_px: the smallest sigma (px) of a recent-template or held position. Their errors are not what
-        the match's own least-squares error says: median 0.5-1.4 px on the texture bed (seeds 0-1) and 1.1-1.8 px
-        on simulator seed 0, at err/sigma medians of 1.2-4.3 with the match's sigma alone; 1 px is that scale.
-    recent_template, recent_min_ncc: see the module docstring (3b). The stored appearance is only as good as its
-        anchor: 0.8 (the template explains >= 64 % of the patch variance) keeps a node partly covered by a leaf
-        from being stored. Without the narrow-window rule the recent template locked onto the occluding leaf 13-16
-        px off in ``tests/test_track_lk.py``'s scene, and at a tip matched with its full patch 7.6 px off
-        (simulator seed 0): both are excluded.
-    segment_tiebreak: see the module docstring (3b); re-uses ``min_segment_ncc`` and h/2.
-    tip_segment_fallback: a tip (a node with a parent and no child) whose own patch fails is placed where the
-        hinged segment search puts it (``min_segment_ncc``), as ``segment_fallback`` does for every node: a tip's
-        band is short and thin, and it was marked lost in ~90 % of the texture bed's frames while the positions
-        were right to ~0.5 px; with it the tip is visible throughout (bed seed 0: error median 0.96 px, p90 3.0 px,
-        sigma median 0.5 px).
-    threads: 2 = the refinement pass runs in a second thread, node by node right behind the first pass (a node
-        is re-matched as soon as the first pass has finished it, its parent and its children, and after its
-        parent's re-match: exactly the values a pass after the first reads, so the tracks are bit-identical to
-        ``threads=1``, the default, which runs the two passes one after the other). The compiled kernels and
-        OpenCV release the GIL, but the per-node Python between them does not, and a re-match is short (a
-        2-px search): on the shared 2-core machine (load 4-6) two threads were 0.75-0.98x as fast as one
-        (``benchmarks/bench_track.py``, ``current2`` row), so one thread is the default. With less Python per node
-        (see the module docstring's Speed paragraph) two threads were 1.08x as fast alone and 1.06x from the mp4 at
-        load 2.3-2.5, for 1.1x the CPU time.
-    """
-
-    patch_radius_px: int | None = None
-    pyr_levels: int = 3
-    min_ncc: float = 0.5
-    max_fb_fraction: float = 0.1
-    min_fb_px: float = 0.5
-    max_stretch: float = 0.25
-    min_length_fraction: float = 0.4
-    length_tol_px: float = 1.5
-    sigma_floor_px: float = 0.05
-    rotate_templates: bool = True
-    mask_to_branch: bool = True
-    band_margin_px: float = 1.5
-    refine_pass: bool = True
-    segment_fallback: bool = False
-    min_segment_ncc: float = 0.7
-    distinct_reacquire: bool = True
-    mask_off_colour: bool = True
-    distinct_sigmas: float = 2.0
-    distinct_follow: bool = True
-    refine_consistency: bool = True
-    anchor_highpass_px: float = 0.0
-    threads: int = 1
-    tip_segment_fallback: bool = True
-    segment_tiebreak: bool = True
-    recent_template: bool = True
-    recent_min_ncc: float = 0.8
-    fallback_sigma_px: float = 1.0
-    hold: bool = True
-    hold_step_px: float = 0.3
-    hold_max_sigma_px: float | None = None
-    hold_agree_px: float = 2.0
-    hold_min_ncc: float = 0.8
-
-    def __post_init__(self):
-        if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads not in (1, 2):
-            raise InputError("LKConfig", f"threads must be 1 or 2, got {self.threads!r}", "threads")
-
-
-#: ``TrackResult.info["how"]`` (P, F) int8 of :class:`LKTracker`: how each position was found.
-HOW = {-1: "invisible", 0: "anchored to frame 0", 1: "recent template", 2: "held by frame-to-frame LK",
-       3: "hinged segment"}
-
-# A tip's template uses its branch band whenever the band holds at least this many (weighted) pixels: a 4x4
-# block, where the correlation of an unrelated patch has a standard error of 1/sqrt(16) = 0.25, so ``min_ncc``
-# (0.5) is still two standard errors above chance. See the module docstring ("Below 4 (2h + 1) band pixels").
-_TIP_MIN_BAND_PX = 16.0
+__all__ = ["LKTracker", "LKConfig", "HOW"]
 
 _LK_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 30, 0.01)
 
@@ -396,422 +259,16 @@ class _Progress:
                 raise RuntimeError("the first pass was abandoned")
 
 
-def _f2f_ncc(prev_gray: np.ndarray, gray: np.ndarray, a, b, h: int) -> float:
-    """Normalised correlation of the (2h+1)^2 patch of ``prev_gray`` at ``a`` with that of ``gray`` at ``b``
-    (px; sub-pixel crops): whether frame-to-frame LK followed the same appearance (a node covered by a leaf or a
-    blank patch correlates poorly). 0 for a flat patch."""
-    size = (2 * h + 1, 2 * h + 1)
-    pa = cv2.getRectSubPix(prev_gray, size, (float(a[0]), float(a[1])), patchType=cv2.CV_32F).ravel()
-    pb = cv2.getRectSubPix(gray, size, (float(b[0]), float(b[1])), patchType=cv2.CV_32F).ravel()
-    pa, pb = pa - pa.mean(), pb - pb.mean()
-    den = math.sqrt(float(pa @ pa) * float(pb @ pb))
-    return float(pa @ pb) / den if den > 1e-6 else 0.0
+class LKTracker(NodeDecision, Measurement, Frame0Setup):
+    """Drift-free Lucas-Kanade tracker (see module docstring). ``LKTracker(LKConfig()).track(src, pts, graph)``.
 
-
-def _rotation_about(cx: float, cy: float, theta: float, dx: float, dy: float) -> np.ndarray:
-    """2x3 affine matrix: rotation by ``theta`` (radians, image frame) about (cx, cy), then a shift (dx, dy) px.
-
-    ``cv2.getRotationMatrix2D((cx, cy), -degrees(theta), 1)`` with (dx, dy) added to its last column.
-    """
-    a, b = math.cos(theta), -math.sin(theta)
-    return np.array([[a, b, (1 - a) * cx - b * cy + dx], [-b, a, b * cx + (1 - a) * cy + dy]])
-
-
-def _turn(a, b, ang0: float) -> float:
-    """Rotation (radians, wrapped to (-pi, pi]) of the vector a->b relative to the direction ``ang0`` (radians,
-    ``atan2`` of the frame-0 vector: ``LKTracker._ang0``)."""
-    d = math.atan2(b[1] - a[1], b[0] - a[0]) - ang0
-    return (d + math.pi) % (2 * math.pi) - math.pi
-
-
-class LKTracker:
-    """Drift-free Lucas-Kanade tracker (see module docstring). ``LKTracker(LKConfig()).track(src, pts, graph)``."""
+    Its methods live in one module per job: the frame-0 set-up (:class:`~rce_gtsam.track.lk_frame0.Frame0Setup`),
+    the measurements (:class:`~rce_gtsam.track.lk_measure.Measurement`) and the first pass's per-node decision
+    (:class:`~rce_gtsam.track.lk_node.NodeDecision`); :meth:`track`, the frame loop, is here."""
 
     def __init__(self, config: LKConfig | None = None):
         self.config = config or LKConfig()
 
-    # -- set-up -------------------------------------------------------------------------------
-    def _setup(self, q: np.ndarray, graph: BranchGraph | None, source: str):
-        cfg = self.config
-        n = len(q)
-        self.order = list(range(n))
-        self.parent = [-1] * n
-        self.rest_len = np.zeros(n)
-        self.children = {i: [] for i in range(n)}
-        if graph is not None:
-            missing = [v for v in graph.nodes if not 0 <= v < n]
-            if missing:
-                raise InputError(graph.source, f"graph node {missing[0]} has no annotated point "
-                                               f"(annotations list {n} points, ids 0..{n - 1})", f"node {missing[0]}")
-            self.order = list(graph.nodes) + [i for i in range(n) if i not in set(graph.nodes)]
-            for c, p in graph.parent.items():
-                self.parent[c] = p
-                self.children[p].append(c)
-                self.rest_len[c] = float(np.hypot(*(q[c] - q[p])))
-        lengths = self.rest_len[self.rest_len > 0]
-        if cfg.patch_radius_px is not None:
-            h = int(cfg.patch_radius_px)
-        elif lengths.size:
-            h = int(np.clip(round(0.45 * float(np.median(lengths))), 6, 15))
-        else:
-            h = 10
-        if h < 2:
-            raise InputError(source, f"patch radius must be >= 2 px, got {h}")
-        self.h = h
-        self._margin = self._rematch_radius()
-        # segments incident to each node (the parent's first), and each segment's frame-0 direction (radians, by its
-        # child: ``_turn``)
-        self._inc = [([(self.parent[i], i)] if self.parent[i] >= 0 else []) + [(i, c) for c in self.children[i]]
-                     for i in range(n)]
-        self._ang0 = [math.atan2(q[c][1] - q[p][1], q[c][0] - q[p][0]) if p >= 0 else 0.0
-                      for c, p in enumerate(self.parent)]
-        # refinement pass (see ``_refine``): at position k of the order, the nodes read that the pass has not
-        # re-matched yet, and how many first-pass nodes must be finished before node order[k] is re-matched
-        pos = {i: k for k, i in enumerate(self.order)}
-        self._refine_reads, self._refine_needs = [], []
-        for k, i in enumerate(self.order):
-            near = [j for j in (self.parent[i], i, *self.children[i]) if j >= 0]
-            self._refine_reads.append(np.array([j for j in near if pos[j] >= k], int))
-            self._refine_needs.append(1 + max(pos[j] for j in near))
-        # terminal nodes (a parent, no children): their band is matched down to _TIP_MIN_BAND_PX pixels
-        self._tips = {j for j in range(n) if self.parent[j] >= 0 and not self.children[j]}
-        # Rotation baseline partner: walk toward the root until >= 2h away, else toward the tip.
-        self.partner = [-1] * n
-        if graph is not None and cfg.rotate_templates:
-            children = graph.children
-            for i in graph.nodes:
-                j = i
-                while self.parent[j] >= 0 and np.hypot(*(q[j] - q[i])) < 2 * h:
-                    j = self.parent[j]
-                if np.hypot(*(q[j] - q[i])) < 2 * h:
-                    k = i
-                    while children.get(k) and np.hypot(*(q[k] - q[i])) < 2 * h:
-                        k = children[k][0]
-                    j = k if np.hypot(*(q[k] - q[i])) > np.hypot(*(q[j] - q[i])) else j
-                self.partner[i] = j if j != i else -1
-
-    def _branch_band(self, rgb: np.ndarray, q: np.ndarray, graph: BranchGraph | None) -> np.ndarray | None:
-        """Frame-0 weight image: 1 on a band around the graph's segments, 0 elsewhere (None: no graph).
-
-        The branch half-width is measured, not assumed: across the middle of every segment, the colour
-        profile is compared with the colour on the axis; the half-width is where the difference first
-        exceeds half its maximum (the edge), median over segments, clipped to [1.5 px, h].
-        """
-        if graph is None or not self.config.mask_to_branch:
-            return None
-        h = self.h
-        img = rgb.astype(np.float32)
-        widths = []
-        offs = np.arange(-h, h + 1, dtype=np.float32)
-        for p, c in graph.edges:
-            a, b = q[p], q[c]
-            d = b - a
-            ln = float(np.hypot(*d))
-            if ln < 1e-6:
-                continue
-            nrm = np.array([-d[1], d[0]]) / ln
-            mid = 0.5 * (a + b)
-            mx = (mid[0] + offs * nrm[0]).reshape(1, -1).astype(np.float32)
-            my = (mid[1] + offs * nrm[1]).reshape(1, -1).astype(np.float32)
-            prof = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[0]
-            centre = prof[h - 1:h + 2].mean(axis=0)
-            dist = np.linalg.norm(prof - centre, axis=1)
-            if dist.max() < 1e-3:
-                continue
-            half = 0.5 * dist.max()
-            sides = []
-            for seq in (dist[h:], dist[h::-1]):
-                hit = np.flatnonzero(seq > half)
-                sides.append(float(hit[0]) if hit.size else float(h))
-            widths.append(float(np.mean(sides)))
-        hw = float(np.clip(np.median(widths) if widths else h, 1.5, h)) + self.config.band_margin_px
-        self.branch_halfwidth_px = hw
-        fg = self._branch_colour_mask(rgb, q, graph) if self.config.mask_off_colour else None
-        # one band per segment, cropped around each of its two end nodes (only those crops are used)
-        self._seg_band = {}
-        self._band_stacks = {}
-        size = 2 * (h + 2 * h) + 1
-        for p, c in graph.edges:
-            for node in (p, c):
-                off = q[node] - (size - 1) / 2.0  # crop origin so that q[node] maps to the crop centre
-                band = np.zeros((size, size), np.uint8)
-                a, b = (np.round((q[p] - off) * 16).astype(int), np.round((q[c] - off) * 16).astype(int))
-                cv2.line(band, tuple(map(int, a)), tuple(map(int, b)), 255, int(round(2 * hw)) + 1, cv2.LINE_AA, shift=4)
-                band = band.astype(np.float32) / 255.0
-                if fg is not None:
-                    band *= cv2.getRectSubPix(fg, (size, size), (float(q[node][0]), float(q[node][1])))
-                self._seg_band[(p, c, node)] = band
-        # frame-0 strip of every segment in its own frame (u along p->c, 1-px steps; v across the band)
-        g0 = self._anchor_image(cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)).astype(np.float32)
-        self._strip = {}
-        vv = np.arange(-math.floor(hw), math.floor(hw) + 1, dtype=np.float32)
-        for p, c in graph.edges:
-            d = q[c] - q[p]
-            ln = float(np.hypot(*d))
-            if ln < 2.0:
-                continue
-            uu = np.arange(0.0, ln + 0.5, 1.0, dtype=np.float32)
-            ex = d / ln
-            ey = np.array([-ex[1], ex[0]])
-            mx = (q[p][0] + uu[None, :] * ex[0] + vv[:, None] * ey[0]).astype(np.float32)
-            my = (q[p][1] + uu[None, :] * ex[1] + vv[:, None] * ey[1]).astype(np.float32)
-            st = cv2.remap(g0, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-            st = st - st.mean()
-            nrm = float(np.sqrt((st * st).sum()))
-            if nrm > 1e-3:
-                # segment search (``_segment_search``): rotations within atan(2h / L0) of the last one, steps of
-                # half a pixel at the child, about the frame-0 direction of the segment (``_ang0``, by its child)
-                span, step = math.atan2(2 * h, ln), 0.5 / ln
-                self._strip[(p, c)] = (uu, vv, st / nrm, np.arange(-span, span + step / 2, step),
-                                       self._ang0[c], step, *map(float, q[c] - q[p]))
-        # each node's articulated-template inputs (``_band_stack``)
-        self._stacks = [self._node_stack(i) for i in range(len(q))]
-        return True
-
-    @staticmethod
-    def _branch_colour_mask(rgb: np.ndarray, q: np.ndarray, graph: BranchGraph) -> np.ndarray:
-        """Frame-0 image (float32, 1/0): pixels whose chromaticity is that of the branch itself.
-
-        Leaves hanging in front of the stem and the background at the band's edges move independently of
-        the node; inside a template they make it fail (a fluttering leaf) or pin it (static background). The
-        branch's own colour is measured on its axis (every segment sampled at 1-px steps): median and robust
-        spread (1.4826 MAD, floored at 0.01 -- sensor noise on a mid-grey pixel) of the chromaticity
-        (r, g) = (R, G) / (R + G + B). Chromaticity, not colour, so that dark bark (knots, shading) counts as
-        branch. A pixel is kept when its normalised distance is below 3.41 = sqrt(chi2_2(0.997)), the
-        two-dimensional 3-sigma bound: 99.7 % of branch pixels are kept if the spread is Gaussian.
-        """
-        from . import match_kernels  # the per-pixel float32 arithmetic of numpy, compiled (10x faster, same values)
-
-        chroma = match_kernels.chromaticity(rgb)
-        samples = []
-        for p, c in graph.edges:
-            d = q[c] - q[p]
-            ln = float(np.hypot(*d))
-            t = np.linspace(0.0, 1.0, max(2, int(ln) + 1), dtype=np.float32)
-            mx = (q[p][0] + t * d[0]).reshape(1, -1).astype(np.float32)
-            my = (q[p][1] + t * d[1]).reshape(1, -1).astype(np.float32)
-            samples.append(cv2.remap(chroma, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[0])
-        smp = np.concatenate(samples, axis=0)
-        med = np.median(smp, axis=0)
-        spread = np.maximum(1.4826 * np.median(np.abs(smp - med), axis=0), 0.01)
-        return match_kernels.chroma_mask(chroma, med, spread, 3.41)
-
-    def _anchor_image(self, gray: np.ndarray) -> np.ndarray:
-        """The image every measurement against frame 0 is made in (see ``LKConfig.anchor_highpass_px``)."""
-        s = self.config.anchor_highpass_px
-        if s <= 0:
-            return gray
-        lg = np.log(gray.astype(np.float32) + 8.0)
-        return (lg - cv2.GaussianBlur(lg, (0, 0), s)) * np.float32(100.0)
-
-    def _segment_search(self, gray, xp, p, c, q0, phi_prev):
-        """Rotation of segment (p, c) found by matching its frame-0 strip around the parent at ``xp``.
-
-        The segment is a rigid body hinged at its parent: the child can only be on a circle of radius L0
-        around the parent, so a 1-D search over the segment's rotation (within atan(2h / L0) of its previous
-        rotation: the child moves at most ~2 patch radii relative to the parent per frame, the same bound as
-        the re-acquisition window; steps of half a pixel at the child) finds it with the whole segment's
-        texture, and cannot slide along a self-similar stem the way a 2-D search around the node can.
-        Returns (predicted child position, rotation, zero-mean NCC) or None.
-        """
-        item = self._strip.get((p, c))
-        if item is None:
-            return None
-        uu, vv, st0, offs, a0, step, v0x, v0y = item
-        x, y, phi, ncc = self._kernels.segment_search(gray, float(xp[0]), float(xp[1]), phi_prev, offs, a0, step,
-                                                      v0x, v0y, uu, vv, st0, gray.dtype == np.uint8)
-        return (x, y), phi, ncc
-
-    def _rotation(self, i: int, est: np.ndarray, vis: np.ndarray, q0: np.ndarray, last: np.ndarray,
-                  now: np.ndarray, done: np.ndarray) -> float:
-        """Rotation (radians, image frame) of node i's neighbourhood since frame 0.
-
-        Measured from node i and its baseline partner when both are visible; otherwise borrowed from the
-        parent's rotation in this frame (a lost node turns with the branch it hangs on), else the last value.
-        """
-        j = self.partner[i]
-        if j < 0:
-            return 0.0
-        if vis[i] and vis[j]:
-            a = est[j] - est[i]
-            b = q0[j] - q0[i]
-            last[i] = math.atan2(a[1], a[0]) - math.atan2(b[1], b[0])
-            return float(last[i])
-        p = self.parent[i]
-        if p >= 0 and done[p]:
-            return float(now[p])
-        return float(last[i])
-
-    # -- measurement against frame 0 ------------------------------------------------------------
-    def _node_stack(self, i):
-        """Node i's articulated-template inputs for :func:`~rce_gtsam.track.match_kernels.articulated_template`
-        but the rotations: ``(bands (S, n, n), background segment, smallest band weight sum)``, S = its incident
-        segments, the parent's first (``self._inc[i]``), or None for a node on no segment.
-
-        The template is *articulated*: each incident segment's band of the frame-0 image is rotated about the node
-        by that segment's own rotation (a node is a joint: the parent segment and the child segments turn by
-        different angles, and one rotation for the whole patch biases the match in proportion to the bend).
-        """
-        keys = self._inc[i]
-        if not keys:
-            return None
-        bg = max((n for n, (_, sc) in enumerate(keys) if sc == i), default=0)
-        # fewer pixels than a 2-px-wide strip: use the full patch -- except at a tip, whose band is short
-        # by construction (one segment, the thinnest stem), down to _TIP_MIN_BAND_PX
-        min_band = _TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * self.h + 1)
-        return np.stack([self._seg_band[(sp, sc, i)] for sp, sc in keys]), bg, float(min_band)
-
-    def _anchor(self, gray0, gray, i, p0, q, theta, r, thetas=None):
-        """Locate node i (frame-0 position p0) near q in ``gray`` within r px, with its frame-0 appearance posed
-        for this frame: articulated (see ``_node_stack``; ``thetas``: the rotations of its incident segments since
-        frame 0, radians, in ``self._inc[i]``'s order) with branch bands, else the whole frame-0 patch rotated by
-        ``theta``.
-
-        Returns (xy, ncc, fb, sigma, second-peak ncc, template weight sum, second-peak xy) or None.
-        """
-        h = self.h
-        k = 2 * (h + r) + 1
-        # the frame-0 crop is only searched by the backward LK, which starts at its centre: a margin of
-        # ``_rematch_radius`` px around the template suffices, whatever the search radius r in this frame
-        margin = self._margin
-        px, py = float(p0[0]), float(p0[1])
-        qx, qy = float(q[0]), float(q[1])
-        cur = cv2.getRectSubPix(gray, (k, k), (qx, qy))
-        stack = self._stacks[i] if self._band is not None and thetas else None
-        if stack is not None:
-            ok, x, y, score, fb, s_lk, second, x2, y2, has2, wsum = self._kernels.match_articulated(
-                gray0, px, py, np.array(thetas), *stack, h, margin, gray0.dtype == np.uint8, cur, r, qx, qy)
-            if not ok:
-                return None
-            return (x, y), score, fb, s_lk, second, wsum, ((x2, y2) if has2 else None)
-        c = float(h + r)
-        cp = float(h + margin)
-        kp = 2 * (h + margin) + 1
-        prev = cv2.warpAffine(gray0, _rotation_about(px, py, theta, cp - px, cp - py), (kp, kp),
-                              flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
-        tmpl = np.ascontiguousarray(prev[margin:margin + 2 * h + 1, margin:margin + 2 * h + 1])
-        wsum = float(tmpl.size)
-        m = self._kernels.match_node(cur.astype(np.float32), tmpl, np.ones_like(tmpl), prev, r, h, cp)
-        if not m[0]:
-            return None
-        return ((qx + (m[1] - c), qy + (m[2] - c)), m[3], m[4], m[5], m[6], wsum,
-                ((qx + (m[7] - c), qy + (m[8] - c)) if m[9] else None))
-
-    def _rematch_radius(self) -> int:
-        """Radius (px) of the refinement pass's re-match: max(2, h // 4) (the first pass is within a pixel)."""
-        return max(2, self.h // 4)
-
-    def _refine_node(self, gray0, gray, q0, i, est, vis, fb_max):
-        """Re-match of visible node i with segment rotations from ``est`` (this frame's matches; the nodes before
-        i in ``self.order`` already re-matched): ``(xy, sigma px)``, or None when the re-match fails (no match,
-        correlation below ``min_ncc`` or forward-backward error above ``fb_max``)."""
-        cfg = self.config
-        p = self.parent[i]
-        ang0 = self._ang0
-        tp = _turn(est[p], est[i], ang0[i]) if p >= 0 else 0.0
-        thetas = [tp] if p >= 0 else []
-        for ch in self.children[i]:
-            thetas.append(_turn(est[i], est[ch], ang0[ch]) if vis[ch] else tp)
-        m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, self._margin, thetas)
-        if m is not None and m[1] >= cfg.min_ncc and m[2] <= fb_max:
-            xy, _, fb, s_lk = m[:4]
-            return xy, math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
-        return None
-
-    def _keep_recent(self, gray, est, sig, anchored, recent) -> None:
-        """Store, for every node anchored to its frame-0 template in this frame, the (2(h + margin) + 1)^2 crop of
-        ``gray`` centred on its position, the position and its sigma (``recent``, in place)."""
-        kp = 2 * (self.h + self._margin) + 1
-        for i in np.flatnonzero(anchored):
-            x, y = float(est[i, 0]), float(est[i, 1])
-            recent[i] = (cv2.getRectSubPix(gray, (kp, kp), (x, y)).astype(np.float32), (x, y), float(sig[i]))
-
-    def _match_recent(self, gray, rec, pred, r, fb_max, i, est, vis):
-        """Match node i's last frame-0-anchored appearance ``rec`` (see ``_keep_recent``) within r px of ``pred``
-        in ``gray``: the same correlation search, Lucas-Kanade refinement and forward-backward check as a frame-0
-        match, on the whole patch. Returns (xy, sigma px) when it passes ``min_ncc``, the forward-backward limit,
-        the distinctness test of a re-acquisition (``distinct_sigmas``) and the segment-length check, else None."""
-        cfg, h, margin = self.config, self.h, self._margin
-        prev = rec[0]
-        tmpl = np.ascontiguousarray(prev[margin:margin + 2 * h + 1, margin:margin + 2 * h + 1])
-        k = 2 * (h + r) + 1
-        qx, qy = float(pred[0]), float(pred[1])
-        cur = cv2.getRectSubPix(gray, (k, k), (qx, qy)).astype(np.float32)
-        m = self._kernels.match_node(cur, tmpl, np.ones_like(tmpl), prev, r, h, float(h + margin))
-        if not m[0] or m[3] < cfg.min_ncc or m[4] > fb_max:
-            return None
-        if m[9] and m[6] > m[3] - cfg.distinct_sigmas / math.sqrt(tmpl.size):
-            return None
-        c = float(h + r)
-        xy = np.array([qx + (m[1] - c), qy + (m[2] - c)])
-        if not self._length_ok(i, xy, est, vis):
-            return None
-        return xy, math.sqrt(m[5] ** 2 + (m[4] / 2) ** 2)
-
-    def _length_ok(self, i: int, xy, est, vis) -> bool:
-        """Whether ``xy`` for node i keeps the segment to its parent (when the parent is visible) within the
-        stretch limits of ``LKConfig`` (``max_stretch``, ``min_length_fraction``, ``length_tol_px``)."""
-        p, cfg = self.parent[i], self.config
-        if p < 0 or not vis[p]:
-            return True
-        d = math.hypot(xy[0] - est[p, 0], xy[1] - est[p, 1])
-        l0 = self.rest_len[i]
-        return (cfg.min_length_fraction * l0 - cfg.length_tol_px <= d
-                <= (1 + cfg.max_stretch) * l0 + cfg.length_tol_px)
-
-    def _refine(self, gray0, gray, q0, est, vis, fb_max, first_done=None):
-        """Second pass: re-match every visible node with segment rotations from this frame's matches.
-
-        In the first pass a node's articulated template is rotated with angles measured partly from
-        frame-to-frame predictions, which lag the true motion (the pyramidal LK window contains static
-        background). Matches are far more accurate, so the rotations are recomputed from them and each node
-        is matched again within a small radius (max(2, h // 4) px: the first pass is already within a pixel).
-
-        ``est``/``vis``: the first pass's (P, 2) positions and (P,) visibility, only read. ``first_done(k)``
-        (threaded, the first pass still running) returns once the first pass has finished the first k nodes of
-        ``self.order``. Node i is re-matched once the first pass has finished it, its parent and its children;
-        it reads the re-matched position of the nodes before it in ``self.order`` and the first pass's of the
-        others: what a pass run after the whole first pass reads. Returns ``{node: (xy, sigma px) or None}``
-        for the visible nodes (None: the re-match failed; see ``_apply_refine``).
-        """
-        cur = est.copy()
-        out = {}
-        for k, i in enumerate(self.order):
-            reads = self._refine_reads[k]  # nodes the re-match of i reads that this pass has not reached yet
-            if first_done is not None:
-                first_done(self._refine_needs[k])
-                cur[reads] = est[reads]
-            if not vis[i]:
-                continue
-            r = out[i] = self._refine_node(gray0, gray, q0, i, cur, vis, fb_max)
-            if r is not None:
-                cur[i] = r[0]
-        return out
-
-    def _apply_refine(self, out, est, vis, sig, pred, counts, borrowed) -> None:
-        """Write the refinement pass's results ``out`` (see ``_refine``) into ``est``, ``vis`` and ``sig``.
-
-        With ``LKConfig.refine_consistency``, a node found in the wide window in this frame (``borrowed``: no
-        frame-to-frame or segment prediction, so its first-pass template was posed with the rotation borrowed
-        from its parent, not measured) whose re-match failed (the template posed as the match itself implies
-        does not fit there) is marked invisible at ``pred`` (its first-pass prediction).
-        """
-        rejected = []
-        for i in self.order:
-            r = out.get(i, False)
-            if r is False:
-                continue
-            if r is not None:
-                est[i], sig[i] = r
-            elif self.config.refine_consistency and borrowed[i]:
-                rejected.append(i)
-        for i in rejected:  # after the pass: a child's re-match is posed from its parent's match, not moved
-            vis[i] = False
-            est[i] = pred[i]
-            sig[i] = float(self.h)
-            counts["rejected_refine"] += 1
-
-    # -- main loop ------------------------------------------------------------------------------
     def track(self, source: FrameSource, query_points, graph: BranchGraph | None = None,
               max_frames: int | None = None, progress: Callable[[int], object] | None = None,
               on_frame: Callable[[int, np.ndarray, np.ndarray], object] | None = None) -> TrackResult:
@@ -830,7 +287,6 @@ class LKTracker:
         from . import match_kernels  # numba: imported (and compiled, once per machine) only when tracking
         self._kernels = match_kernels
         h, n = self.h, len(q0)
-        ang0 = self._ang0
         fb_max = max(cfg.min_fb_px, cfg.max_fb_fraction * h)
         lk_params = dict(winSize=(2 * h + 1, 2 * h + 1), maxLevel=cfg.pyr_levels, criteria=_LK_CRITERIA)
         xs, vis_all, sig_all, how_all = [], [], [], []
@@ -902,143 +358,15 @@ class LKTracker:
                     if self._band is not None and cfg.refine_pass:
                         refine = True if pool is None else pool.submit(self._refine, gray0, ga, q0, new_est,
                                                                        new_vis, fb_max, first.wait_for)
-                    for i in self.order:
-                        theta = self._rotation(i, new_est, cur_vis, q0, theta_last, theta_now, done)
-                        theta_now[i] = theta
-                        p = self.parent[i]
-                        seg = None
-                        if p >= 0 and new_vis[p] and self._band is not None:
-                            # a node lost in the last frame has not been measured while the whole branch kept
-                            # swinging: its segment turned with the parent's (the bend changes slowly, the
-                            # sway does not), so search around the parent's rotation plus the last bend
-                            phi_prev = seg_rot[i] if prev_vis[i] else seg_rot[p] + bend_rot[i]
-                            seg = self._segment_search(ga, new_est[p], p, i, q0, phi_prev)
-                        if seg is not None and seg[2] >= cfg.min_ncc:
-                            pred, r = seg[0], h
-                            counts["predicted_from_segment"] += 1
-                        elif f2f_ok[i] and prev_vis[i]:
-                            pred, r = f2f[i], h
-                        elif p >= 0:
-                            ct, sn = math.cos(theta), math.sin(theta)
-                            v0 = q0[i] - q0[p]
-                            pred = new_est[p] + np.array([ct * v0[0] - sn * v0[1], sn * v0[0] + ct * v0[1]])
-                            r = 2 * h
-                            counts["predicted_from_graph"] += 1
-                        else:
-                            pred, r = (f2f[i] if f2f_ok[i] else prev_est[i]), 2 * h
-                        thetas = None  # rotations of the segments at node i (``self._inc[i]``)
-                        if self._band is not None:
-                            tp = _turn(new_est[p], pred, ang0[i]) if p >= 0 else theta
-                            thetas = [tp] if p >= 0 else []
-                            for ch in self.children[i]:
-                                # a child not followed: assume the branch continues straight
-                                thetas.append(_turn(pred, f2f[ch], ang0[ch]) if f2f_ok[ch] and prev_vis[ch] else tp)
-                        # a wide search (no frame-to-frame or segment prediction to trust) is a re-acquisition
-                        # whatever the previous frame said: the same ambiguity and geometry checks apply
-                        reacquiring = not prev_vis[i] or r > h or held[i] > 0
-                        preds[i], wide[i] = pred, r > h
-                        m = self._anchor(gray0, ga, i, q0[i], pred, theta, r, thetas)
-                        ok = m is not None
-                        if not ok:
-                            counts["lost_match"] += 1
-                        else:
-                            xy, score, fb, s_lk, second, n_eff, xy2 = m
-                            ambiguous = second > score - cfg.distinct_sigmas / math.sqrt(n_eff)
-                            if score < cfg.min_ncc:
-                                ok = False
-                                counts["rejected_ncc"] += 1
-                            elif (cfg.distinct_reacquire and reacquiring and ambiguous
-                                  and not (cfg.segment_tiebreak and seg is not None and seg[2] >= cfg.min_segment_ncc
-                                           and xy2 is not None
-                                           and math.hypot(xy[0] - seg[0][0], xy[1] - seg[0][1]) <= h / 2
-                                           < math.hypot(xy2[0] - seg[0][0], xy2[1] - seg[0][1]))):
-                                # two indistinguishable peaks, unless the whole segment strip, hinged at the
-                                # visible parent, matched well (``min_segment_ncc``) and points at the best one
-                                # (within h/2) and not at the other: the strip's many pixels break the tie
-                                ok = False
-                                counts["rejected_ambiguous"] += 1
-                            elif (cfg.distinct_follow and ambiguous and xy2 is not None
-                                  and math.hypot(xy2[0] - pred[0], xy2[1] - pred[1])
-                                  < math.hypot(xy[0] - pred[0], xy[1] - pred[1])):
-                                # followed (not re-acquired), two indistinguishable peaks, and the prediction
-                                # points at the other one: which of the two the node is would be a guess
-                                ok = False
-                                counts["rejected_ambiguous"] += 1
-                            elif fb > fb_max:
-                                ok = False
-                                counts["rejected_fb"] += 1
-                            elif p >= 0 and reacquiring and not new_vis[p]:
-                                # re-acquiring while the parent is lost too: nothing checks the match's
-                                # geometry (a tip re-found next to a leaf edge 18 px off, then followed
-                                # to 67 px, on simulator seed 0); wait until the parent is seen again
-                                ok = False
-                                counts["rejected_unanchored"] += 1
-                            elif p >= 0 and new_vis[p]:
-                                d = math.hypot(xy[0] - new_est[p, 0], xy[1] - new_est[p, 1])
-                                l0 = self.rest_len[i]
-                                if d > (1 + cfg.max_stretch) * l0 + cfg.length_tol_px or d < cfg.min_length_fraction * l0 - cfg.length_tol_px:
-                                    ok = False
-                                    counts["rejected_length"] += 1
-                        if ok:
-                            new_est[i], new_vis[i] = xy, True
-                            how[i] = 0
-                            anchored_now[i] = score >= cfg.recent_min_ncc
-                            if p >= 0:
-                                seg_rot[i] = _turn(new_est[p], xy, ang0[i])
-                                if new_vis[p]:
-                                    bend_rot[i] = seg_rot[i] - seg_rot[p]
-                            sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
-                            counts["anchored"] += 1
-                            held[i] = 0
-                        elif ((cfg.segment_fallback or (cfg.tip_segment_fallback and i in self._tips))
-                              and seg is not None and seg[2] >= cfg.min_segment_ncc
-                              ):
-                            # the node's own patch failed (a leaf over the joint, a template spoiled by a leaf in
-                            # frame 0) but its whole segment matched well, hinged at a measured parent: the node is
-                            # where the rigid segment puts it. sigma: the half-pixel angular search step at the
-                            # child on top of the parent's own uncertainty.
-                            new_est[i], new_vis[i] = seg[0], True
-                            sig[i] = math.sqrt(sig[p] ** 2 + 0.5 ** 2)
-                            seg_rot[i] = seg[1]
-                            counts["from_segment"] += 1
-                            how[i] = 3
-                        elif (cfg.recent_template and recent[i] is not None and r <= h and i not in self._tips
-                              and (rm := self._match_recent(gray, recent[i], pred, r, fb_max, i, new_est, new_vis))
-                              is not None):
-                            # the frame-0 template does not fit, but the node's appearance in the last frame it was
-                            # anchored to frame 0 does: measured against that frame, so its error is that anchor's
-                            # plus this match's (no accumulation while the node stays off its frame-0 template)
-                            new_est[i], new_vis[i] = rm[0], True
-                            sig[i] = math.sqrt(recent[i][2] ** 2 + rm[1] ** 2 + cfg.fallback_sigma_px ** 2)
-                            if p >= 0:
-                                seg_rot[i] = _turn(new_est[p], rm[0], ang0[i])
-                            held[i] += 1  # off its frame-0 template: finding it there again is a re-acquisition
-                            counts["recent_template"] += 1
-                            how[i] = 1
-                        elif (cfg.hold and f2f_ok[i] and prev_vis[i] and (p < 0 or new_vis[p])
-                              and (s_hold := math.sqrt(max(sig_prev[i], cfg.fallback_sigma_px) ** 2 + (fb_f2f[i] / 2) ** 2
-                                                       + cfg.hold_step_px ** 2))
-                              <= hold_max and self._length_ok(i, f2f[i], new_est, new_vis)
-                              and (p < 0 or (seg is not None and seg[2] >= cfg.min_ncc
-                                             and math.hypot(*(f2f[i] - seg[0])) <= cfg.hold_agree_px))
-                              and _f2f_ncc(prev_gray, gray, prev_est[i], f2f[i], h) >= cfg.hold_min_ncc):
-                            # the frame-0 template does not fit here now (blur, a leaf, a pose far from frame 0),
-                            # but frame-to-frame LK followed the node from a measured (or held) position: keep it
-                            # visible with a sigma that grows as a random walk (``hold_step_px`` a frame plus the
-                            # round trip's own error) until the template fits again or sigma passes ``hold_max``
-                            new_est[i], new_vis[i], sig[i] = f2f[i], True, s_hold
-                            if p >= 0:
-                                seg_rot[i] = _turn(new_est[p], f2f[i], ang0[i])
-                            held[i] += 1
-                            counts["held"] += 1
-                            how[i] = 2
-                        else:
-                            new_est[i], new_vis[i], sig[i] = pred, False, float(r)
-                            counts["invisible"] += 1
-                        done[i] = True
-                        cur_vis[i] = new_vis[i]
-                        if first is not None:
-                            first.advance()
+                    fr = FirstPassFrame(
+                        gray0=gray0, ga=ga, gray=gray, prev_gray=prev_gray, q0=q0, f2f=f2f, f2f_ok=f2f_ok,
+                        fb_f2f=fb_f2f, prev_est=prev_est, prev_vis=prev_vis, new_est=new_est, new_vis=new_vis, sig=sig,
+                        done=done, cur_vis=cur_vis, theta_now=theta_now, preds=preds, wide=wide,
+                        anchored_now=anchored_now, how=how, theta_last=theta_last, seg_rot=seg_rot, bend_rot=bend_rot,
+                        held=held, recent=recent, counts=counts, sig_prev=sig_prev, fb_max=fb_max, hold_max=hold_max,
+                        first=first)
+                    for i in self.order:  # in graph order: a node's segment search hinges at its parent's new match
+                        self._first_pass_node(fr, i)
                     if refine is not None:
                         out = refine.result() if pool is not None else self._refine(gray0, ga, q0, new_est,
                                                                                      new_vis, fb_max)
