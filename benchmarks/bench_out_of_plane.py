@@ -1,9 +1,8 @@
 """Out-of-plane swing named from 2-D tracks: the length channel's test, the diagnosis' verdicts, the held-out error.
 
-Recordings: :func:`rce_gtsam.sim.foreshorten.foreshortened` (the 2-D simulator's true tracks raised out of the
-branch plane by chi = cumulative kappa z_o, the plane tilted, a pinhole projection, then the default tracker noise
-and the tracker-artifact family; ``share`` = the out-of-plane share of the wind, default 0.5, tilt 30 deg; share 0
-and tilt 0 = the 2-D simulator's planar recording) -> ``analyze(preset="default", n_boot=0)`` -> the diagnosis as
+Recordings: the 3-D simulator (``rce simulate --effect out_of_plane``: :mod:`rce_gtsam.sim.three_d`, ``share`` =
+the out-of-plane share of the wind, default 0.5, the branch plane tilted 30 deg, a pinhole projection, then the
+default tracker noise and the tracker-artifact family); planar = the 2-D simulator (no out_of_plane effect) -> ``analyze(preset="default", n_boot=0)`` -> the diagnosis as
 ``rce diagnose`` runs it (:func:`rce_gtsam.diagnosis.io.diagnose_result`).
 
 Printed:
@@ -34,16 +33,20 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
-def recording(seed: int, frames: int, share: float, tilt: float, family: str | None = None, scale: float = 1.0):
+def recording(seed: int, frames: int, share: float, tilt: float | None, family: str | None = None,
+              scale: float = 1.0):
+    """(simulation, 3-D truth or None, analysis): ``share`` 0 and ``tilt`` None: the planar 2-D simulator."""
     from rce_gtsam.pipeline import analyze
     from rce_gtsam.sim.artifacts import ArtifactConfig
-    from rce_gtsam.sim.foreshorten import foreshortened
-    from rce_gtsam.sim.simulate import SimulationConfig
+    from rce_gtsam.sim.simulate import SimulationConfig, simulate
+    from rce_gtsam.sim.three_d import Scene3D
 
     art = ArtifactConfig(families=(family,), scale=scale) if family else ArtifactConfig()
-    sim, truth = foreshortened(SimulationConfig(seed=seed, n_frames=frames, artifacts=art), share=share,
-                               tilt_deg=tilt)
-    return sim, truth, analyze(sim.tracks, sim.graph, preset="default", n_boot=0)
+    effects = ("out_of_plane",) if share > 0 else ()
+    scene = None if tilt is None else Scene3D(tilt_deg=tilt)
+    sim = simulate(SimulationConfig(seed=seed, n_frames=frames, artifacts=art, effects=effects,
+                                    effect_strength={"out_of_plane": share} if share > 0 else None, scene3d=scene))
+    return sim, sim.three_d, analyze(sim.tracks, sim.graph, preset="default", n_boot=0)
 
 
 def length_p(res) -> float:
@@ -63,9 +66,11 @@ def calibration(a) -> None:
     print(f"\n1. length test, p <= {ALPHA_OOP} (the first condition for naming out_of_plane); "
           f"{a.seeds} seeds x {a.frames} frames")
     cases = [("swing share 0.5, tilt 30", 0.5, 30.0, None, 1.0), ("planar tilted 30, no swing", 0.0, 30.0, None, 1.0)]
+    cases += [(f"swing share 0.5, tilt 30, {fam} 2x", 0.5, 30.0, fam, 2.0) for fam in ("slide", "gust_occlusion")
+              if fam in a.families]
     for fam in a.families:
         for k in ((1.0,) if fam == "none" else a.scales):
-            cases.append((f"planar, {fam}" + ("" if fam == "none" else f" {k:g}x"), 0.0, 0.0,
+            cases.append((f"planar, {fam}" + ("" if fam == "none" else f" {k:g}x"), 0.0, None,
                           None if fam == "none" else fam, k))
     for name, share, tilt, fam, k in cases:
         t = time.perf_counter()
@@ -80,7 +85,7 @@ def diagnosis(a) -> None:
 
     print(f"\n2. the diagnosis (rce diagnose's path); {a.diagnose_seeds} seeds x {a.frames} frames")
     for name, share, tilt in (("swing share 0.5, tilt 30", 0.5, 30.0), ("swing share 1.0, tilt 30", 1.0, 30.0),
-                              ("planar (2-D simulator)", 0.0, 0.0)):
+                              ("planar (2-D simulator)", 0.0, None)):
         t = time.perf_counter()
         named, imps, imps_named, verdicts = 0, [], [], {}
         lr_base, lr_ext, lr_img = [], [], []
@@ -95,7 +100,8 @@ def diagnosis(a) -> None:
                 imps_named.append(c.improvement_pct)
             row = {b.edge: i for i, b in enumerate(sim.graph.bends)}
             idx = [row[tuple(e)] for e in res.response.edges]
-            k3, ki = truth.kappa_3d[idx], truth.kappa_image[idx]
+            k3 = (truth.kappa_3d if truth is not None else np.array([sim.kappa_true[b.edge] for b in sim.graph.bends]))[idx]
+            ki = truth.kappa_image[idx] if truth is not None else k3
             lr_base.append(log_rmse(d.baseline.kappa, k3))
             lr_ext.append(log_rmse(c.fit.kappa, k3))
             lr_img.append(log_rmse(d.baseline.kappa, ki))

@@ -2,8 +2,8 @@
 
 The length channel's test (a course shared by node-disjoint segments beyond the excitation, phase-surrogate null),
 the effect's protocol (a zero term without data, a fitted term that predicts the bending with data), its own
-family (the other candidates' Bonferroni count unchanged), and the diagnosis on foreshortened recordings through
-the pipeline and ``rce diagnose``.
+family (the other candidates' Bonferroni count unchanged), and the diagnosis on the 3-D simulator's recordings
+through the pipeline and ``rce diagnose``.
 """
 
 from __future__ import annotations
@@ -21,7 +21,6 @@ from rce_gtsam.effects.out_of_plane import OutOfPlane
 from rce_gtsam.model import ResponseModel
 from rce_gtsam.pipeline import analyze
 from rce_gtsam.sim.artifacts import ArtifactConfig
-from rce_gtsam.sim.foreshorten import foreshortened, swing_excitation
 from rce_gtsam.sim.simulate import SimulationConfig, simulate
 
 SMALL = dict(n_nodes=12, n_frames=300)
@@ -36,31 +35,6 @@ def _chain_channel(rel: np.ndarray) -> LengthChannel:
     S, T = rel.shape
     return LengthChannel(rel=rel, length_px=np.full(S, 20.0), segments=[(i, i + 1) for i in range(S)],
                          root_distance=np.arange(1, S + 1) / S, frames=np.arange(T))
-
-
-def test_foreshortening_without_swing_or_tilt_is_the_2d_recording():
-    cfg = SimulationConfig(seed=3, **SMALL)
-    sim, truth = foreshortened(cfg, share=0.0, tilt_deg=0.0)
-    ref = simulate(cfg)
-    np.testing.assert_allclose(sim.true_xy, ref.true_xy, atol=1e-9)
-    np.testing.assert_allclose(sim.tracks.xy, ref.tracks.xy, atol=1e-9, equal_nan=True)
-    np.testing.assert_allclose(np.log(truth.kappa_image), np.log(truth.kappa_3d), atol=1e-6)
-
-
-def test_a_swing_stretches_segments_more_toward_the_tip():
-    sim, truth = foreshortened(SimulationConfig(seed=3, **SMALL), share=0.5, tilt_deg=30.0)
-    row = {n: i for i, n in enumerate(sim.graph.nodes)}
-    rel_sd = []
-    for p, c in sim.graph.edges:
-        L = np.linalg.norm(sim.true_xy[row[c]] - sim.true_xy[row[p]], axis=-1)
-        rel_sd.append(np.std(L / L[0]))
-    rel_sd = np.array(rel_sd)
-    assert rel_sd[0] < 1e-6  # the root segment has no joint below it: it stays in the plane
-    assert rel_sd[-3:].mean() > 3 * rel_sd[1:4].mean() > 0  # elevation accumulates toward the tip
-    # z_o = share (rho z + sqrt(1 - rho^2) z'): linear in share, z alone at rho = 1
-    cfg = SimulationConfig(seed=3, **SMALL)
-    np.testing.assert_allclose(swing_excitation(cfg, sim.z_true, 1.0, 0.5), 2 * truth.z_o, atol=1e-12)
-    np.testing.assert_allclose(swing_excitation(cfg, sim.z_true, 0.5, 1.0), 0.5 * sim.z_true, atol=1e-12)
 
 
 def test_length_test_tells_a_shared_course_from_node_wise_errors():
@@ -123,7 +97,8 @@ def test_with_lengths_the_term_predicts_the_bending_and_keeps_the_others_alpha()
 
 @pytest.fixture(scope="module")
 def swinging():
-    sim, truth = foreshortened(SimulationConfig(seed=1, **SMALL), share=0.5, tilt_deg=30.0)
+    """The 3-D simulator at the default out-of-plane strength (share 0.5, branch plane tilted 30 deg)."""
+    sim = simulate(SimulationConfig(seed=1, effects=("out_of_plane",), n_nodes=14, n_frames=450))
     return sim, analyze(sim.tracks, sim.graph, preset="default", n_boot=0)
 
 
@@ -131,8 +106,7 @@ def test_pipeline_names_a_swing_and_not_a_planar_branch_with_slide(swinging):
     _, res = swinging
     d = diagnose_result(res, effects="out_of_plane,offset")
     assert d.verdict == "out_of_plane" and d.candidate("out_of_plane").extra["p"] <= ALPHA_OOP
-    planar, _ = foreshortened(SimulationConfig(seed=1, artifacts=ArtifactConfig(("slide",), 2.0), **SMALL),
-                              share=0.0, tilt_deg=0.0)
+    planar = simulate(SimulationConfig(seed=1, artifacts=ArtifactConfig(("slide",), 2.0), **SMALL))
     dp = diagnose_result(analyze(planar.tracks, planar.graph, preset="default", n_boot=0),
                          effects="out_of_plane,offset")
     assert dp.verdict != "out_of_plane" and dp.candidate("out_of_plane").extra["p"] > ALPHA_OOP
