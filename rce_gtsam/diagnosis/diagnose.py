@@ -95,6 +95,7 @@ from .heldout import fold_blocks, frame_loss, heldout_errors, paired_t
 from .heldout_null import heldout_gain_null_test
 from .maxt import sign_flip_max_t
 from .noise_floor import NoiseFloor
+from .own_family import choose_with_own_last, own_supported, own_test_significant
 from .plausibility import PlausibilityContext, implausibility
 from .tracker_signature import away_from_gaps, near_gap_share, tracker_text
 from .score_test import (effect_score_test, half_fits, is_significant, score_is_significant,
@@ -102,7 +103,7 @@ from .score_test import (effect_score_test, half_fits, is_significant, score_is_
 from .settings import BLOCK_LENGTH, FULL_ITER, N_FOLDS, CV_ITER, RESOLUTION
 from .statistics import ResidualContext
 from .sysid import ResidualAnalysis, residual_analysis
-from .verdict import (choose_verdict, earns_its_place, finding_of, support_a_richer_form,
+from .verdict import (earns_its_place, finding_of, support_a_richer_form,
                                 test_the_lowest_against_simpler)
 from ..model import ModelFit, ResponseModel, validate_inputs
 from ..model.row_sets import (edge_halves, edge_nodes_from_labels, node_disjoint_split,  # noqa: F401 (re-exported)
@@ -374,8 +375,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     # share moved the score tests' threshold from 0.005 to 0.0042 and lost borderline lags: dynamics 0.75x seed
     # 1, delay p = 0.0050). The nominal family-wise bound becomes (n_candidates / n_findings) alpha (6 % for six
     # candidates of five findings); measured on effect-free pipeline data: 0 of 40 verdicts (bench_diagnose)
-    # an effect judged by its own test at its own level (own_family: OutOfPlane's length channel) is no share of it
-    n_c = max(len({e.verdict_name for e in cands if not e.own_family}), 1)
+    n_c = max(len({e.verdict_name for e in cands if not e.own_family}), 1)  # own_family: its own alpha (own_family.py)
     t_crit = float(stats.t.ppf(1 - alpha / n_c, max(int(used.sum()) - 1, 1)))
     # an effect with a full-data score test has two tests, each at half its share of alpha (Bonferroni)
     t_crit_split = float(stats.t.ppf(1 - alpha / (2 * n_c), max(int(used.sum()) - 1, 1)))
@@ -447,10 +447,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                           "significant_by_fold_t": significant})
             significant = bool(null.p <= alpha or (shared_for_drift is not None and shared_for_drift <= p_crit_score)
                                or (pattern is not None and pattern.p <= alpha))
-        own = eff.own_family_test(base, seed=seed) if eff.own_family else None
-        if eff.own_family:  # its own family: its own test at its own level (the bend residuals' tests do not apply)
-            extra.update(own or {})
-            significant = bool(own is not None and own["p"] <= own["alpha"])
+        if eff.own_family:  # its own test at its own level (own_family.py)
+            significant = own_test_significant(eff, base, seed, extra)
         extra["significant"] = significant
         if starts:
             extra["start_cross_prediction_sse"] = starts["errors"]
@@ -462,8 +460,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         extra["implausible"] = list(reasons)
         supported = bool(significant and not reasons
                          and earns_its_place(rmse, b_rmse, daic, gain_share, resolution, calibrated))
-        if eff.own_family:  # named from its own channel: the bend model with it must not predict worse held out
-            supported = bool(significant and not reasons and gain_share > -resolution)
+        if eff.own_family:
+            supported = own_supported(significant, reasons, gain_share, resolution)
         results.append(CandidateResult(effect=eff.name, fit=full, heldout_rmse=rmse, fold_mse=mse, evidence=ev,
                                        improvement_pct=imp, delta_aic=daic, delta_bic=dbic, supported=supported,
                                        statistics=stats_all.get(eff.name, {}), extra=extra,
@@ -478,10 +476,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     if node_disjoint:
         results = support_a_richer_form(results, Y, W, s, halves, seed, b_rmse, resolution, p_crit_score)
         test_the_lowest_against_simpler(results, Y, W, s, halves, seed, t_crit, p_crit_score)
-    # an own-family effect (read from another channel) is the verdict only where no bend-residual candidate is
-    verdict_effect, parsimony = choose_verdict([c for c in results if not own_family(c)], t_crit, p_pair=p_crit_score)
-    if verdict_effect is None:
-        verdict_effect, parsimony = choose_verdict([c for c in results if own_family(c)], t_crit)
+    verdict_effect, parsimony = choose_with_own_last(results, t_crit, p_pair=p_crit_score)
     # the finding a verdict reports: another form of a library effect reports that effect (resonances: dynamics)
     named = None if verdict_effect is None else next(c for c in results if c.effect == verdict_effect)
     verdict = None if named is None else finding_of(named)
@@ -525,11 +520,6 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     object.__setattr__(diag, "explanation", explain(diag) + tracker_text(settings["residual_power_near_gaps"],
                                                                          labels))
     return diag
-
-
-def own_family(c: CandidateResult) -> bool:
-    """Whether candidate ``c``'s effect is judged by its own test (:attr:`~rce_gtsam.effects.Effect.own_family`)."""
-    return any(e.own_family for e in c.fit.model.effects if e.name == c.effect)
 
 
 def effective_sample(fit: ModelFit) -> dict:
