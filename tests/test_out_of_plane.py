@@ -124,3 +124,10 @@ def test_rce_diagnose_names_out_of_plane_end_to_end(swinging, tmp_path, capsys):
     c = d["candidates"][0]
     assert c["length_p"] <= ALPHA_OOP and len(c["length_loadings"]) == len(sim.graph.edges)
     assert "out_of_plane" in capsys.readouterr().out
+
+
+def test_fitting_it_by_name_is_refused_before_any_work(swinging):
+    from rce_gtsam.errors import InputError
+    sim, _ = swinging
+    with pytest.raises(InputError, match="out_of_plane reads more of the recording"):
+        analyze(sim.tracks, sim.graph, effects="out_of_plane")
