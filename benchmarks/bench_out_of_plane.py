@@ -110,7 +110,7 @@ def diagnosis(a) -> None:
               f"{np.mean(imps_named) if imps_named else float('nan'):+.2f} %, min "
               f"{np.min(imps_named) if imps_named else float('nan'):+.2f} %); kappa log-RMSE vs 3-D truth: rank-1 "
               f"{np.median(lr_base):.3f}, with the term {np.median(lr_ext):.3f}; rank-1 vs image-plane truth "
-              f"{np.median(lr_img):.3f} (medians; {time.perf_counter() - t:.0f} s)", flush=True)
+              f"{np.nanmedian(lr_img):.3f} (medians; {time.perf_counter() - t:.0f} s)", flush=True)
 
 
 def real(a) -> None:

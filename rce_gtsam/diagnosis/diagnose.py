@@ -461,7 +461,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         supported = bool(significant and not reasons
                          and earns_its_place(rmse, b_rmse, daic, gain_share, resolution, calibrated))
         if eff.own_family:
-            supported = own_supported(significant, reasons, gain_share, resolution)
+            supported = own_supported(significant, reasons)
         results.append(CandidateResult(effect=eff.name, fit=full, heldout_rmse=rmse, fold_mse=mse, evidence=ev,
                                        improvement_pct=imp, delta_aic=daic, delta_bic=dbic, supported=supported,
                                        statistics=stats_all.get(eff.name, {}), extra=extra,

@@ -5,10 +5,9 @@ An effect read from another channel than the bend residuals (OutOfPlane: the seg
 test at its own level (:meth:`~rce_gtsam.effects.Effect.own_family_test`): it takes no share of the diagnosis'
 alpha, so the other candidates' thresholds are what they were without it, and a diagnosis' nominal family-wise
 false-alarm rate is alpha + that level. Such a candidate is *significant* when its own test is, *supported* when
-besides the bend model with it predicts no worse held out (the held-out error rises by less than the diagnosis'
-resolution share of the bending variance: a term shrunk to nothing changes it by ~1e-5 deg, on which a fold t says
-anything), and it is the verdict only where no bend-residual candidate is supported (:func:`choose_with_own_last`):
-it names what the bend candidates leave, and changes none of their decisions.
+besides its fit is plausible (:func:`own_supported`: the held-out change is reported, not required), and it is the
+verdict only where no bend-residual candidate is supported (:func:`choose_with_own_last`): it names what the bend
+candidates leave, and changes none of their decisions.
 """
 
 from __future__ import annotations
@@ -24,10 +23,14 @@ def own_test_significant(eff, base, seed: int, extra: dict) -> bool:
     return bool(own is not None and own["p"] <= own["alpha"])
 
 
-def own_supported(significant: bool, reasons, gain_share: float, resolution: float) -> bool:
-    """Support of an own-family candidate: significant, plausible, and a held-out error that does not rise by the
-    resolution share of the bending variance or more."""
-    return bool(significant and not reasons and gain_share > -resolution)
+def own_supported(significant: bool, reasons) -> bool:
+    """Support of an own-family candidate: its own test significant and its fit plausible. The held-out change of
+    the bend model with its term is reported, not required: the finding is read from the other channel, and where
+    the term does not lower the held-out error the rank-1 kappa stays the one to report
+    (:func:`~rce_gtsam.kappa_report.kappa_after_verdict`). Measured on the 3-D simulator at the default swing (20
+    seeds, 450 frames): the length test held on 20/20, the term lowered the held-out RMSE by at most 0.3 % and
+    raised it by 0.1-0.5 % on 4 (requiring no rise named 15/20)."""
+    return bool(significant and not reasons)
 
 
 def is_own_family(c) -> bool:
