@@ -13,8 +13,8 @@ course common to segments that share no tracked node is no tracker error
 (:mod:`rce_gtsam.diagnosis.length_channel`). So w comes from the length channel, not from the bend angles, and
 the term is per-edge coefficients on known courses: held out, it predicts the bending only where the swing is
 real. The image angle's change with the elevation depends on the segment's heading, which moves with z, and a
-large swing acts at second order, so the term has three courses (measured on noise-free foreshortened 2-D
-simulations at the default strength, share 0.5 and tilt 30 deg: the true z_o alone took the rank-1 misfit of 4
+large swing acts at second order, so the term has three courses (measured on the 2-D simulator's noise-free tracks
+foreshortened by this model, a stand-in for the 3-D simulator, at share 0.5 and tilt 30 deg: the true z_o alone took the rank-1 misfit of 4
 seeds from 0.27/0.46/0.36/0.21 deg RMS to 0.22/0.29/0.35/0.07, with z_o z and z_o^2 to 0.14/0.21/0.32/0.05):
 
     y_e(t) = kappa_e z_t + g_e w_t + h_e w_t z_t + q_e w_t^2.
