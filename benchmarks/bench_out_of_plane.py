@@ -137,7 +137,7 @@ def real(a) -> None:
               f"{x.get('length_tip_growth', float('nan')):+.2f}; held-out RMSE change with the term "
               f"{c.improvement_pct:+.2f} %; verdict {d.verdict}, status {d.status}", flush=True)
         if b:
-            print(f"    budget before: total {b['total']:.2f}, rank-1 residual {b['rank1']:.2f}, noise floor "
+            print(f"    budget before: total {b['total']:.2f}, rank-1 explains {b['rank1']:.2f}, noise floor "
                   f"{b['noise_floor']:.2f}, unexplained {b['unexplained']:.2f} +- {b['unexplained_se']:.2f} "
                   f"({b['status']})")
         if after is not None:
