@@ -64,6 +64,15 @@ def kappa_after_verdict(result, diagnosis) -> KappaChoice:
                   "; the diagnosis found more than noise left over that no effect in the library explains, so "
                   "read kappa as the best one-excitation summary, not a full description") + ".")
         return KappaChoice(effect=None, model="rank-1", reason=why)
+    if not cand.heldout_rmse < diagnosis.baseline_heldout_rmse:
+        # named from a channel of its own (the segments' lengths), its term predicting the bending no better held
+        # out: the extended kappa would be the rank-1 kappa under another name (bend-residual candidates are never
+        # named without a lower held-out error)
+        why = (f"The diagnosis names {diagnosis.verdict}, but the model with it predicts the bending no better held "
+               f"out ({diagnosis.baseline_heldout_rmse:.3g} -> {cand.heldout_rmse:.3g} deg RMSE), so the rank-1 "
+               f"kappa is reported; it describes the bending as the camera sees it, and what {diagnosis.verdict} "
+               f"adds to it is not measured from these tracks.")
+        return KappaChoice(effect=None, model="rank-1", reason=why)
     fit = ExtendedFit(model_fit=cand.fit, baseline_rmse_deg=float(diagnosis.baseline.rmse))
     ci, _ = bootstrap_extended(fit, result.preset.compliance)
     name = cand.effect

@@ -39,6 +39,7 @@ from .heldout import fold_blocks
 from .information import effective_ic, effective_sample  # noqa: F401 (re-exported)
 from .misfit import resolve_effects, residual_statistics, worst_edges_and_frames  # noqa: F401 (re-exported)
 from .noise_floor import NoiseFloor
+from .own_family import own_test_significant
 from .result import CandidateResult, Diagnosis  # noqa: F401 (re-exported)
 from .settings import BLOCK_LENGTH, N_FOLDS, RESOLUTION
 from .sysid import residual_analysis
@@ -94,7 +95,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     fulls = full_fits(base_model, base, cands, Y, W, s, halves)
     h = heldout_setting(base_model, base, fulls, Y, W, s, blocks, halves, node_disjoint, block_length, seed)
     stats_all = residual_statistics(base, cands)
-    lv = decision.levels(alpha, len({e.verdict_name for e in cands}), h.n_used)
+    # an effect read from another channel (own_family: OutOfPlane's lengths) has its own level, outside the family
+    lv = decision.levels(alpha, len({e.verdict_name for e in cands if not e.own_family}), h.n_used)
     results = []
     for eff, model, full, starts in fulls:
         ev = candidate_evidence(h, eff, model, full, starts, lv)
@@ -103,6 +105,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         if decision.asks_drift_checks(ev.basis, sig, ev.score is not None):
             extra.update({**drift_checks(h, ev, lv), "significant_by_fold_t": sig})
             sig = decision.drift_rescued(ev.tests)
+        if eff.own_family:  # its own test at its own level (own_family.py)
+            sig = own_test_significant(eff, base, seed, extra)
         extra["significant"] = sig
         if starts:
             extra.update({"start_cross_prediction_sse": starts["errors"], "start_chosen": starts["chosen"],
@@ -111,7 +115,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         results.append(CandidateResult(
             effect=eff.name, fit=full, heldout_rmse=ev.heldout_rmse, fold_mse=ev.fold_mse, evidence=ev.evidence,
             improvement_pct=ev.improvement_pct, delta_aic=ev.delta_aic, delta_bic=ev.delta_bic,
-            supported=decision.supported(ev, sig, h.b_rmse, resolution), statistics=stats_all.get(eff.name, {}),
+            supported=(decision.own_supported(sig, ev.implausible) if eff.own_family
+                       else decision.supported(ev, sig, h.b_rmse, resolution)), statistics=stats_all.get(eff.name, {}),
             extra=extra, tests=ev.tests,
             ml_fit=(starts["lowest_in_sample_fit"] if starts and starts["lowest_in_sample"] != starts["chosen"]
                     else None)))

@@ -178,6 +178,13 @@ def explain(diag: Diagnosis) -> str:
              f"{diag.settings['n_folds']} folds, threshold {c.extra.get('threshold_t', float('nan')):.2f}{score}; "
              f"delta AIC {c.delta_aic:.0f} on the effective sample of "
              f"{diag.settings.get('n_eff', float('nan')):.0f} observations)."]
+    eff = next((e for e in c.fit.model.effects if e.name == c.effect), None)
+    own = eff is not None and eff.own_family  # named by its own test on another channel (own_family.py)
+    if own:
+        lines = [f"Missing effect: {named}, named by its own test on a channel besides the bend angles (p = "
+                 f"{c.extra.get('p', float('nan')):.2g} against its own level {c.extra.get('alpha', float('nan')):.2g}); "
+                 f"the model with it predicts the bending held out at {c.heldout_rmse:.3f} against {base:.3f} deg "
+                 f"RMSE ({c.improvement_pct:+.1f}%)."]
     par = diag.settings.get("parsimony") or {}
     enc = par.get("encompassing_p") or {}
     thr = diag.settings.get("encompassing_threshold_p", float("nan"))
@@ -191,11 +198,10 @@ def explain(diag: Diagnosis) -> str:
                      + ("" if osp is None else f", full-data score test p = {osp:.2g}")
                      + f"): {c.effect} predicts what {form_of} leaves in the residuals "
                      f"({form_p_text(c, form_of, thr)}).")
-    eff = next((e for e in c.fit.model.effects if e.name == c.effect), None)
     if eff is not None:
         lines.append(eff.explain(c.fit.effect_summary().get(c.effect, {}), c.statistics))
-        lines.append(f"What it means: {eff.physics} Fit the model with {type(eff).__name__}() and read kappa "
-                     "from the extended fit.")
+        lines.append(f"What it means: {eff.physics}" + ("" if own else f" Fit the model with {type(eff).__name__}() "
+                                                       "and read kappa from the extended fit."))
     lead = par.get("leading", par.get("lowest_heldout"))
     def leads(cand) -> str:
         return (f"has the lowest held-out RMSE ({cand.heldout_rmse:.3f} deg)"
@@ -251,7 +257,7 @@ def explain(diag: Diagnosis) -> str:
     if diag.budget is not None:
         lines.append(f"The variance budget is scored after adding {c.effect}: "
                      f"{remainder_text(diag.budget, c.effect).split(': ', 1)[1]}. That is about the rest, not "
-                     f"about {c.effect}, which the held-out test above names.")
+                     f"about {c.effect}, which {'its own' if own else 'the held-out'} test above names.")
     return " ".join(lines)
 
 

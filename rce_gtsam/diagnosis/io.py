@@ -68,8 +68,11 @@ def diagnose_inputs(result, effects=None, seed: int = 0, n_folds: int | None = N
     names = parse_effect_names(effects, source="effects")
     resp, cfg = result.response, result.preset.compliance
     kw = {} if n_folds is None else {"n_folds": int(n_folds)}
+    from ..effects import CANDIDATES
     return dict(Y=resp.Y, weights=resp.weights if cfg.weighted else None, root_distance=resp.root_distance,
-                effects=list(names) if names is not None else None, seed=int(seed),
+                # each candidate as it reads this recording (Effect.for_analysis: the lengths, for one)
+                effects=[CANDIDATES[n].for_analysis(result) for n in (effect_names() if names is None else names)],
+                seed=int(seed),
                 block_length=cfg.block_length, config=cfg,
                 edge_labels=resp.edge_labels, frames=resp.frames,
                 edge_nodes=result.bending.nodes_of(resp.bend_rows),

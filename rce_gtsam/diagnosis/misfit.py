@@ -22,7 +22,7 @@ def resolve_effects(effects, n_edges: int) -> list:
     if effects is None:
         effects = list(effects_mod.names())
     out = [effects_mod.make(e) if isinstance(e, str) else e for e in effects]
-    return [e for e in out if n_edges >= e.min_rows]
+    return [e for e in out if n_edges >= e.min_rows and e.available]  # available: has what it reads
 
 
 def residual_statistics(fit: ModelFit, effects=None) -> dict[str, dict]:

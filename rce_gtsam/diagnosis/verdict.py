@@ -150,3 +150,17 @@ def choose_verdict(results: list, t_crit: float, same_kind: bool = False,
     if form is not None:
         return form.effect, {**out, "preferred_simpler": form.effect, "richer_form_of": pick.effect}
     return pick.effect, {**out, "preferred_simpler": pick.effect}
+
+
+def is_own_family(c) -> bool:
+    """Whether candidate ``c``'s effect is judged by its own test."""
+    return any(e.own_family for e in c.fit.model.effects if e.name == c.effect)
+
+
+def choose_with_own_last(results: list, t_crit: float, p_pair: float):
+    """:func:`~rce_gtsam.diagnosis.verdict.choose_verdict` among the bend-residual candidates; only where it names
+    none, among the own-family ones."""
+    verdict, parsimony = choose_verdict([c for c in results if not is_own_family(c)], t_crit, p_pair=p_pair)
+    if verdict is None:
+        verdict, parsimony = choose_verdict([c for c in results if is_own_family(c)], t_crit)
+    return verdict, parsimony

@@ -57,5 +57,10 @@ def make(name: str) -> Effect:
         raise ValueError(f"unknown effect {name!r}; known: {', '.join(CANDIDATES)}") from None
 
 
-__all__ = ["Effect", "Parameter", "Delay", "Dynamics", "Nonlinear", "Offset", "Resonances", "SecondMode", "CANDIDATES",
+# out-of-plane swing reads the segments' lengths besides the bends (its data come with the instance, and it is
+# judged by its own test at its own level): registered after the built-ins, so EFFECT_NAMES keeps the bend-only six
+from .out_of_plane import OutOfPlane  # noqa: E402
+register(OutOfPlane)
+
+__all__ = ["Effect", "OutOfPlane", "Parameter", "Delay", "Dynamics", "Nonlinear", "Offset", "Resonances", "SecondMode", "CANDIDATES",
            "EFFECT_NAMES", "finding", "make", "names", "register"]

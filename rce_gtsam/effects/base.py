@@ -90,10 +90,19 @@ class Effect:
     #: frequency at its top bound is a quasi-static joint).
     natural_limits: ClassVar[dict] = {}
     #: Named only where its held-out fold t AND its full-data score test are both significant (each at its share
-    #: of alpha), instead of either (:func:`~rce_gtsam.diagnosis.score_test.is_significant`). For an effect whose
+    #: of alpha), instead of either (:func:`~rce_gtsam.diagnosis.decision.is_significant`). For an effect whose
     #: signature the rank-1 model's excitation mostly absorbs, so that its oracle detects nothing and whatever one
     #: test alone finds has been a tracker's artifact (see :class:`~.nonlinear.Nonlinear`). Needs a score test.
     needs_both_tests: ClassVar[bool] = False
+    #: True: the diagnosis judges this effect by :meth:`own_family_test` at that test's own level, outside the
+    #: Bonferroni family the bend-residual tests share (an effect read from another channel, OutOfPlane's lengths)
+    own_family: ClassVar[bool] = False
+
+    @property
+    def available(self) -> bool:
+        """Whether the term has what it reads (default True): OutOfPlane without the recording's lengths has not,
+        and the diagnosis leaves such a term out of its candidates."""
+        return True
 
     @property
     def verdict_name(self) -> str:
@@ -239,6 +248,18 @@ class Effect:
         its range is checked for every effect already (:func:`~rce_gtsam.diagnosis.plausibility.implausibility`);
         an implausible fit is never named."""
         return []
+
+    @classmethod
+    def for_analysis(cls, result) -> "Effect":
+        """The term as the diagnosis of an analysis ``result`` (:class:`~rce_gtsam.pipeline.AnalysisResult`) tries
+        it: an effect that reads more of the recording than the bend matrix takes its data here (OutOfPlane: the
+        segments' lengths). Default: ``cls()``."""
+        return cls()
+
+    def own_family_test(self, fit, seed: int = 0) -> dict | None:
+        """For an :attr:`own_family` effect: {"p": p-value, "alpha": its level, ...statistics} of its own test on the
+        baseline ``fit``, or None (no test: never named). Default None."""
+        return None
 
     def explain(self, summary: dict, statistics: dict) -> str:
         """One or two sentences with the fitted numbers behind a verdict for this effect. ``summary``: the

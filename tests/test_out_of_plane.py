@@ -1,0 +1,133 @@
+"""The out_of_plane effect (issue #39, part 2): segment lengths name a swing out of the branch plane.
+
+The length channel's test (a course shared by node-disjoint segments beyond the excitation, phase-surrogate null),
+the effect's protocol (a zero term without data, a fitted term that predicts the bending with data), its own
+family (the other candidates' Bonferroni count unchanged), and the diagnosis on the 3-D simulator's recordings
+through the pipeline and ``rce diagnose``.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from rce_gtsam import effects
+from rce_gtsam.diagnosis.diagnose import diagnose
+from rce_gtsam.diagnosis.io import diagnose_result
+from rce_gtsam.diagnosis.length_channel import ALPHA_OOP, LengthChannel, out_of_plane_test, swing_course
+from rce_gtsam.effects.out_of_plane import OutOfPlane
+from rce_gtsam.model import ResponseModel
+from rce_gtsam.pipeline import analyze
+from rce_gtsam.sim.artifacts import ArtifactConfig
+from rce_gtsam.sim.simulate import SimulationConfig, simulate
+
+SMALL = dict(n_nodes=12, n_frames=300)
+
+
+def _smooth(rng, T, width=15):
+    x = np.convolve(rng.standard_normal(T + 4 * width), np.ones(width) / width, mode="same")[2 * width:-2 * width]
+    return x / x.std()
+
+
+def _chain_channel(rel: np.ndarray) -> LengthChannel:
+    S, T = rel.shape
+    return LengthChannel(rel=rel, length_px=np.full(S, 20.0), segments=[(i, i + 1) for i in range(S)],
+                         root_distance=np.arange(1, S + 1) / S, frames=np.arange(T))
+
+
+def test_length_test_tells_a_shared_course_from_node_wise_errors():
+    """Node errors that follow the excitation (slide: +1 on one segment, -1 on the next, a multiple of z) are
+    removed or stay within a set; a course common to every segment (a swing) is found."""
+    rng = np.random.default_rng(0)
+    S, T = 14, 400
+    z, w = _smooth(rng, T), _smooth(rng, T)
+    node_err = rng.standard_normal((S + 1, 1)) * 0.02 * z[None] + 0.01 * rng.standard_normal((S + 1, T))
+    nodewise = np.diff(node_err, axis=0)  # each segment: its child's error minus its parent's
+    null = out_of_plane_test(_chain_channel(nodewise), z, seed=0)
+    swing = out_of_plane_test(_chain_channel(nodewise + 0.004 * np.arange(1, S + 1)[:, None] * w[None]), z, seed=0)
+    assert null is not None and null.p > 0.05
+    assert swing.p <= ALPHA_OOP and swing.same_sign_share == 1.0 and swing.tip_growth > 0.5
+    # the course it estimates is the shared one
+    assert abs(np.corrcoef(swing_course(_chain_channel(nodewise + 0.004 * np.arange(1, S + 1)[:, None] * w[None]),
+                                        z), w)[0, 1]) > 0.9
+
+
+def test_without_lengths_the_term_is_zero_and_never_named():
+    rng = np.random.default_rng(1)
+    E, T = 8, 300
+    z = _smooth(rng, T)
+    kappa = np.exp(rng.normal(0, 0.4, E))
+    Y = kappa[:, None] * z[None] + 0.2 * rng.standard_normal((E, T))
+    eff = effects.make("out_of_plane")
+    assert isinstance(eff, OutOfPlane) and eff.own_family and eff.own_family_test(None) is None
+    assert not eff.available and eff.evidence(None) == {}
+    d = diagnose(Y, effects=["offset", eff], n_folds=8)
+    assert [c.effect for c in d.candidates] == ["offset"] and d.verdict != "out_of_plane"
+    base = ResponseModel().fit(Y)
+    ext = (ResponseModel() + eff).fit(Y)
+    np.testing.assert_allclose(ext.predict(), base.predict(), atol=1e-6)
+
+
+def test_with_lengths_the_term_predicts_the_bending_and_keeps_the_others_alpha():
+    """Synthetic: bends carry a swing course w with per-edge gains; the lengths carry w too. The term lowers the
+    held-out error and is supported; the bend-residual candidates' Bonferroni count is what it is without it, and
+    where one of them is supported too (here the free second excitation, which fits the same course from the bends)
+    it keeps the verdict: an own-family candidate names only what the bend candidates leave."""
+    rng = np.random.default_rng(2)
+    E, T = 12, 450
+    z, w = _smooth(rng, T), _smooth(rng, T)
+    kappa = np.exp(rng.normal(0, 0.4, E))
+    g = 0.6 * rng.standard_normal(E)
+    Y = kappa[:, None] * z[None] + g[:, None] * w[None] + 0.2 * rng.standard_normal((E, T))
+    rel = 0.004 * np.arange(1, E + 2)[:, None] * w[None] + 0.01 * rng.standard_normal((E + 1, T))
+    eff = OutOfPlane(_chain_channel(rel), z)
+    with_it = diagnose(Y, effects=["offset", "second_mode", eff], n_folds=8)
+    without = diagnose(Y, effects=["offset", "second_mode"], n_folds=8)
+    assert with_it.settings["n_findings"] == without.settings["n_findings"] == 2
+    assert with_it.settings["evidence_threshold_t"] == without.settings["evidence_threshold_t"]
+    c = with_it.candidate("out_of_plane")
+    assert c.extra["p"] <= ALPHA_OOP and c.extra["alpha"] == ALPHA_OOP
+    assert c.improvement_pct > 5 and c.supported
+    assert with_it.verdict == without.verdict == "second_mode"
+    alone = diagnose(Y, effects=["offset", eff], n_folds=8)
+    assert alone.verdict == "out_of_plane" and "length" in alone.explanation
+
+
+@pytest.fixture(scope="module")
+def swinging():
+    """The 3-D simulator at the default out-of-plane strength (share 0.5, branch plane tilted 30 deg)."""
+    sim = simulate(SimulationConfig(seed=1, effects=("out_of_plane",), n_nodes=14, n_frames=450))
+    return sim, analyze(sim.tracks, sim.graph, preset="default", n_boot=0)
+
+
+def test_pipeline_names_a_swing_and_not_a_planar_branch_with_slide(swinging):
+    _, res = swinging
+    d = diagnose_result(res, effects="out_of_plane,offset")
+    assert d.verdict == "out_of_plane" and d.candidate("out_of_plane").extra["p"] <= ALPHA_OOP
+    planar = simulate(SimulationConfig(seed=1, artifacts=ArtifactConfig(("slide",), 2.0), **SMALL))
+    dp = diagnose_result(analyze(planar.tracks, planar.graph, preset="default", n_boot=0),
+                         effects="out_of_plane,offset")
+    assert dp.verdict != "out_of_plane" and dp.candidate("out_of_plane").extra["p"] > ALPHA_OOP
+
+
+def test_rce_diagnose_names_out_of_plane_end_to_end(swinging, tmp_path, capsys):
+    from rce_gtsam.cli import main
+    sim, _ = swinging
+    sim.write(tmp_path / "rec")
+    js = tmp_path / "d.json"
+    assert main(["diagnose", str(tmp_path / "rec" / "tracks.csv"), str(tmp_path / "rec" / "graph.json"),
+                 "--effects", "out_of_plane", "--json", str(js)]) == 0
+    d = json.loads(js.read_text())
+    assert d["verdict"] == "out_of_plane" and d["status"] == "effect"
+    c = d["candidates"][0]
+    assert c["length_p"] <= ALPHA_OOP and len(c["length_loadings"]) == len(sim.graph.edges)
+    assert "out_of_plane" in capsys.readouterr().out
+
+
+def test_fitting_it_by_name_is_refused_before_any_work(swinging):
+    from rce_gtsam.errors import InputError
+    sim, _ = swinging
+    with pytest.raises(InputError, match="out_of_plane reads more of the recording"):
+        analyze(sim.tracks, sim.graph, effects="out_of_plane")
