@@ -24,7 +24,7 @@ class BatchOptions:
     preset: preset name for rows with an empty ``preset`` column. overrides: ``--set STAGE.FIELD=VALUE``
     items applied on top of every row's preset. seed: bootstrap and cross-validation seed (None: the
     preset's bootstrap seed, edge-split seed 0 — as ``rce analyze`` / ``rce diagnose``). n_boot: bootstrap
-    resamples (None: the preset's). effects: diagnosis candidates (None: all six). figures: write the
+    resamples (None: the preset's). effects: diagnosis candidates (None: every registered effect). figures: write the
     per-recording PNG figures. max_frames: track only the first N frames of a video. model: TAPIR ONNX
     export for video rows (None: the OpenCV tracker).
     """

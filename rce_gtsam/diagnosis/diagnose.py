@@ -56,7 +56,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
 
     Y: (E, T) bend response in degrees (NaN = missing/outlier); weights: (E, T) >= 0 or None;
     root_distance: (E,) normalised root distance of each row's child (default: row order);
-    effects: candidate names or :class:`~rce_gtsam.effects.Effect` instances (default: all six);
+    effects: candidate names or :class:`~rce_gtsam.effects.Effect` instances (default: every registered effect);
     n_folds: cross-validation blocks (default :data:`N_FOLDS`; reduced so that blocks are >= block_length frames);
     seed: RNG seed of the stratified edge split; block_length: frames, the bootstrap's block length,
     used as the CV buffer and the smallest test block; prior_strength, response: the core model's

@@ -100,7 +100,7 @@ def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = N
     """Diagnose the rank-1 model of an analysis: which physical effect does it miss?
 
     Runs :func:`rce_gtsam.diagnosis.diagnose.diagnose` on the analysis (:func:`diagnose_inputs`).
-    ``effects``: candidate names (``"a,b"`` or a sequence; default all six); ``seed``: seed of the stratified
+    ``effects``: candidate names (``"a,b"`` or a sequence; default every registered effect); ``seed``: seed of the stratified
     edge split; ``n_folds``: cross-validation blocks (default: diagnose's N_FOLDS, 16). Under a preset whose
     settings lie outside the domain the diagnosis is calibrated on (the ``paper`` preset:
     :mod:`rce_gtsam.diagnosis.domain`) it names no effect and its status reads ``"uncalibrated"``.
