@@ -131,3 +131,12 @@ def test_progress_bars_on_stderr_and_quiet_silences_them(chain, tmp_path):
     quiet = subprocess.run([*cmd, "--quiet", "--no-figures"], capture_output=True, text=True, env=env, check=True)
     assert quiet.stderr == "" and "kappa" in quiet.stdout
     assert (tmp_path / "a" / "figures" / "compliance.png").is_file()
+
+
+def test_the_candidates_help_lists_the_registered_effects():
+    """``--candidates``' help writes the default list out (importing the effects would slow ``--help``); it must
+    be the registry's, built-in effects in the order the diagnosis tries them."""
+    from rce_gtsam import effects
+    from rce_gtsam.cli.wording import DEFAULT_CANDIDATES
+
+    assert DEFAULT_CANDIDATES.split(",") == list(effects.names())

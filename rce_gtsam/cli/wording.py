@@ -50,19 +50,18 @@ def rce_invocation() -> list[str]:
     return [sys.executable, "-m", "rce_gtsam.cli"]
 
 
-def effects_names() -> tuple[str, ...]:
-    """The registered effects' names (the diagnosis' default candidates), in the order it tries them."""
-    from ..effects import names
-
-    return tuple(names())
+#: The built-in effects the diagnosis tries by default, as the help lists them (written out, not imported: the
+#: effects package takes a second to import and ``--help`` answers in well under that; a test keeps it equal to
+#: :func:`rce_gtsam.effects.names`).
+DEFAULT_CANDIDATES = "delay,dynamics,second_mode,offset,nonlinear,resonances,out_of_plane"
 
 
 def add_candidates_argument(p: argparse.ArgumentParser, command: str) -> None:
     """``--candidates A,B``: the effects the diagnosis tests (``--effects`` is the deprecated old name here;
     in ``rce analyze`` ``--effects`` adds terms to the fitted model)."""
     p.add_argument("--candidates", default=None, metavar="A,B",
-                   help="effects the diagnosis tests, comma-separated (default: every registered effect: "
-                        + ",".join(effects_names()) + ")")
+                   help="effects the diagnosis tests, comma-separated (default: every effect in the library: "
+                        + DEFAULT_CANDIDATES + ")")
     p.add_argument("--effects", default=None, dest="effects_deprecated", help=argparse.SUPPRESS)
     p.set_defaults(_command_name=command)
 
