@@ -158,7 +158,8 @@ class SimulationConfig:
             if v not in EFFECT_FORMS[k]:
                 raise InputError(src, f"effect_form[{k!r}] must be one of {', '.join(EFFECT_FORMS[k])}, got {v!r}")
         self.artifacts.validate()
-        (self.scene3d or Scene3D()).validate(self.image_size)
+        if self.scene3d is not None or "out_of_plane" in self.effects:  # a planar simulation has no camera to check
+            (self.scene3d or Scene3D()).validate(self.image_size)
         w, h = self.image_size
         if w < 64 or h < 64:
             raise InputError(src, f"image_size must be at least 64x64, got {self.image_size}")
