@@ -131,3 +131,16 @@ def test_fitting_it_by_name_is_refused_before_any_work(swinging):
     sim, _ = swinging
     with pytest.raises(InputError, match="out_of_plane reads more of the recording"):
         analyze(sim.tracks, sim.graph, effects="out_of_plane")
+
+
+def test_an_inconclusive_budget_quotes_the_length_test():
+    """Where the floor is only bounded because segments stretch, the explanation gives the length test's p rather
+    than calling out-of-plane motion untestable."""
+    from types import SimpleNamespace
+
+    from rce_gtsam.diagnosis.explain import out_of_plane_text
+
+    cand = SimpleNamespace(effect="out_of_plane", extra={"length_p": 0.046, "alpha": 0.01})
+    text = out_of_plane_text(SimpleNamespace(candidates=[cand]))
+    assert "p = 0.046 against its level 0.01" in text and "share no course" in text
+    assert "not tested here" in out_of_plane_text(SimpleNamespace(candidates=[]))

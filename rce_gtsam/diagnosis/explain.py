@@ -41,6 +41,19 @@ def significant_but_not_named(diag: Diagnosis) -> str:
             "the data show.")
 
 
+def out_of_plane_text(diag) -> str:
+    """What the segment-length test says about out-of-plane swing where the floor is bounded (the segments stretch),
+    and what would settle it."""
+    c = next((c for c in diag.candidates if c.effect == "out_of_plane" and "length_p" in c.extra), None)
+    if c is None:
+        return (" Out-of-plane swing is not tested here (no segment lengths); depth (a RealSense recording) or a "
+                "second camera view would settle it.")
+    p, a = c.extra["length_p"], c.extra.get("alpha", 0.01)
+    return (f" The segment lengths' test for out-of-plane swing gives p = {p:.2g} against its level {a:g}"
+            + (": the lengths share no course beyond tracking noise at that level" if p > a else "")
+            + "; depth (a RealSense recording) would measure the swing.")
+
+
 def both_tests_text(c) -> str:
     """Why a candidate of an effect that needs both of its tests (a saturation) was not named though one passed."""
     from ..effects import CANDIDATES
@@ -167,7 +180,7 @@ def explain(diag: Diagnosis) -> str:
                 "branch's motion by more than tracking noise could (out-of-plane swing, or a tracker sliding along "
                 f"the stem), so there the noise floor is only bounded: the unexplained part lies between "
                 f"{share(b.unexplained_range[0]):+.0f}% and {share(b.unexplained_range[1]):+.0f}% of the variance."
-                + closest + " Out-of-plane motion is outside this 2-D model; a second camera view would settle it.")
+                + closest + out_of_plane_text(diag))
     c = diag.verdict_candidate
     sp = c.extra.get("score_p")
     score = ("" if sp is None else f"; full-data score test p = {sp:.2g} against {c.extra['score_threshold_p']:.2g}")
