@@ -23,37 +23,8 @@ rank-1 misfit of the noise-free response / its RMS (how large the effect is befo
 Every case's pipeline output is cached (``--cache``, default /work/cache/beam: one pickle per condition, strength,
 seed, length) so the diagnosis can be re-run without the pipeline.
 
-Measured (2026-11-27, shared 2-core machine, single process, OMP_NUM_THREADS=1; 450 frames, 20 nodes, seeds 0-4,
-default tracker noise; the preset's 250 resamples for the CIs):
-
-    condition     x  right  oracle  klog  cover  floor ratio (range)  <=25%  size  verdicts
-    none          1   4/5      -    0.369  90%   0.84 (0.81-0.93)      5/5   0.000  none 4, nonlinear 1
-    modal         1   2/5     2/5   0.327  67%   0.78 (0.75-0.86)      4/5   0.156  none 2, dynamics 2, nonlinear 1
-    modal         2   0/5     4/5   0.322  51%   0.86 (0.78-0.96)      5/5   0.155  none 5
-    modal         3   0/5     4/5   0.463  33%   0.82 (0.81-0.94)      5/5   0.146  none 4, second_mode 1
-    gust_front    1   1/5     1/5   0.350  88%   0.89 (0.81-0.97)      5/5   0.094  none 4, delay 1
-    gust_front    2   3/5     3/5   0.374  79%   0.88 (0.85-0.96)      5/5   0.154  delay 3, none 2
-    gust_front    3   2/5     3/5   0.411  74%   0.91 (0.85-1.02)      5/5   0.188  none 3, delay 2
-    two_sources   1   0/5     1/5   0.362  92%   0.86 (0.81-0.92)      5/5   0.179  none 5
-    two_sources   2   0/5     1/5   0.378  87%   0.84 (0.81-0.91)      5/5   0.276  none 5
-    two_sources   3   0/5     2/5   0.422  76%   0.84 (0.81-0.88)      5/5   0.326  none 5
-    creep         1   0/5     0/5   0.372  90%   0.83 (0.82-0.93)      5/5   0.113  none 4, nonlinear 1
-    creep         2   0/5     1/5   0.377  87%   0.82 (0.80-0.91)      5/5   0.185  none 4, second_mode 1
-    creep         3   0/5     1/5   0.406  83%   0.83 (0.79-0.91)      5/5   0.261  none 4, second_mode 1
-    stiffening    1   0/5     0/5   0.443  83%   0.89 (0.85-0.98)      5/5   0.041  none 5
-    stiffening    2   0/5     0/5   0.467  82%   0.90 (0.86-1.01)      5/5   0.045  none 5
-    stiffening    3   0/5     0/5   0.490  82%   0.90 (0.86-1.01)      5/5   0.045  none 5
-
-Effect-free seeds 5-19 (same settings): 0/15 verdicts, klog 0.372, CI coverage 78 %, floor ratio 0.92 (0.74-0.98),
-14/15 within 25 %. Over the 20 effect-free seeds: 1 false verdict (nonlinear, seed 3: held-out +6.9 %, t 3.5),
-kappa log-RMSE median 0.37 (the branch simulator at the same length: 0.30-0.42 on seeds 0-1), CI coverage 81 %
-(nominal 95 %), noise floor within 25 % on 19/20.
-
-Read: at 450 frames the beam's effects are mostly below what even the oracle detects, except a mode in the wind
-band at x2-x3 (a 2-3 s period), where the oracle fires on 4/5 and the diagnosis on 0/5: the gap to look at.
-Stiffening stays near rank 1 whatever its strength (size 0.04, see :mod:`rce_gtsam.sim.beam`): no test of the
-residuals can see it, and it biases kappa (klog 0.44-0.49 against 0.37 effect-free). The noise floor reads low by
-10-20 % on every condition and within 25 % of the truth on 79/80 recordings.
+Measured: the ``beam_effect_free`` and ``beam_effects`` records in ``docs/validation/`` (``--record NAME`` writes
+one), shown on the docs' Validation page.
 
 Usage: OMP_NUM_THREADS=1 python benchmarks/bench_beam.py [--seeds 5] [--first-seed 0] [--frames 450]
        [--effects none,modal,gust_front,two_sources,creep,stiffening] [--strength-mult 1[,0.5,2]] [--boot N]
