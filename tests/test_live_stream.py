@@ -7,6 +7,7 @@ its file is read with `rerun.chunk.RrdReader`.
 
 from __future__ import annotations
 
+import os
 import signal
 import socket
 import subprocess
@@ -33,7 +34,8 @@ class Sink:
         from rce_gtsam.viewer import viewer_executable
         self.path, self.port = path, _free_port()
         self.proc = subprocess.Popen([viewer_executable(), "--bind", "127.0.0.1", "--port", str(self.port),
-                                      "--save", str(path)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                                      "--save", str(path)], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                     start_new_session=True)  # its own group: the wrapper's child dies with it
         t0 = time.monotonic()
         while True:
             try:
@@ -43,6 +45,13 @@ class Sink:
                 assert self.proc.poll() is None and time.monotonic() - t0 < 20, "the rerun gRPC sink did not start"
                 time.sleep(0.1)
 
+    def signal_group(self, sig) -> None:
+        """Send ``sig`` to the sink's process group (the rerun wrapper and the viewer binary it starts)."""
+        try:
+            os.killpg(self.proc.pid, sig)
+        except ProcessLookupError:
+            pass
+
     @property
     def address(self) -> str:
         return f"127.0.0.1:{self.port}"
@@ -51,11 +60,11 @@ class Sink:
         """Stop the server and return its chunks, in the order they arrived."""
         from rerun.chunk import RrdReader
         if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGINT)
+            self.signal_group(signal.SIGINT)
             try:
                 self.proc.wait(15)
             except subprocess.TimeoutExpired:
-                self.proc.kill()
+                self.signal_group(signal.SIGKILL)
         with warnings.catch_warnings():  # a streamed .rrd has no footer; RrdReader warns about that
             warnings.simplefilter("ignore")
             return list(RrdReader(str(self.path)).stream())
@@ -65,8 +74,8 @@ class Sink:
 def sink(tmp_path):
     s = Sink(tmp_path / "sink.rrd")
     yield s
+    s.signal_group(signal.SIGKILL)  # whatever of the group is still running (a test may have stopped the wrapper)
     if s.proc.poll() is None:
-        s.proc.kill()
         s.proc.wait(5)
 
 
