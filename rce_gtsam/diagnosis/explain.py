@@ -44,7 +44,8 @@ def significant_but_not_named(diag: Diagnosis) -> str:
 def out_of_plane_text(diag) -> str:
     """What the segment-length test says about out-of-plane swing where the floor is bounded (the segments stretch),
     and what would settle it."""
-    c = next((c for c in diag.candidates if c.effect == "out_of_plane" and "length_p" in c.extra), None)
+    # the candidate that read the segment lengths (its length test's p is in its extra), whatever its name
+    c = next((c for c in diag.candidates if "length_p" in c.extra), None)
     if c is None:
         return (" Out-of-plane swing is not tested here (no segment lengths); depth (a RealSense recording) or a "
                 "second camera view would settle it.")
