@@ -22,7 +22,8 @@ import numpy as np
 
 from ..camera import CameraIntrinsics
 from ..errors import InputError
-from .sources import REALSENSE_SUFFIXES, FrameSource, import_pyrealsense2
+from .sources import (REALSENSE_SUFFIXES, FrameSource, drain, import_pyrealsense2, open_playback,
+                      put_until_closed, rgb_pixels)
 
 
 @dataclass(frozen=True, eq=False)
@@ -106,13 +107,7 @@ class RealSenseDepthSource(FrameSource):
         rs = import_pyrealsense2()
         self._rs = rs
         self.path = str(path)
-        try:
-            self._ctx = rs.context()
-            dev = self._ctx.load_device(self.path)
-        except RuntimeError as exc:
-            raise InputError(path, f"librealsense cannot play this recording ({exc})") from None
-        self._playback = dev.as_playback()
-        self._playback.set_real_time(False)
+        self._ctx, dev, self._playback = open_playback(rs, path)
         found = {}
         for s in dev.query_sensors():
             for sp in s.get_stream_profiles():
@@ -143,38 +138,15 @@ class RealSenseDepthSource(FrameSource):
         self._closed = threading.Event()
         self._started = False
 
-    def _rgb(self, frame) -> np.ndarray:
-        import cv2
-
-        rs = self._rs
-        data = np.asanyarray(frame.get_data())
-        fmt = self._color_format
-        if fmt == rs.format.rgb8:
-            return np.array(data, copy=True)  # own the pixels: librealsense reuses its frame buffers
-        conv = {rs.format.bgr8: cv2.COLOR_BGR2RGB, rs.format.rgba8: cv2.COLOR_RGBA2RGB,
-                rs.format.bgra8: cv2.COLOR_BGRA2RGB}.get(fmt)
-        if conv is not None:
-            return cv2.cvtColor(data, conv)
-        if fmt == rs.format.yuyv:
-            return cv2.cvtColor(data.reshape(self.size[1], self.size[0], 2), cv2.COLOR_YUV2RGB_YUYV)
-        raise InputError(self.path, f"unsupported colour format {fmt}; expected rgb8, bgr8, rgba8, bgra8 or yuyv")
-
     def _on_frame(self, frame) -> None:
-        import queue
-
         try:
             is_depth = frame.get_profile().stream_type() == self._rs.stream.depth
             data = (np.asanyarray(frame.get_data()).astype(np.float32) * np.float32(self.depth_unit_mm) if is_depth
-                    else self._rgb(frame.as_video_frame()))
+                    else rgb_pixels(self._rs, frame.as_video_frame(), self._color_format, self.size, self.path))
             item = ("depth" if is_depth else "color", frame.get_frame_number(), frame.get_timestamp() / 1000.0, data)
         except Exception as exc:  # report in the reader thread, not librealsense's
             item = exc
-        while not self._closed.is_set():
-            try:
-                self._queue.put(item, timeout=0.1)
-                return
-            except queue.Full:
-                continue
+        put_until_closed(self._queue, item, self._closed)
 
     def _registered(self, depth_mm: np.ndarray) -> np.ndarray:
         if self.aligned_by == "registered":
@@ -227,17 +199,11 @@ class RealSenseDepthSource(FrameSource):
             i += 1
 
     def close(self) -> None:
-        import queue
-
         if self._closed.is_set():
             return
         self._closed.set()
         if self._started:
-            while True:  # unblock the callbacks, then stop the sensors
-                try:
-                    self._queue.get_nowait()
-                except queue.Empty:
-                    break
+            drain(self._queue)  # unblock the callbacks, then stop the sensors
             for step in (self._dsensor.stop, self._csensor.stop, self._dsensor.close, self._csensor.close):
                 try:
                     step()

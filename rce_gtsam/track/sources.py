@@ -216,6 +216,61 @@ def import_pyrealsense2():
     return rs
 
 
+def open_playback(rs, path: str | Path):
+    """(context, device, playback) of a RealSense recording, played back not in real time (set before streaming
+    starts, so no frame is dropped). :class:`InputError` naming ``path`` where librealsense cannot play it."""
+    try:
+        ctx = rs.context()
+        dev = ctx.load_device(str(path))
+    except RuntimeError as exc:
+        raise InputError(path, f"librealsense cannot play this recording ({exc}); note: librealsense >= 2.58 "
+                               "reads .bag and .db3, older versions only .bag") from None
+    playback = dev.as_playback()
+    playback.set_real_time(False)
+    return ctx, dev, playback
+
+
+def rgb_pixels(rs, frame, fmt, size: tuple[int, int], path) -> np.ndarray:
+    """(H, W, 3) uint8 RGB copy of a RealSense colour ``frame`` in format ``fmt`` (rgb8, bgr8, rgba8, bgra8 or
+    yuyv; ``size`` (W, H) px); :class:`InputError` naming ``path`` for any other format."""
+    import cv2
+
+    data = np.asanyarray(frame.get_data())
+    if fmt == rs.format.rgb8:
+        return np.array(data, copy=True)  # own the pixels: librealsense reuses its frame buffers
+    conv = {rs.format.bgr8: cv2.COLOR_BGR2RGB, rs.format.rgba8: cv2.COLOR_RGBA2RGB,
+            rs.format.bgra8: cv2.COLOR_BGRA2RGB}.get(fmt)
+    if conv is not None:
+        return cv2.cvtColor(data, conv)
+    if fmt == rs.format.yuyv:
+        return cv2.cvtColor(data.reshape(size[1], size[0], 2), cv2.COLOR_YUV2RGB_YUYV)
+    raise InputError(path, f"unsupported colour format {fmt}; expected rgb8, bgr8, rgba8, bgra8 or yuyv")
+
+
+def put_until_closed(q, item, closed) -> None:
+    """Put ``item`` into the bounded queue ``q`` from a librealsense callback, waiting while it is full (so the
+    non-real-time playback waits for the reader) until the ``closed`` event is set."""
+    import queue
+
+    while not closed.is_set():
+        try:
+            q.put(item, timeout=0.1)
+            return
+        except queue.Full:
+            continue
+
+
+def drain(q) -> None:
+    """Empty the queue ``q`` (unblocks a callback waiting in :func:`put_until_closed`)."""
+    import queue
+
+    while True:
+        try:
+            q.get_nowait()
+        except queue.Empty:
+            return
+
+
 class RealSenseSource(FrameSource):
     """The colour stream of a RealSense ``.bag``/``.db3`` recording, played back frame by frame.
 
@@ -241,14 +296,7 @@ class RealSenseSource(FrameSource):
         rs = import_pyrealsense2()
         self._rs = rs
         self.path = str(path)
-        try:
-            self._ctx = rs.context()
-            dev = self._ctx.load_device(self.path)
-        except RuntimeError as exc:
-            raise InputError(path, f"librealsense cannot play this recording ({exc}); note: librealsense >= 2.58 "
-                                   "reads .bag and .db3, older versions only .bag") from None
-        self._playback = dev.as_playback()
-        self._playback.set_real_time(False)
+        self._ctx, dev, self._playback = open_playback(rs, path)
         found = [(s, sp) for s in dev.query_sensors() for sp in s.get_stream_profiles()
                  if sp.stream_type() == rs.stream.color]
         if not found:
@@ -264,36 +312,13 @@ class RealSenseSource(FrameSource):
         self._started = False
 
     def _on_frame(self, frame) -> None:
-        import queue
-
         try:
-            item = (frame.get_timestamp() / 1000.0, self._to_rgb(frame.as_video_frame()))
+            vf = frame.as_video_frame()
+            item = (frame.get_timestamp() / 1000.0,
+                    rgb_pixels(self._rs, vf, vf.get_profile().format(), self.size, self.path))
         except Exception as exc:  # report in the reader thread, not librealsense's
             item = exc
-        while not self._closed.is_set():
-            try:
-                self._queue.put(item, timeout=0.1)
-                return
-            except queue.Full:
-                continue
-
-    def _to_rgb(self, frame) -> np.ndarray:
-        import cv2
-
-        rs = self._rs
-        data = np.asanyarray(frame.get_data())
-        fmt = frame.get_profile().format()
-        if fmt == rs.format.rgb8:
-            return np.array(data, copy=True)  # own the pixels: librealsense reuses its frame buffers
-        if fmt == rs.format.bgr8:
-            return cv2.cvtColor(data, cv2.COLOR_BGR2RGB)
-        if fmt == rs.format.rgba8:
-            return cv2.cvtColor(data, cv2.COLOR_RGBA2RGB)
-        if fmt == rs.format.bgra8:
-            return cv2.cvtColor(data, cv2.COLOR_BGRA2RGB)
-        if fmt == rs.format.yuyv:
-            return cv2.cvtColor(data.reshape(self.size[1], self.size[0], 2), cv2.COLOR_YUV2RGB_YUYV)
-        raise InputError(self.path, f"unsupported colour format {fmt}; expected rgb8, bgr8, rgba8, bgra8 or yuyv")
+        put_until_closed(self._queue, item, self._closed)
 
     def __iter__(self) -> Iterator[Frame]:
         import queue
@@ -327,17 +352,11 @@ class RealSenseSource(FrameSource):
             i += 1
 
     def close(self) -> None:
-        import queue
-
         if self._closed.is_set():
             return
         self._closed.set()
         if self._started:
-            while True:  # unblock the callback, then stop the sensor
-                try:
-                    self._queue.get_nowait()
-                except queue.Empty:
-                    break
+            drain(self._queue)  # unblock the callback, then stop the sensor
             for step in (self._sensor.stop, self._sensor.close):
                 try:
                     step()
