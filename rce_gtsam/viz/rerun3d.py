@@ -14,14 +14,13 @@ Entities (timeline ``frame``):
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from ..fileio import temp_file_beside
+from .rerun_log import write_rrd
 from .style import KAPPA_CMAP, cmap_rgb
 
 APP_ID = "rce_gtsam_3d"
@@ -86,20 +85,8 @@ def save_3d_recording(d3, path: str | Path, video=None) -> Path:
     """Write the 3-D recording to ``path`` (atomically) with a blueprint: 3-D view | depth image | bends."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = temp_file_beside(path, suffix=".rrd")
     blueprint = rrb.Blueprint(rrb.Horizontal(
         rrb.Spatial3DView(origin="world", name="3-D skeleton (kappa colours)"),
         rrb.Vertical(rrb.Spatial2DView(origin="depth", name="depth (mm)"),
                      rrb.TimeSeriesView(origin="bending3d", name="in-plane θ / out-of-plane ψ (deg)"))))
-    try:
-        rec = rr.RecordingStream(APP_ID)
-        rec.save(str(tmp), default_blueprint=blueprint)
-        log_3d(d3, rec, video=video)
-        rec.flush()
-        rec.disconnect()
-        del rec
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return write_rrd(path, blueprint, lambda rec: log_3d(d3, rec, video=video), app_id=APP_ID)

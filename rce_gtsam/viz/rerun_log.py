@@ -226,13 +226,24 @@ def save_recording(result, path: str | Path, video_path: str | Path | None = Non
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     view = _as_view(result)
-    tmp = temp_file_beside(path, suffix=".rrd")
-    try:
-        rec = rr.RecordingStream(APP_ID)
-        rec.save(str(tmp), default_blueprint=build_blueprint(view, diagnosis, video=video_path is not None))
+
+    def log(rec) -> None:
         log_analysis(view, rec, video_path=video_path, fps=fps)
         if diagnosis is not None:
             log_diagnosis(diagnosis, rec, view=view)
+
+    return write_rrd(path, build_blueprint(view, diagnosis, video=video_path is not None), log)
+
+
+def write_rrd(path: Path, blueprint, log, app_id: str = APP_ID) -> Path:
+    """Write one ``.rrd``: a recording stream of ``app_id`` saved to a temporary file beside ``path`` with
+    ``blueprint`` as its default, filled by ``log(rec)``, then renamed, so a failure leaves no partial recording.
+    Returns ``path``."""
+    tmp = temp_file_beside(path, suffix=".rrd")
+    try:
+        rec = rr.RecordingStream(app_id)
+        rec.save(str(tmp), default_blueprint=blueprint)
+        log(rec)
         rec.flush()
         rec.disconnect()
         del rec
