@@ -79,15 +79,12 @@ def kappa_vs_tapir(res, tap, graph, n_boot: int = 250):
 
 
 def plain_lk_time(frames, q) -> float:
-    """Seconds plain frame-to-frame pyramidal LK takes over ``frames`` (grey conversion included)."""
+    """Seconds plain frame-to-frame pyramidal LK (``bench_track.plain_lk``) takes over ``frames`` (grey conversion
+    included)."""
+    from bench_track import plain_lk
+
     t = time.perf_counter()
-    p = q.astype(np.float32).reshape(-1, 1, 2)
-    prev = None
-    for im in frames:
-        g = cv2.cvtColor(im, cv2.COLOR_RGB2GRAY)
-        if prev is not None:
-            p, _, _ = cv2.calcOpticalFlowPyrLK(prev, g, p, None, winSize=(21, 21), maxLevel=3)
-        prev = g
+    plain_lk(frames, q)
     return time.perf_counter() - t
 
 
