@@ -49,6 +49,8 @@ def test_length_test_tells_a_shared_course_from_node_wise_errors():
     swing = out_of_plane_test(_chain_channel(nodewise + 0.004 * np.arange(1, S + 1)[:, None] * w[None]), z, seed=0)
     assert null is not None and null.p > 0.05
     assert swing.p <= ALPHA_OOP and swing.same_sign_share == 1.0 and swing.tip_growth > 0.5
+    # held out: the other set's course predicts a set's lengths where there is a swing, and not otherwise
+    assert swing.heldout_gain_pct > 30.0 and null.heldout_gain_pct < 2.0
     # the course it estimates is the shared one
     assert abs(np.corrcoef(swing_course(_chain_channel(nodewise + 0.004 * np.arange(1, S + 1)[:, None] * w[None]),
                                         z), w)[0, 1]) > 0.9

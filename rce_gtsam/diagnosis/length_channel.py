@@ -41,6 +41,8 @@ from ..model.row_sets import node_disjoint_split, shared_node_matrix
 N_SURROGATES = 999
 #: surrogates per batch (memory)
 BATCH = 100
+#: contiguous time blocks of the held-out length prediction (:func:`heldout_length_gain`)
+HELDOUT_FOLDS = 5
 #: the length channel's own family-wise level: the diagnosis' other candidates share alpha, this test its own
 #: (the nominal family-wise false-alarm rate of a diagnosis is then alpha + ALPHA_OOP)
 ALPHA_OOP = 0.01
@@ -138,7 +140,8 @@ class LengthTest:
     node-disjoint set; corr_a, corr_b: correlation of each set's leading course with w (diagnostic);
     loadings: (S,) each segment's regression of its relative length change on w (1 per unit RMS of w, NaN =
     dropped); same_sign_share: share of the kept loadings with the sign of their sum; tip_growth: Spearman
-    correlation of |loading| with root distance (the swing's signature grows toward the tip)."""
+    correlation of |loading| with root distance (the swing's signature grows toward the tip); heldout_gain_pct:
+    :func:`heldout_length_gain` of the two sets (%)."""
 
     p: float
     statistic: float
@@ -148,9 +151,11 @@ class LengthTest:
     loadings: np.ndarray
     same_sign_share: float
     tip_growth: float
+    heldout_gain_pct: float = float("nan")
 
     def as_dict(self) -> dict:
         return {"length_p": self.p, "length_statistic": self.statistic, "length_null_median": self.null_median,
+                "length_heldout_gain_pct": self.heldout_gain_pct,
                 "length_rows_a": list(self.rows_a), "length_rows_b": list(self.rows_b),
                 "length_loadings": [float(v) for v in self.loadings], "length_same_sign_share": self.same_sign_share,
                 "length_tip_growth": self.tip_growth}
@@ -211,10 +216,55 @@ def out_of_plane_test(channel: LengthChannel, z: np.ndarray, seed: int = 0,
     same = float(np.mean(np.sign(load[fin]) == tot)) if fin.any() else 0.0
     growth = _spearman(channel.root_distance[fin], np.abs(load[fin])) if fin.sum() >= 3 else 0.0
     seg = [channel.segments[i] for i in kept]
-    return LengthTest(p=p, statistic=q, null_median=float(np.median(qs)),
+    gain = heldout_length_gain(channel, z, kept[halves[0]], kept[halves[1]])
+    return LengthTest(heldout_gain_pct=gain, p=p, statistic=q, null_median=float(np.median(qs)),
                       rows_a=tuple(f"{a}->{b}" for a, b in (seg[i] for i in halves[0])),
                       rows_b=tuple(f"{a}->{b}" for a, b in (seg[i] for i in halves[1])),
                       loadings=load, same_sign_share=same, tip_growth=growth)
+
+
+def _leading_course(rows: np.ndarray) -> np.ndarray:
+    """(T,) the leading right singular vector of unit-RMS residual rows (missing frames 0), unit RMS."""
+    w = np.linalg.svd(np.nan_to_num(rows), full_matrices=False)[2][0]
+    return w / max(float(np.sqrt(np.mean(w * w))), 1e-300)
+
+
+def heldout_length_gain(channel: LengthChannel, z: np.ndarray, rows_a, rows_b, n_folds: int = HELDOUT_FOLDS) -> float:
+    """The out-of-plane term's held-out error on the observable it models, the segments' lengths (%).
+
+    For each of the two node-disjoint sets in turn: the swing course w is taken from the *other* set's length
+    residuals (:func:`length_residuals`, all frames: that set is measured there), and each segment of this set is
+    predicted on held-out frames (``n_folds`` contiguous blocks) from its fit on the remaining frames, once on the
+    baseline columns (:func:`excitation_columns`: what the rank-1 model's bending alone moves a length with) and
+    once on those columns plus w. Returned: 100 (1 - SSE_with_w / SSE_baseline), summed over both sets' held-out
+    frames (relative length changes). No segment's own data set its course, and no frame its own prediction, so a
+    tracker's node-wise error cannot make it positive; about 0 or below without a swing. NaN where a set has no
+    usable row."""
+    z = np.asarray(z, float)
+    X = excitation_columns(z)
+    T = X.shape[1]
+    R, kept = length_residuals(channel, z)
+    pos = {int(k): i for i, k in enumerate(kept)}
+    blocks = np.array_split(np.arange(T), n_folds)
+    sse = np.zeros(2)
+    for own, other in ((rows_a, rows_b), (rows_b, rows_a)):
+        oth = [pos[int(k)] for k in other if int(k) in pos]
+        if not oth:
+            return float("nan")
+        w = _leading_course(R[oth])
+        Xw = np.vstack([X, w])
+        for k in own:
+            r = channel.rel[int(k)]
+            for blk in blocks:
+                test = np.zeros(T, bool)
+                test[blk] = True
+                ok_tr, ok_te = np.isfinite(r) & ~test, np.isfinite(r) & test
+                if ok_tr.sum() < Xw.shape[0] + 3 or not ok_te.any():
+                    continue
+                for j, A in enumerate((X, Xw)):
+                    beta = np.linalg.lstsq(A[:, ok_tr].T, r[ok_tr], rcond=None)[0]
+                    sse[j] += float(np.sum((r[ok_te] - beta @ A[:, ok_te]) ** 2))
+    return float(100.0 * (1.0 - sse[1] / sse[0])) if sse[0] > 0 else float("nan")
 
 
 def _spearman(x: np.ndarray, y: np.ndarray) -> float:

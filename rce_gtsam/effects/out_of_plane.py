@@ -173,6 +173,7 @@ class OutOfPlane(Effect):
         g = (R0 * w[None, :]).sum(axis=1) / np.maximum(sww, 1e-12)
         return {"length_p": test.p, "length_statistic": test.statistic, "length_null_median": test.null_median,
                 "length_same_sign_share": test.same_sign_share, "length_tip_growth": test.tip_growth,
+                "length_heldout_gain_pct": test.heldout_gain_pct,
                 "rms_residual_on_course_deg": float(np.sqrt(np.mean(g ** 2)))}
 
     @classmethod
@@ -201,6 +202,8 @@ class OutOfPlane(Effect):
                 f"{statistics.get('length_statistic', 0):.1f} against a null median "
                 f"{statistics.get('length_null_median', 0):.1f}; {100 * statistics.get('length_same_sign_share', 0):.0f} % "
                 f"of the segments change with one sign, rank correlation of the change with root distance "
-                f"{statistics.get('length_tip_growth', 0):+.2f}); that course adds "
+                f"{statistics.get('length_tip_growth', 0):+.2f}); predicting each segment's held-out frames from "
+                f"the course of the segments it shares no node with lowers their length error by "
+                f"{statistics.get('length_heldout_gain_pct', float('nan')):.1f} %; that course adds "
                 f"{statistics.get('rms_residual_on_course_deg', 0):.2f} deg RMS to the bend residuals.")
 
