@@ -87,7 +87,7 @@ def diagnosis(a) -> None:
     for name, share, tilt in (("swing share 0.5, tilt 30", 0.5, 30.0), ("swing share 1.0, tilt 30", 1.0, 30.0),
                               ("planar (2-D simulator)", 0.0, None)):
         t = time.perf_counter()
-        named, imps, imps_named, verdicts = 0, [], [], {}
+        named, imps, imps_named, verdicts, lgain, lgain_named = 0, [], [], {}, [], []
         lr_base, lr_ext, lr_img = [], [], []
         for s in range(a.diagnose_seeds):
             sim, truth, res = recording(s, a.frames, share, tilt)
@@ -95,9 +95,11 @@ def diagnosis(a) -> None:
             verdicts[d.verdict] = verdicts.get(d.verdict, 0) + 1
             c = d.candidate(OutOfPlane.name)
             imps.append(c.improvement_pct)
+            lgain.append(c.extra.get("length_heldout_gain_pct", float("nan")))
             if d.verdict == OutOfPlane.name:
                 named += 1
                 imps_named.append(c.improvement_pct)
+                lgain_named.append(lgain[-1])
             row = {b.edge: i for i, b in enumerate(sim.graph.bends)}
             idx = [row[tuple(e)] for e in res.response.edges]
             k3 = (truth.kappa_3d if truth is not None else np.array([sim.kappa_true[b.edge] for b in sim.graph.bends]))[idx]
@@ -108,7 +110,11 @@ def diagnosis(a) -> None:
         print(f"  {name:28s} out_of_plane named {named}/{a.diagnose_seeds}; verdicts {verdicts}; held-out RMSE "
               f"change with the term: median {np.median(imps):+.2f} % (when named: mean "
               f"{np.mean(imps_named) if imps_named else float('nan'):+.2f} %, min "
-              f"{np.min(imps_named) if imps_named else float('nan'):+.2f} %); kappa log-RMSE vs 3-D truth: rank-1 "
+              f"{np.min(imps_named) if imps_named else float('nan'):+.2f} %); held-out length error change with the "
+              f"term: median {-np.nanmedian(lgain):+.1f} % (when named: median "
+              f"{-np.nanmedian(lgain_named) if lgain_named else float('nan'):+.1f} %, range "
+              f"{-np.nanmax(lgain_named) if lgain_named else float('nan'):+.1f} to "
+              f"{-np.nanmin(lgain_named) if lgain_named else float('nan'):+.1f} %); kappa log-RMSE vs 3-D truth: rank-1 "
               f"{np.median(lr_base):.3f}, with the term {np.median(lr_ext):.3f}; rank-1 vs image-plane truth "
               f"{np.nanmedian(lr_img):.3f} (medians; {time.perf_counter() - t:.0f} s)", flush=True)
 
@@ -135,7 +141,9 @@ def real(a) -> None:
               f"(null median {x.get('length_null_median', float('nan')):.0f}), same-sign share "
               f"{x.get('length_same_sign_share', float('nan')):.2f}, tip growth "
               f"{x.get('length_tip_growth', float('nan')):+.2f}; held-out RMSE change with the term "
-              f"{c.improvement_pct:+.2f} %; verdict {d.verdict}, status {d.status}", flush=True)
+              f"{c.improvement_pct:+.2f} %; held-out length error change "
+              f"{-x.get('length_heldout_gain_pct', float('nan')):+.1f} %; verdict {d.verdict}, status {d.status}",
+              flush=True)
         if b:
             print(f"    budget before: total {b['total']:.2f}, rank-1 explains {b['rank1']:.2f}, noise floor "
                   f"{b['noise_floor']:.2f}, unexplained {b['unexplained']:.2f} +- {b['unexplained_se']:.2f} "

@@ -70,6 +70,9 @@ class NoiseFloor:
     n_eff: (E,) effective number of independent samples of each row's d_j (for standard errors).
     coherent_share: (E,) share of var(d_j) explained by the motion of bends sharing no node with j (0 for pure
         tracking noise up to ~2 / n_eff by chance).
+    nodewise_deg2: (E,) the node-wise estimate from the rank-1 residual's covariance between bends that share a
+        node (:mod:`.noise_floor_nodewise`; NaN = not estimable, None = not computed); ``variance_deg2`` is at
+        least this where it is finite. nodewise_sigma_px: the node error's SD across the branch it implies (px).
     """
 
     variance_deg2: np.ndarray
@@ -81,6 +84,8 @@ class NoiseFloor:
     series_deg: np.ndarray
     n_eff: np.ndarray
     coherent_share: np.ndarray
+    nodewise_deg2: np.ndarray | None = None
+    nodewise_sigma_px: float = float("nan")
 
     @property
     def rms_deg(self) -> float:
@@ -94,9 +99,14 @@ class NoiseFloor:
                 "white_lower_bound_deg2": self.white_deg2.tolist(),
                 "inextensibility_holds": [bool(v) for v in self.valid],
                 "across_over_along": float(self.across_over_along),
+                "nodewise_deg2": None if self.nodewise_deg2 is None else
+                [None if not np.isfinite(v) else float(v) for v in self.nodewise_deg2],
+                "nodewise_sigma_px": None if not np.isfinite(self.nodewise_sigma_px) else float(self.nodewise_sigma_px),
                 "smoother_white_gain": float(self.smoother_gain),
                 "method": "q x var(relative stretch of the two segments) of the smoothed tracks (inextensibility); "
-                          "rows where that exceeds the bending variance use the white-noise lower bound"}
+                          "rows where that exceeds the bending variance use the white-noise lower bound; raised "
+                          "to the node-wise estimate (the rank-1 residual's covariance between bends that share "
+                          "a node) where that is larger"}
 
 
 def rest_frame(xy: np.ndarray, node_ids, edges) -> tuple[np.ndarray, dict]:
@@ -345,6 +355,31 @@ def noise_floor_of(result) -> NoiseFloor:
     shared = np.array([[bool(a & b) for b in nodes] for a in nodes])
     smoothed_xy = result.smoothed.tracks.xy.copy()
     smoothed_xy[~result.smoothed.observed] = np.nan  # the frames a tracker saw, as the bends use them
-    return estimate_noise_floor(result.tracks.xy, smoothed_xy, result.tracks.node_ids,
-                                result.graph.edges, [(b.grandparent, b.joint, b.child) for b in bends],
-                                r.Y, r.frames, raw_angle, gain, shared=shared)
+    triples = [(b.grandparent, b.joint, b.child) for b in bends]
+    nf = estimate_noise_floor(result.tracks.xy, smoothed_xy, result.tracks.node_ids, result.graph.edges, triples,
+                              r.Y, r.frames, raw_angle, gain, shared=shared)
+    return with_nodewise(nf, nodewise_of(result, triples))
+
+
+def nodewise_of(result, triples):
+    """:func:`~.noise_floor_nodewise.nodewise_floor` of ``result``'s rank-1 fit (None without one)."""
+    from .noise_floor_nodewise import nodewise_floor
+    fit = getattr(result, "fit", None)
+    if fit is None or getattr(fit, "z", None) is None:
+        return None
+    r = result.response
+    kappa = np.asarray(fit.kappa, float) * np.asarray(getattr(fit, "direction", 1.0), float)
+    row = {int(n): i for i, n in enumerate(result.tracks.node_ids)}
+    rest = np.nanmedian(result.smoothed.tracks.xy, axis=1)
+    rest_xy = {n: rest[row[n]] for t in triples for n in t}
+    return nodewise_floor(r.Y - fit.predict(), kappa, triples, rest_xy)
+
+
+def with_nodewise(nf: NoiseFloor, nodewise) -> NoiseFloor:
+    """``nf`` with the node-wise estimate attached and its per-row variance raised to it where it is larger."""
+    if nodewise is None:
+        return nf
+    from dataclasses import replace
+    nw = np.asarray(nodewise.variance_deg2, float)
+    return replace(nf, variance_deg2=np.fmax(nf.variance_deg2, nw), nodewise_deg2=nw,
+                   nodewise_sigma_px=nodewise.sigma_px)
