@@ -64,6 +64,11 @@ def case(family: str | None, scale: float, seed: int, frames: int) -> dict:
             "budget": status, "pipeline_s": tp}
 
 
+#: the noise floor's version in the cache's file names: a case cached before the floor changed is run again
+#: (the node-wise estimate joined the floor in v2)
+FLOOR_TAG = "_nf2"
+
+
 def preset_tag(family: str | None) -> str:
     """A short fingerprint of the family's measured parameters, so that a re-measured preset is not read from
     the cache of an older one (empty for no artifact)."""
@@ -81,7 +86,7 @@ def cached(cache: str | None, family: str | None, scale: float, seed: int, frame
     """:func:`case`, kept in (and read back from) ``cache`` when given."""
     if cache is None:
         return case(family, scale, seed, frames)
-    path = Path(cache) / f"artifact_{family or 'none'}_{scale:g}_{seed}_{frames}{preset_tag(family)}.npz"
+    path = Path(cache) / f"artifact_{family or 'none'}_{scale:g}_{seed}_{frames}{preset_tag(family)}{FLOOR_TAG}.npz"
     if path.exists():
         d = dict(np.load(path))
         d = {k: (v.item() if v.ndim == 0 else v) for k, v in d.items()}
