@@ -17,9 +17,14 @@ TRUE tracks plus one part of E at a time, with the tracker's own visibility and 
   tracker; both on the same visibility.
 
 Columns: log-RMSE of kappa against the truth, Spearman, share of true kappa inside the 95 % CI, and the part's RMS
-(px per axis). ``--record NAME`` saves the table as docs/validation/NAME.json (with the ceiling rows).
+(px per axis). Then our tracks themselves (``our tracks``, kappa from the tracker's positions and sigmas) for this
+revision's tracker and, with ``--baseline REV``, that revision's (before/after), with the median |error| / sigma
+of their frame-0 matches (a calibrated 2-D Gaussian: 1.18); and, per quality verdict of ``rce_gtsam.quality``
+on our tracks, the share of true kappa inside the CI: which verdict tells a user that the interval is not to be
+trusted. ``--record NAME`` saves all rows as docs/validation/NAME.json.
 
-Usage: python benchmarks/bench_texture_errors.py [--seeds 0,1,2,3,4] [--conditions none,delay] [--record NAME]
+Usage: python benchmarks/bench_texture_errors.py [--seeds 0,1,2,3,4] [--conditions none,delay] [--baseline REV]
+       [--record NAME]
 """
 
 from __future__ import annotations
@@ -49,9 +54,9 @@ def cached_tracks(seed, cond, frames, tip_px, cache: Path, tracker_cls, tag_rev:
         cv2.setNumThreads(1)
         with open_video(path) as src:
             res = tracker_cls().track(src, cf.points, cf.graph)
-        np.savez(npz, xy=res.xy, vis=res.visible, sig=res.sigma_px)
+        np.savez(npz, xy=res.xy, vis=res.visible, sig=res.sigma_px, how=res.info["how"])
     d = np.load(npz)
-    return bed, cf, {k: d[k] for k in ("xy", "vis", "sig")}
+    return bed, cf, {k: d[k] for k in ("xy", "vis", "sig", "how")}
 
 
 def running_mean(e: np.ndarray, w: int) -> np.ndarray:
@@ -120,6 +125,36 @@ def parts(bed, graph, E: np.ndarray, slow: int, rng) -> dict:
             "white, same RMS": white, "white 0.1 px": white01}
 
 
+def our_tracks(bed, graph, tr, n_boot: int) -> tuple[tuple, dict]:
+    """((log-RMSE, Spearman, share in CI, error RMS px/axis, median |error|/sigma of frame-0 matches),
+    {quality verdict: [truth inside the CI, ...]}) of kappa from the tracker's own positions and sigmas."""
+    import rce_gtsam
+    from rce_gtsam.quality import assess_quality
+    from rce_gtsam.tracks import Tracks
+
+    nodes = list(graph.nodes)
+    vis = tr["vis"]
+    t = Tracks(node_ids=np.array(nodes), xy=np.where(vis[..., None], tr["xy"], np.nan)[nodes],
+               sigma_px=np.where(vis, tr["sig"], np.nan)[nodes], source="tracker")
+    r = rce_gtsam.analyze(t, graph, preset="default", n_boot=n_boot, seed=0)
+    est = np.array([r.kappa[e] for e in r.response.edges])
+    tru = np.array([bed.kappa_true[e] for e in r.response.edges])
+    inside = (tru >= r.ci.low) & (tru <= r.ci.high)
+    from scipy.stats import spearmanr
+    err = np.where(vis[..., None], tr["xy"] - bed.true_xy, np.nan)
+    m = vis & (tr["how"] == 0)
+    z = np.hypot(*(tr["xy"] - bed.true_xy)[m].T) / tr["sig"][m]
+    verdicts: dict[str, list] = {}
+    for e, q in assess_quality(r).items():
+        ins = bool(inside[r.response.edges.index(e)])
+        verdicts.setdefault("quality ok" if q.ok else "quality not ok", []).append(ins)
+        for reason in q.reasons:
+            verdicts.setdefault(reason, []).append(ins)
+        verdicts.setdefault("informative" if q.informative else "not informative", []).append(ins)
+    return ((float(np.sqrt(np.mean(np.log(est / tru) ** 2))), float(spearmanr(est, tru)[0]), float(inside.mean()),
+             float(np.sqrt(np.nanmean(err ** 2))), float(np.median(z))), verdicts)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0,1,2,3,4")
@@ -130,7 +165,9 @@ def main():
     ap.add_argument("--conditions", default="none,delay")
     ap.add_argument("--cache", type=Path, default=None)
     ap.add_argument("--record", default=None, metavar="NAME")
+    ap.add_argument("--baseline", default=None, help="git revision of the default tracker to compare (before/after)")
     args = ap.parse_args()
+    import tempfile
     from bench_texture_bed import PLANT, default_cache, kappa_scores
     from rce_gtsam.track import LKTracker
     from rce_gtsam.tracks import Tracks
@@ -143,11 +180,26 @@ def main():
     dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "rce_gtsam/track"],
                            capture_output=True, text=True).stdout.strip()
     tag_rev = rev + ("-dirty" if dirty else "")
+    trackers = {f"this revision ({tag_rev})": (LKTracker, tag_rev)}
+    tmp = tempfile.TemporaryDirectory()
+    if args.baseline:
+        from bench_track import baseline_tracker
+        trackers = {f"baseline {args.baseline}": (baseline_tracker(args.baseline, Path(tmp.name)), f"base-{args.baseline}"),
+                    **trackers}
+    ours: dict[str, list] = {name: [] for name in trackers}
+    verdicts: dict[str, dict] = {name: {} for name in trackers}
     seeds = [int(s) for s in args.seeds.split(",")]
     conds = [() if c == "none" else (c,) for c in args.conditions.split(",")]
     table: dict[str, list] = {}
+    floor = []  # (median segment length px, bending RMS deg, tracker error RMS px/axis) per case
     for c in conds:
         for seed in seeds:
+            for name, (cls, tag) in trackers.items():
+                bed, cf, tr = cached_tracks(seed, c, args.frames, args.tip_px, cache, cls, tag)
+                row, ver = our_tracks(bed, cf.graph, tr, args.n_boot)
+                ours[name].append(row)
+                for k, v in ver.items():
+                    verdicts[name].setdefault(k, []).extend(v)
             bed, cf, tr = cached_tracks(seed, c, args.frames, args.tip_px, cache, LKTracker, tag_rev)
             graph = cf.graph
             nodes = list(graph.nodes)
@@ -162,24 +214,56 @@ def main():
                 table.setdefault(name, []).append((lr, rho, inside, float(np.sqrt(np.nanmean(part ** 2)))))
             t = Tracks(node_ids=np.array(nodes), xy=bed.true_xy[nodes], source="truth")
             table.setdefault("truth (all visible, no sigma)", []).append((*kappa_scores(t, graph, bed, args.n_boot), 0.0))
+            seg = np.array([np.hypot(*(cf.points[ch] - cf.points[p])) for p, ch in bed.edges])
+            floor.append((float(np.median(seg)), float(np.sqrt(np.mean(bed.response_deg ** 2))),
+                          float(np.sqrt(np.nanmean(E ** 2)))))
             print(f"  done {'-'.join(c) or 'none'} seed {seed}", flush=True)
     print(f"tracker {tag_rev}; {len(seeds)} seeds x {len(conds)} conditions; mean (min-max) over cases")
     print(f"  {'part of the error':40s} {'logRMSE':>17s} {'Spearman':>9s} {'inCI %':>7s} {'RMS px':>7s}")
     rows = []
     for name, v in table.items():
         a = np.array(v)
-        print(f"  {name:40s} {a[:, 0].mean():5.2f} ({a[:, 0].min():.2f}-{a[:, 0].max():.2f}) "
+        label = name if name.startswith(("truth", "white", "none")) else "truth + " + name
+        print(f"  {label:40s} {a[:, 0].mean():5.2f} ({a[:, 0].min():.2f}-{a[:, 0].max():.2f}) "
               f"{a[:, 1].mean():9.2f} {100 * a[:, 2].mean():7.0f} {a[:, 3].mean():7.3f}")
-        rows.append([name, round(a[:, 0].mean(), 3), round(a[:, 0].min(), 3), round(a[:, 0].max(), 3),
-                     round(a[:, 1].mean(), 2), round(100 * a[:, 2].mean(), 1), round(a[:, 3].mean(), 3)])
+        rows.append(["step 1: " + label, round(a[:, 0].mean(), 3), round(a[:, 0].min(), 3), round(a[:, 0].max(), 3),
+                     round(a[:, 1].mean(), 2), round(100 * a[:, 2].mean(), 1), round(a[:, 3].mean(), 3), ""])
+    print("  our tracks (kappa from the tracker's positions and sigmas):")
+    for name, v in ours.items():
+        a = np.array(v)
+        print(f"  {name:40s} {a[:, 0].mean():5.2f} ({a[:, 0].min():.2f}-{a[:, 0].max():.2f}) "
+              f"{a[:, 1].mean():9.2f} {100 * a[:, 2].mean():7.0f} {a[:, 3].mean():7.3f}  |error|/sigma median "
+              f"{a[:, 4].mean():.2f}")
+        rows.append(["our tracks, " + name, round(a[:, 0].mean(), 3), round(a[:, 0].min(), 3),
+                     round(a[:, 0].max(), 3), round(a[:, 1].mean(), 2), round(100 * a[:, 2].mean(), 1),
+                     round(a[:, 3].mean(), 3), round(a[:, 4].mean(), 2)])
+    notes = []
+    for name, ver in verdicts.items():
+        n_all = sum(len(v) for k, v in ver.items() if k.startswith("quality"))
+        parts_ = [f"{k} {len(v)} ({100 * len(v) / n_all:.0f} %): {100 * np.mean(v):.0f} % in CI"
+                  for k, v in sorted(ver.items())]
+        line = f"segments by quality verdict, our tracks, {name}: " + "; ".join(parts_)
+        print("  " + line)
+        notes.append(line)
+    from rce_gtsam.sim.texture_bed import angle_floor_deg
+    L, bend, e = (float(np.mean([f[k] for f in floor])) for k in range(3))
+    for what, err in (("this tracker's error", e), ("a 0.1 px tracker", 0.1)):
+        lo, hi = angle_floor_deg(err, L)
+        line = (f"physical floor, {what}: {err:.2f} px RMS per axis on the median segment of {L:.1f} px gives "
+                f"{lo:.2f}-{hi:.2f} deg of bend-angle noise against the bed's bending RMS of {bend:.2f} deg")
+        print("  " + line)
+        notes.append(line)
     if args.record:
         from record import save_record
-        save_record(args.record, title="Texture bed: what in the tracker's error costs kappa",
+        save_record(args.record, title="Texture bed: what the default tracker's error costs kappa, and whether its CIs hold",
                     command=f"python benchmarks/bench_texture_errors.py --seeds {args.seeds} --conditions "
-                            f"{args.conditions} --record {args.record}",
+                            f"{args.conditions}" + (f" --baseline {args.baseline}" if args.baseline else "")
+                            + f" --record {args.record}",
                     description=__doc__.split("\n\n")[1].replace("\n", " "),
-                    columns=["part of the error", "kappa log-RMSE (mean)", "min", "max", "Spearman",
-                             "truth in 95 % CI (%)", "part RMS (px per axis)"], rows=rows)
+                    columns=["tracks", "kappa log-RMSE (mean)", "min", "max", "Spearman",
+                             "truth in 95 % CI (%)", "error RMS (px per axis)", "median |error| / sigma"],
+                    rows=rows, notes=notes)
+    tmp.cleanup()
     return table
 
 
