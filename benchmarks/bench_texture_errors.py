@@ -41,14 +41,14 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 
-def cached_tracks(seed, cond, frames, tip_px, cache: Path, tracker_cls, tag_rev: str):
-    """(bed, clean frame, dict xy/vis/sig) of the default tracker on the bed video, cached as npz."""
+def cached_tracks(seed, cond, frames, tip_px, cache: Path, tracker_cls, tag_rev: str, settings=None):
+    """(bed, clean frame, dict xy/vis/sig/how) of the tracker on the bed video, cached as npz."""
     import cv2
 
     from bench_texture_bed import bed_case
     from rce_gtsam.track import open_video
 
-    bed, cf, path = bed_case(seed, cond, frames, tip_px, cache)
+    bed, cf, path = bed_case(seed, cond, frames, tip_px, cache, settings)
     npz = cache / f"tracks_{tag_rev}_{path.stem}.npz"
     if not npz.is_file():
         cv2.setNumThreads(1)
@@ -166,6 +166,9 @@ def main():
     ap.add_argument("--cache", type=Path, default=None)
     ap.add_argument("--record", default=None, metavar="NAME")
     ap.add_argument("--baseline", default=None, help="git revision of the default tracker to compare (before/after)")
+    ap.add_argument("--rigid-px", type=float, default=None,
+                    help="render the bed with the stem's surroundings moving rigidly out to this distance (px; "
+                         "default 7, fading out over 6 px more): how much of the error is the static background")
     args = ap.parse_args()
     import tempfile
     from bench_texture_bed import PLANT, default_cache, kappa_scores
@@ -188,6 +191,8 @@ def main():
                     **trackers}
     ours: dict[str, list] = {name: [] for name in trackers}
     verdicts: dict[str, dict] = {name: {} for name in trackers}
+    from rce_gtsam.sim.texture_bed import RenderSettings
+    settings = None if args.rigid_px is None else RenderSettings(inner_px=args.rigid_px, outer_px=args.rigid_px + 6)
     seeds = [int(s) for s in args.seeds.split(",")]
     conds = [() if c == "none" else (c,) for c in args.conditions.split(",")]
     table: dict[str, list] = {}
@@ -195,12 +200,12 @@ def main():
     for c in conds:
         for seed in seeds:
             for name, (cls, tag) in trackers.items():
-                bed, cf, tr = cached_tracks(seed, c, args.frames, args.tip_px, cache, cls, tag)
+                bed, cf, tr = cached_tracks(seed, c, args.frames, args.tip_px, cache, cls, tag, settings)
                 row, ver = our_tracks(bed, cf.graph, tr, args.n_boot)
                 ours[name].append(row)
                 for k, v in ver.items():
                     verdicts[name].setdefault(k, []).extend(v)
-            bed, cf, tr = cached_tracks(seed, c, args.frames, args.tip_px, cache, LKTracker, tag_rev)
+            bed, cf, tr = cached_tracks(seed, c, args.frames, args.tip_px, cache, LKTracker, tag_rev, settings)
             graph = cf.graph
             nodes = list(graph.nodes)
             vis = tr["vis"]
@@ -258,6 +263,7 @@ def main():
         save_record(args.record, title="Texture bed: what the default tracker's error costs kappa, and whether its CIs hold",
                     command=f"python benchmarks/bench_texture_errors.py --seeds {args.seeds} --conditions "
                             f"{args.conditions}" + (f" --baseline {args.baseline}" if args.baseline else "")
+                            + (f" --rigid-px {args.rigid_px:g}" if args.rigid_px is not None else "")
                             + f" --record {args.record}",
                     description=__doc__.split("\n\n")[1].replace("\n", " "),
                     columns=["tracks", "kappa log-RMSE (mean)", "min", "max", "Spearman",
