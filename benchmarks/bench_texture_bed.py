@@ -47,11 +47,15 @@ def default_cache() -> Path:
         return Path(tempfile.gettempdir()) / "rce_texture_bed"
 
 
-def bed_case(seed: int, effects: tuple, n_frames: int, tip_px: float, cache: Path):
-    """(bed, clean frame, mp4 path), rendered once and cached."""
-    from rce_gtsam.sim.texture_bed import clean_first_frame, make_bed, write_bed_video
+def bed_case(seed: int, effects: tuple, n_frames: int, tip_px: float, cache: Path, settings=None):
+    """(bed, clean frame, mp4 path), rendered once and cached. ``settings``: the bed's ``RenderSettings`` (None:
+    the default; others are cached under a tag of their rigid band, ``inner_px``/``outer_px``)."""
+    from rce_gtsam.sim.texture_bed import RenderSettings, clean_first_frame, make_bed, write_bed_video
 
+    settings = settings or RenderSettings()
     tag = f"v2_s{seed}_{'-'.join(effects) or 'none'}_f{n_frames}_tip{tip_px:g}"
+    if settings != RenderSettings():
+        tag += f"_in{settings.inner_px:g}_out{settings.outer_px:g}"
     cache.mkdir(parents=True, exist_ok=True)
     path, meta = cache / f"{tag}.mp4", cache / f"{tag}.pkl"
     cf = clean_first_frame(PLANT)
@@ -59,7 +63,7 @@ def bed_case(seed: int, effects: tuple, n_frames: int, tip_px: float, cache: Pat
         bed = pickle.loads(meta.read_bytes())
     else:
         bed = make_bed(cf.points, cf.graph, n_frames, seed, effects, tip_excursion_px=tip_px)
-        write_bed_video(bed, cf.rgb, cf.points, path)
+        write_bed_video(bed, cf.rgb, cf.points, path, settings=settings)
         meta.write_bytes(pickle.dumps(bed))
     return bed, cf, path
 
