@@ -140,7 +140,9 @@ class OutOfPlane(Effect):
         infl = residual_variance_inflated(resid, W)
         out, dof = {}, 0.0
         for j, k in enumerate("ghq"):
-            out[k], f = shrink_toward_zero(coef[:, j], infl * var[:, j])
+            with np.errstate(invalid="ignore"):  # an edge without a fit has var inf; no residual at all: infl nan
+                v = infl * var[:, j]
+            out[k], f = shrink_toward_zero(coef[:, j], v)
             dof += float(f.sum())
         return {"params": out, "latents": {}, "dof": dof}
 
