@@ -14,7 +14,7 @@ H.264 video). Scored: kappa log-RMSE (geometric-mean-free) against truth.json's 
 Timings: the 3-D smoother's and the 2-D smoother's seconds on the same recording (depth3d.json).
 
 Usage: OMP_NUM_THREADS=1 python benchmarks/bench_depth3d.py --seeds 20 --frames 300 [--factors cv,1,0.5,0.25]
-       [--no-video2d] [--out bench_depth3d.json]
+       [--no-video2d] [--out bench_depth3d.json] [--cache DIR [--rerun-3d]] [--oracles | --oracles-only]
 """
 
 from __future__ import annotations
@@ -33,13 +33,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-
-
-def log_rmse(kappa: dict, truth: dict) -> float:
-    keys = [k for k in truth if k in kappa and np.isfinite(kappa[k]) and kappa[k] > 0]
-    d = np.log([kappa[k] for k in keys]) - np.log([truth[k] for k in keys])
-    d -= d.mean()
-    return float(np.sqrt(np.mean(d ** 2)))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from depth3d_oracles import log_rmse  # noqa: E402
 
 
 def rce(*args, cwd) -> None:
@@ -78,15 +73,18 @@ def refit(d: Path, factors) -> dict:
     return out
 
 
-def one_seed(seed: int, frames: int, work: Path, factors, video2d: bool) -> dict:
+def one_seed(seed: int, frames: int, work: Path, factors, video2d: bool, keep: bool = False,
+             rerun: bool = True) -> dict:
     import pandas as pd
     d = work / f"s{seed}"
-    rce("simulate", "--out", str(d), "--effect", "out_of_plane", "--depth", "--frames", str(frames),
-        "--seed", str(seed), cwd=work)
+    if not (d / "truth.json").exists():  # a cached recording (--cache) is rendered once
+        rce("simulate", "--out", str(d), "--effect", "out_of_plane", "--depth", "--frames", str(frames),
+            "--seed", str(seed), cwd=work)
     truth = json.loads((d / "truth.json").read_text())
     t0 = time.perf_counter()
-    rce("run", "recording.db3", "annotations.json", "graph.json", "--out", "run3d", "--no-figures",
-        "--bootstrap", "100", "--no-progress", "--seed", "0", cwd=d)
+    if rerun or not (d / "run3d" / "depth3d.json").exists():
+        rce("run", "recording.db3", "annotations.json", "graph.json", "--out", "run3d", "--no-figures",
+            "--bootstrap", "100", "--no-progress", "--seed", "0", cwd=d)
     row = {"seed": seed, "seconds_run3d": time.perf_counter() - t0}
     k3 = pd.read_csv(d / "run3d" / "kappa_3d.csv")
     rep = json.loads((d / "run3d" / "depth3d.json").read_text())
@@ -98,15 +96,29 @@ def one_seed(seed: int, frames: int, work: Path, factors, video2d: bool) -> dict
     row["smooth_3d_s"] = rep["timings_s"]["smooth_3d"]
     row["smooth_2d_s"] = rep["timings_s"]["smooth_2d"]
     row["depth_coverage"] = rep["depth_coverage"]
-    if video2d:
+    if video2d and not (d / "run2d" / "compliance_summary.csv").exists():
         rce("run", "video.mp4", "annotations.json", "graph.json", "--out", "run2d", "--no-figures",
             "--bootstrap", "100", "--no-progress", "--seed", "0", cwd=d)
+    if video2d:
         cs = pd.read_csv(d / "run2d" / "compliance_summary.csv")
         row["2d_video"] = log_rmse({f"{p}->{c}": k for p, c, k in zip(cs.parent, cs.child, cs.kappa)}, kt)
-    (d / "recording.db3").unlink(missing_ok=True)  # ~0.7 MB per frame
+    if not keep:
+        (d / "recording.db3").unlink(missing_ok=True)  # ~0.7 MB per frame
     if factors:
         row.update(refit(d, factors))
     return row
+
+
+def summarize(rows: list[dict], frames: int, what: str) -> list[dict]:
+    """Print the median and mean of every column over the seeds without an error; returns those rows."""
+    ok = [r for r in rows if "error" not in r]
+    if ok:
+        keys = [k for k in ok[0] if k not in ("seed", "cv_factor")]
+        print(f"\n{what}: {len(ok)} of {len(rows)} seeds, {frames} frames; median (and mean) over seeds:")
+        for k in keys:
+            v = np.array([r[k] for r in ok if k in r], float)
+            print(f"  {k:>14}: median {np.median(v):.3f}  mean {np.mean(v):.3f}")
+    return ok
 
 
 def main(argv=None) -> int:
@@ -117,28 +129,47 @@ def main(argv=None) -> int:
     ap.add_argument("--factors", default="cv,1,0.5,0.25")
     ap.add_argument("--no-video2d", action="store_true")
     ap.add_argument("--out", type=Path, default=Path("bench_depth3d.json"))
+    ap.add_argument("--oracles", action="store_true",
+                    help="also the oracle rows (benchmarks/depth3d_oracles.py: true 3-D; true pixels + simulated "
+                         "depth noise; tracker-noise pixels + depth noise) per seed, without rendering")
+    ap.add_argument("--oracles-only", action="store_true", help="only the oracle rows (fast: no video)")
+    ap.add_argument("--cache", type=Path, default=None,
+                    help="keep each seed's recording and runs here (outside git) and reuse them on the next call")
+    ap.add_argument("--rerun-3d", action="store_true",
+                    help="with --cache: run `rce run recording.db3` again (after a change to the 3-D code)")
     args = ap.parse_args(argv)
     factors = [f if f == "cv" else float(f) for f in args.factors.split(",") if f]
-    work = Path(tempfile.mkdtemp(prefix="bench_depth3d_"))
+    cache = args.cache
+    if cache is not None:
+        cache.mkdir(parents=True, exist_ok=True)
+    work = cache if cache is not None else Path(tempfile.mkdtemp(prefix="bench_depth3d_"))
     rows = []
+    if args.oracles or args.oracles_only:
+        from depth3d_oracles import oracles
+        orows = []
+        for s in range(args.first_seed, args.first_seed + args.seeds):
+            orows.append(oracles(s, args.frames))
+            print(json.dumps(orows[-1]), flush=True)
+        summarize(orows, args.frames, "oracles (no video)")
+        args.out.with_name(args.out.stem + "_oracles.json").write_text(json.dumps(orows, indent=1) + "\n")
+        if args.oracles_only:
+            return 0
     try:
         for s in range(args.first_seed, args.first_seed + args.seeds):
             try:
-                rows.append(one_seed(s, args.frames, work, factors, not args.no_video2d))
+                rows.append(one_seed(s, args.frames, work, factors, not args.no_video2d, keep=cache is not None,
+                                     rerun=cache is None or args.rerun_3d))
             except Exception as exc:  # noqa: BLE001 - a failed seed is reported, the others go on
                 rows.append({"seed": s, "error": str(exc)[-500:]})
             print(json.dumps(rows[-1]), flush=True)
             args.out.write_text(json.dumps(rows, indent=1) + "\n")
-            shutil.rmtree(work / f"s{s}", ignore_errors=True)
+            if cache is None:
+                shutil.rmtree(work / f"s{s}", ignore_errors=True)
     finally:
-        shutil.rmtree(work, ignore_errors=True)
-    ok = [r for r in rows if "error" not in r]
+        if cache is None:
+            shutil.rmtree(work, ignore_errors=True)
+    ok = summarize(rows, args.frames, "rendered recordings")
     if ok:
-        keys = [k for k in ok[0] if k not in ("seed", "cv_factor")]
-        print(f"\n{len(ok)} of {len(rows)} seeds, {args.frames} frames; median (and mean) over seeds:")
-        for k in keys:
-            v = np.array([r[k] for r in ok if k in r], float)
-            print(f"  {k:>14}: median {np.median(v):.3f}  mean {np.mean(v):.3f}")
         if "2d_video" in ok[0]:
             ratio = np.array([r["3d"] / r["2d_video"] for r in ok])
             print(f"  3d / 2d_video: median {np.median(ratio):.2f}; 3d <= 0.5 x 2d_video in {np.sum(ratio <= 0.5)} of {len(ok)}")

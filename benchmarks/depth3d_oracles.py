@@ -1,0 +1,101 @@
+"""Oracles for kappa from depth (issue #39): how much of the 3-D kappa error is depth noise, how much the
+tracker's pixel error, how much the fit itself. No video is rendered: each oracle starts from the simulator's
+truth (``simulate(out_of_plane)``, the same seed and defaults as ``rce simulate --effect out_of_plane --depth``).
+
+Rows (kappa log-RMSE against ``kappa_true_3d``, the geometric-mean-free error of bench_depth3d.py):
+
+* ``true3d``: the true 3-D node positions (mm) -> angles3d -> kappa3d (the fit's own floor: rank-1 model, the
+  branch-plane estimate, the rest geometry);
+* ``px0+z``: the true pixel positions and, per node and frame, the true depth plus the simulator's D435i
+  depth-noise draw (``DepthNoise.sigma_mm(z)`` of :mod:`rce_gtsam.sim.depth`, independent per node and frame)
+  -> ``smooth_tracks_3d`` -> angles3d -> kappa3d; the depth sigma given to the smoother is the reader's
+  (:func:`rce_gtsam.track.depth_sample.d435_depth_rms_mm`), as in ``rce run``;
+* ``pxN+z``: as ``px0+z`` with the default tracker-noise model's pixel tracks (``sim.tracks``; sigma_px emitted);
+* ``pxN 2d``: the 2-D pipeline on those same noisy tracks (what the 2-D analysis loses to the same pixel error);
+* ``image``: kappa_true_image (a perfect 2-D tracker, the 2-D ceiling).
+
+Each oracle with depth is run with the 3-D smoother's default and, where given, other keyword arguments
+(``variants``: {name: kwargs for smooth_tracks_3d}), so a change to the smoother is measured here first.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def log_rmse(kappa: dict, truth: dict) -> float:
+    keys = [k for k in truth if k in kappa and np.isfinite(kappa[k]) and kappa[k] > 0]
+    d = np.log([kappa[k] for k in keys]) - np.log([truth[k] for k in keys])
+    d -= d.mean()
+    return float(np.sqrt(np.mean(d ** 2)))
+
+
+def simulate_seed(seed: int, frames: int):
+    """The simulation behind ``rce simulate --effect out_of_plane --depth --seed S --frames F`` (tracks with
+    their sigma_px; the noise draws do not depend on emitting it)."""
+    from rce_gtsam.sim.simulate import NoiseConfig, SimulationConfig, simulate
+
+    return simulate(SimulationConfig(n_frames=frames, effects=("out_of_plane",), seed=seed,
+                                     noise=NoiseConfig(emit_sigma=True)))
+
+
+def kappa_from_xyz(xyz_mm, node_ids, graph, geometry, preset, frame_cov=None, observed=None) -> dict:
+    """{"p->c": kappa} from 3-D positions (N, F, 3) mm through angles3d and kappa3d."""
+    from rce_gtsam.bending.angles3d import compute_bending_3d
+    from rce_gtsam.model.kappa3d import fit_kappa_3d
+
+    b3 = compute_bending_3d(xyz_mm, node_ids, graph, preset.bending, frame_cov, observed=observed)
+    k3 = fit_kappa_3d(b3, geometry, preset)
+    return {f"{j}->{c}": float(v) for (j, c), v in zip(k3.edges, k3.kappa)}
+
+
+def noisy_depth(xyz_mm: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(z measured, z sigma claimed) (N, F) mm: the true depth plus the simulator's D435i noise (seeded)."""
+    from rce_gtsam.sim.depth import DepthNoise
+    from rce_gtsam.track.depth_sample import d435_depth_rms_mm
+
+    z = xyz_mm[..., 2]
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x0AC1E]))
+    zm = np.round(z + DepthNoise().sigma_mm(z) * rng.standard_normal(z.shape))  # z16: whole mm
+    return zm, d435_depth_rms_mm(zm)
+
+
+def oracles(seed: int, frames: int, variants: dict | None = None, tracks_xy=None, tracks_sigma=None) -> dict:
+    """The oracle rows of one seed (see the module docstring). ``tracks_xy``/``tracks_sigma`` (N, F, 2)/(N, F):
+    other pixel tracks for the ``pxN`` rows (e.g. a rendered run's), rows in graph.nodes order."""
+    from rce_gtsam.bending.geometry import compute_geometry
+    from rce_gtsam.pipeline import analyze
+    from rce_gtsam.presets import get_preset
+    from rce_gtsam.smoothing.smoother3d import smooth_tracks_3d
+    from rce_gtsam.tracks import Tracks
+
+    variants = {"": {}} if variants is None else variants
+    sim = simulate_seed(seed, frames)
+    t3 = sim.three_d
+    g = sim.graph
+    ids = np.array(g.nodes)
+    truth = {f"{b.edge[0]}->{b.edge[1]}": float(k) for b, k in zip(g.bends, t3.kappa_3d)}
+    pre = get_preset("default").with_(compliance={"n_boot": 0})
+    P = np.asarray(t3.positions_mm, float)  # (N, F, 3)
+    geo = compute_geometry(sim.true_xy, ids, g, rest=pre.bending.rest)
+    out = {"seed": seed, "true3d": log_rmse(kappa_from_xyz(P, ids, g, geo, pre), truth),
+           "image": log_rmse({f"{b.edge[0]}->{b.edge[1]}": float(k) for b, k in zip(g.bends, t3.kappa_image)},
+                             truth)}
+    zm, zs = noisy_depth(P, seed)
+    uv_true = t3.camera.project(P)
+    xy_n = sim.tracks.xy if tracks_xy is None else tracks_xy
+    sig_n = sim.tracks.sigma_px if tracks_sigma is None else tracks_sigma
+    sig0 = np.where(np.isfinite(sig_n), sig_n, np.nanmedian(sig_n))
+    res = analyze(Tracks(node_ids=ids, xy=xy_n, sigma_px=sig_n, source="oracle"), g, pre)
+    out["pxN 2d"] = log_rmse({f"{p}->{c}": float(k) for (p, c), k in zip(res.response.edges, res.fit.kappa)},
+                             truth)
+    for name, kw in variants.items():
+        for label, xy, sig in (("px0+z", uv_true, sig0), ("pxN+z", xy_n, sig_n)):
+            zz = np.where(np.isfinite(xy).all(axis=2), zm, np.nan)
+            sm = smooth_tracks_3d(xy, sig, zz, zs, ids, g, t3.camera, pre.smoother, source="oracle", **kw)
+            k = kappa_from_xyz(sm.xyz_mm, ids, g, res.geometry if label == "pxN+z" else geo, pre,
+                               sm.frame_cov, sm.observed)
+            key = label + (f" {name}" if name else "")
+            out[key] = log_rmse(k, truth)
+            out[key + " s"] = sm.report.seconds_total
+    return out
