@@ -44,16 +44,18 @@ def rce(*args, cwd) -> None:
         raise RuntimeError(f"rce {' '.join(args)} exited {r.returncode}: {r.stderr[-2000:]}")
 
 
-def refit(d: Path, factors) -> dict:
-    from rce_gtsam.bending.angles3d import compute_bending_3d
+def refit(d: Path, factors, stretch=()) -> dict:
+    """kappa_3d re-fitted from the recording run's tracks.csv (its depths too) with each depth-axis factor in
+    ``factors`` (key ``3d@F``) and each inextensibility sigma share in ``stretch`` ("off" = no factor; key
+    ``3d+len@S``, the depth factor by cross-validation); also ``smooth_3d_s@...``, the smoother's seconds."""
     from rce_gtsam.camera import CameraIntrinsics
     from rce_gtsam.graph import load_graph
-    from rce_gtsam.model.kappa3d import fit_kappa_3d
     from rce_gtsam.pipeline import analyze
     from rce_gtsam.presets import get_preset
     from rce_gtsam.smoothing.smoother3d import smooth_tracks_3d
     from rce_gtsam.track.depth_tracks import read_depth_columns
-    from rce_gtsam.tracks import load_tracks
+    from rce_gtsam.tracks import load_tracks, lost_nodes
+    from depth3d_oracles import kappa_from_xyz
 
     truth = json.loads((d / "truth.json").read_text())
     g = load_graph(d / "graph.json")
@@ -62,19 +64,22 @@ def refit(d: Path, factors) -> dict:
     res = analyze(tr, g, pre)
     z, zs = read_depth_columns(d / "run3d" / "tracks.csv", tr)
     cam = CameraIntrinsics.coerce(truth["three_d"]["camera"])
+    runs = [(f"3d@{fac}", {"z_accel_factor": fac}) for fac in factors]
+    runs += [(f"3d+len@{s}", {"stretch_rel": None if s == "off" else float(s)}) for s in stretch]
     out = {}
-    for fac in factors:
-        sm = smooth_tracks_3d(tr.xy, tr.sigma_px, z, zs, tr.node_ids, g, cam, pre.smoother, z_accel_factor=fac)
-        b3 = compute_bending_3d(sm.xyz_mm, tr.node_ids, g, pre.bending, sm.frame_cov, observed=sm.observed)
-        k3 = fit_kappa_3d(b3, res.geometry, pre)
-        out[f"3d@{fac}"] = log_rmse({f"{j}->{c}": v for (j, c), v in zip(k3.edges, k3.kappa)}, truth["kappa_true_3d"])
-        if fac == "cv":
+    for key, kw in runs:
+        sm = smooth_tracks_3d(tr.xy, tr.sigma_px, z, zs, tr.node_ids, g, cam, pre.smoother, **kw)
+        k3 = kappa_from_xyz(sm.xyz_mm, tr.node_ids, g, res.geometry, pre, sm.frame_cov, sm.observed,
+                            skip_nodes=lost_nodes(tr))
+        out[key] = log_rmse(k3, truth["kappa_true_3d"])
+        out["smooth_3d_s" + key[2:]] = sm.report.seconds_total
+        if kw.get("z_accel_factor") == "cv":
             out["cv_factor"] = sm.report.z_accel_factor
     return out
 
 
 def one_seed(seed: int, frames: int, work: Path, factors, video2d: bool, keep: bool = False,
-             rerun: bool = True) -> dict:
+             rerun: bool = True, stretch=()) -> dict:
     import pandas as pd
     d = work / f"s{seed}"
     if not (d / "truth.json").exists():  # a cached recording (--cache) is rendered once
@@ -104,8 +109,8 @@ def one_seed(seed: int, frames: int, work: Path, factors, video2d: bool, keep: b
         row["2d_video"] = log_rmse({f"{p}->{c}": k for p, c, k in zip(cs.parent, cs.child, cs.kappa)}, kt)
     if not keep:
         (d / "recording.db3").unlink(missing_ok=True)  # ~0.7 MB per frame
-    if factors:
-        row.update(refit(d, factors))
+    if factors or stretch:
+        row.update(refit(d, factors, stretch))
     return row
 
 
@@ -127,6 +132,8 @@ def main(argv=None) -> int:
     ap.add_argument("--first-seed", type=int, default=0)
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--factors", default="cv,1,0.5,0.25")
+    ap.add_argument("--stretch", default="",
+                    help="re-fit with these inextensibility sigma shares, e.g. off,0.01 (smooth_tracks_3d(stretch_rel))")
     ap.add_argument("--no-video2d", action="store_true")
     ap.add_argument("--out", type=Path, default=Path("bench_depth3d.json"))
     ap.add_argument("--oracles", action="store_true",
@@ -146,9 +153,10 @@ def main(argv=None) -> int:
     rows = []
     if args.oracles or args.oracles_only:
         from depth3d_oracles import oracles
+        from rce_gtsam.smoothing.smoother3d import STRETCH_REL
         orows = []
         for s in range(args.first_seed, args.first_seed + args.seeds):
-            orows.append(oracles(s, args.frames))
+            orows.append(oracles(s, args.frames, {"": {}, "+len": {"stretch_rel": STRETCH_REL}}))
             print(json.dumps(orows[-1]), flush=True)
         summarize(orows, args.frames, "oracles (no video)")
         args.out.with_name(args.out.stem + "_oracles.json").write_text(json.dumps(orows, indent=1) + "\n")
@@ -158,7 +166,8 @@ def main(argv=None) -> int:
         for s in range(args.first_seed, args.first_seed + args.seeds):
             try:
                 rows.append(one_seed(s, args.frames, work, factors, not args.no_video2d, keep=cache is not None,
-                                     rerun=cache is None or args.rerun_3d))
+                                     rerun=cache is None or args.rerun_3d,
+                                     stretch=[v for v in args.stretch.split(",") if v]))
             except Exception as exc:  # noqa: BLE001 - a failed seed is reported, the others go on
                 rows.append({"seed": s, "error": str(exc)[-500:]})
             print(json.dumps(rows[-1]), flush=True)

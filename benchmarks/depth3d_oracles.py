@@ -10,7 +10,9 @@ Rows (kappa log-RMSE against ``kappa_true_3d``, the geometric-mean-free error of
   depth-noise draw (``DepthNoise.sigma_mm(z)`` of :mod:`rce_gtsam.sim.depth`, independent per node and frame)
   -> ``smooth_tracks_3d`` -> angles3d -> kappa3d; the depth sigma given to the smoother is the reader's
   (:func:`rce_gtsam.track.depth_sample.d435_depth_rms_mm`), as in ``rce run``;
+  the pixel sigma given is :data:`PX0_SIGMA`;
 * ``pxN+z``: as ``px0+z`` with the default tracker-noise model's pixel tracks (``sim.tracks``; sigma_px emitted);
+* ``pxN+z0``: those pixel tracks with the exact depth (rounded to mm): what the tracker's pixels allow;
 * ``pxN 2d``: the 2-D pipeline on those same noisy tracks (what the 2-D analysis loses to the same pixel error);
 * ``image``: kappa_true_image (a perfect 2-D tracker, the 2-D ceiling).
 
@@ -21,6 +23,10 @@ Each oracle with depth is run with the 3-D smoother's default and, where given, 
 from __future__ import annotations
 
 import numpy as np
+
+
+#: The pixel sigma (px) claimed for the true pixel positions of the ``px0`` rows: a tracker good to 0.1 px.
+PX0_SIGMA = 0.1
 
 
 def log_rmse(kappa: dict, truth: dict) -> float:
@@ -39,13 +45,14 @@ def simulate_seed(seed: int, frames: int):
                                      noise=NoiseConfig(emit_sigma=True)))
 
 
-def kappa_from_xyz(xyz_mm, node_ids, graph, geometry, preset, frame_cov=None, observed=None) -> dict:
+def kappa_from_xyz(xyz_mm, node_ids, graph, geometry, preset, frame_cov=None, observed=None,
+                   skip_nodes=()) -> dict:
     """{"p->c": kappa} from 3-D positions (N, F, 3) mm through angles3d and kappa3d."""
     from rce_gtsam.bending.angles3d import compute_bending_3d
     from rce_gtsam.model.kappa3d import fit_kappa_3d
 
     b3 = compute_bending_3d(xyz_mm, node_ids, graph, preset.bending, frame_cov, observed=observed)
-    k3 = fit_kappa_3d(b3, geometry, preset)
+    k3 = fit_kappa_3d(b3, geometry, preset, skip_nodes=skip_nodes)
     return {f"{j}->{c}": float(v) for (j, c), v in zip(k3.edges, k3.kappa)}
 
 
@@ -89,10 +96,13 @@ def oracles(seed: int, frames: int, variants: dict | None = None, tracks_xy=None
     res = analyze(Tracks(node_ids=ids, xy=xy_n, sigma_px=sig_n, source="oracle"), g, pre)
     out["pxN 2d"] = log_rmse({f"{p}->{c}": float(k) for (p, c), k in zip(res.response.edges, res.fit.kappa)},
                              truth)
+    z_exact = np.round(P[..., 2])
+    zs_exact = np.full(z_exact.shape, 1 / np.sqrt(12))  # z16 rounding, mm
     for name, kw in variants.items():
-        for label, xy, sig in (("px0+z", uv_true, sig0), ("pxN+z", xy_n, sig_n)):
-            zz = np.where(np.isfinite(xy).all(axis=2), zm, np.nan)
-            sm = smooth_tracks_3d(xy, sig, zz, zs, ids, g, t3.camera, pre.smoother, source="oracle", **kw)
+        for label, xy, sig, z_, zs_ in (("px0+z", uv_true, np.full(sig0.shape, PX0_SIGMA), zm, zs),
+                                        ("pxN+z", xy_n, sig_n, zm, zs), ("pxN+z0", xy_n, sig_n, z_exact, zs_exact)):
+            zz = np.where(np.isfinite(xy).all(axis=2), z_, np.nan)
+            sm = smooth_tracks_3d(xy, sig, zz, zs_, ids, g, t3.camera, pre.smoother, source="oracle", **kw)
             k = kappa_from_xyz(sm.xyz_mm, ids, g, res.geometry if label == "pxN+z" else geo, pre,
                                sm.frame_cov, sm.observed)
             key = label + (f" {name}" if name else "")
