@@ -55,7 +55,7 @@ def refit(d: Path, factors, stretch=()) -> dict:
     from rce_gtsam.smoothing.smoother3d import smooth_tracks_3d
     from rce_gtsam.track.depth_tracks import read_depth_columns
     from rce_gtsam.tracks import load_tracks, lost_nodes
-    from depth3d_oracles import kappa_from_xyz
+    from depth3d_oracles import kappa_from_xyz, kappa_in_plane_backprojected
 
     truth = json.loads((d / "truth.json").read_text())
     g = load_graph(d / "graph.json")
@@ -64,17 +64,31 @@ def refit(d: Path, factors, stretch=()) -> dict:
     res = analyze(tr, g, pre)
     z, zs = read_depth_columns(d / "run3d" / "tracks.csv", tr)
     cam = CameraIntrinsics.coerce(truth["three_d"]["camera"])
+    order = {n: i for i, n in enumerate(truth["three_d"]["node_order"])}
+    P = np.asarray(truth["positions_mm"], float).transpose(1, 0, 2)[[order[int(n)] for n in tr.node_ids]]
+    z_exact = np.where(np.isfinite(z), np.round(P[..., 2]), np.nan)  # the run's tracks with the true depth
     runs = [(f"3d@{fac}", {"z_accel_factor": fac}) for fac in factors]
     runs += [(f"3d+len@{s}", {"stretch_rel": None if s == "off" else float(s)}) for s in stretch]
-    out = {}
+    runs += [("3d z-exact", {"z": (z_exact, np.full(z.shape, 1 / np.sqrt(12)))})]
+    e = np.linalg.norm(tr.xy - cam.project(P), axis=2)
+    e = e[np.isfinite(e)]
+    zerr = (z - P[..., 2])[np.isfinite(z)]
+    out = {"px_err_median": float(np.median(e)), "px_err_rms": float(np.sqrt(np.mean(e ** 2))),
+           "px_gross_pct": float(100 * np.mean(e > 1.0)), "z_err_median": float(np.median(zerr)),
+           "z_err_mad": float(1.4826 * np.median(np.abs(zerr - np.median(zerr)))),
+           "z_sigma_median": float(np.nanmedian(zs))}
     for key, kw in runs:
-        sm = smooth_tracks_3d(tr.xy, tr.sigma_px, z, zs, tr.node_ids, g, cam, pre.smoother, **kw)
+        z_, zs_ = kw.pop("z", (z, zs))
+        sm = smooth_tracks_3d(tr.xy, tr.sigma_px, z_, zs_, tr.node_ids, g, cam, pre.smoother, **kw)
         k3 = kappa_from_xyz(sm.xyz_mm, tr.node_ids, g, res.geometry, pre, sm.frame_cov, sm.observed,
                             skip_nodes=lost_nodes(tr))
         out[key] = log_rmse(k3, truth["kappa_true_3d"])
         out["smooth_3d_s" + key[2:]] = sm.report.seconds_total
         if kw.get("z_accel_factor") == "cv":
             out["cv_factor"] = sm.report.z_accel_factor
+        if key == "3d+len@off":  # the in-plane bends from the pixels on the branch plane
+            kb = kappa_in_plane_backprojected(sm.xyz_mm, cam, tr.node_ids, g, res.geometry, pre, sm.observed)
+            out["3d bp_in"] = log_rmse(kb, truth["kappa_true_3d"])
     return out
 
 
@@ -110,7 +124,7 @@ def one_seed(seed: int, frames: int, work: Path, factors, video2d: bool, keep: b
     if not keep:
         (d / "recording.db3").unlink(missing_ok=True)  # ~0.7 MB per frame
     if factors or stretch:
-        row.update(refit(d, factors, stretch))
+        row.update(refit(d, factors, stretch))  # (and 3d z-exact: the run's tracks with the true depth)
     return row
 
 
@@ -133,13 +147,21 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=300)
     ap.add_argument("--factors", default="cv,1,0.5,0.25")
     ap.add_argument("--stretch", default="",
-                    help="re-fit with these inextensibility sigma shares, e.g. off,0.01 (smooth_tracks_3d(stretch_rel))")
+                    help="re-fit with these inextensibility sigma shares, e.g. off,0.01 "
+                         "(smooth_tracks_3d(stretch_rel)); also the run's tracks with the true depth")
     ap.add_argument("--no-video2d", action="store_true")
     ap.add_argument("--out", type=Path, default=Path("bench_depth3d.json"))
     ap.add_argument("--oracles", action="store_true",
                     help="also the oracle rows (benchmarks/depth3d_oracles.py: true 3-D; true pixels + simulated "
                          "depth noise; tracker-noise pixels + depth noise) per seed, without rendering")
+    ap.add_argument("--oracle-rows", type=Path, default=None,
+                    help="with --record: take the oracle rows from this file (an earlier --oracles-only run's)")
+    ap.add_argument("--reuse-rows", type=Path, nargs="*", default=[],
+                    help="take the rows of these seeds from earlier --out files instead of measuring them again")
     ap.add_argument("--oracles-only", action="store_true", help="only the oracle rows (fast: no video)")
+    ap.add_argument("--oracle-seeds", type=int, default=None, help="seeds of the oracle rows (default --seeds)")
+    ap.add_argument("--record", action="store_true",
+                    help="write docs/validation/depth3d.json and benchmarks/results/depth3d_*.json")
     ap.add_argument("--cache", type=Path, default=None,
                     help="keep each seed's recording and runs here (outside git) and reuse them on the next call")
     ap.add_argument("--rerun-3d", action="store_true",
@@ -150,20 +172,24 @@ def main(argv=None) -> int:
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
     work = cache if cache is not None else Path(tempfile.mkdtemp(prefix="bench_depth3d_"))
-    rows = []
+    rows, orows = [], []
     if args.oracles or args.oracles_only:
         from depth3d_oracles import oracles
         from rce_gtsam.smoothing.smoother3d import STRETCH_REL
-        orows = []
-        for s in range(args.first_seed, args.first_seed + args.seeds):
+        n_or = args.seeds if args.oracle_seeds is None else args.oracle_seeds
+        for s in range(args.first_seed, args.first_seed + n_or):
             orows.append(oracles(s, args.frames, {"": {}, "+len": {"stretch_rel": STRETCH_REL}}))
             print(json.dumps(orows[-1]), flush=True)
         summarize(orows, args.frames, "oracles (no video)")
         args.out.with_name(args.out.stem + "_oracles.json").write_text(json.dumps(orows, indent=1) + "\n")
         if args.oracles_only:
             return 0
+    reuse = {r["seed"]: r for f in args.reuse_rows for r in json.loads(f.read_text()) if "error" not in r}
     try:
         for s in range(args.first_seed, args.first_seed + args.seeds):
+            if s in reuse:
+                rows.append(reuse[s])
+                continue
             try:
                 rows.append(one_seed(s, args.frames, work, factors, not args.no_video2d, keep=cache is not None,
                                      rerun=cache is None or args.rerun_3d,
@@ -182,6 +208,13 @@ def main(argv=None) -> int:
         if "2d_video" in ok[0]:
             ratio = np.array([r["3d"] / r["2d_video"] for r in ok])
             print(f"  3d / 2d_video: median {np.median(ratio):.2f}; 3d <= 0.5 x 2d_video in {np.sum(ratio <= 0.5)} of {len(ok)}")
+    if args.record:
+        from depth3d_record import write
+        if args.oracle_rows is not None:
+            orows = json.loads(args.oracle_rows.read_text())
+        cmd = "OMP_NUM_THREADS=1 python benchmarks/bench_depth3d.py " + " ".join(
+            a for a in (argv if argv is not None else sys.argv[1:]) if not a.startswith("/"))
+        print("record:", write(ok, [r for r in orows if "error" not in r], args.frames, cmd))
     return 0
 
 

@@ -6,13 +6,15 @@ Rows (kappa log-RMSE against ``kappa_true_3d``, the geometric-mean-free error of
 
 * ``true3d``: the true 3-D node positions (mm) -> angles3d -> kappa3d (the fit's own floor: rank-1 model, the
   branch-plane estimate, the rest geometry);
-* ``px0+z``: the true pixel positions and, per node and frame, the true depth plus the simulator's D435i
-  depth-noise draw (``DepthNoise.sigma_mm(z)`` of :mod:`rce_gtsam.sim.depth`, independent per node and frame)
-  -> ``smooth_tracks_3d`` -> angles3d -> kappa3d; the depth sigma given to the smoother is the reader's
-  (:func:`rce_gtsam.track.depth_sample.d435_depth_rms_mm`), as in ``rce run``;
-  the pixel sigma given is :data:`PX0_SIGMA`;
+* ``px0+z``: the true pixel positions plus white noise of :data:`PX0_SIGMA` (the sigma given to the smoother)
+  and, per node and frame, the true depth plus the simulator's D435i depth-noise draw (``DepthNoise.sigma_mm(z)``
+  of :mod:`rce_gtsam.sim.depth`, independent per node and frame) -> ``smooth_tracks_3d`` -> angles3d -> kappa3d;
+  the depth sigma given to the smoother is the reader's (:func:`rce_gtsam.track.depth_sample.d435_depth_rms_mm`),
+  as in ``rce run``;
 * ``pxN+z``: as ``px0+z`` with the default tracker-noise model's pixel tracks (``sim.tracks``; sigma_px emitted);
 * ``pxN+z0``: those pixel tracks with the exact depth (rounded to mm): what the tracker's pixels allow;
+* ``px0+z bp_in``, ``pxN+z bp_in``: kappa of the in-plane bends only, each smoothed node moved along its pixel
+  ray onto the branch plane (:func:`kappa_in_plane_backprojected`): the depth noise kept out of those angles;
 * ``pxN 2d``: the 2-D pipeline on those same noisy tracks (what the 2-D analysis loses to the same pixel error);
 * ``image``: kappa_true_image (a perfect 2-D tracker, the 2-D ceiling).
 
@@ -25,7 +27,8 @@ from __future__ import annotations
 import numpy as np
 
 
-#: The pixel sigma (px) claimed for the true pixel positions of the ``px0`` rows: a tracker good to 0.1 px.
+#: The ``px0`` rows' pixel error (px, white, isotropic; also the sigma given to the smoother): a tracker good to
+#: 0.1 px, about the rendered runs' median error (0.1-0.15 px) without their gross failures.
 PX0_SIGMA = 0.1
 
 
@@ -54,6 +57,23 @@ def kappa_from_xyz(xyz_mm, node_ids, graph, geometry, preset, frame_cov=None, ob
     b3 = compute_bending_3d(xyz_mm, node_ids, graph, preset.bending, frame_cov, observed=observed)
     k3 = fit_kappa_3d(b3, geometry, preset, skip_nodes=skip_nodes)
     return {f"{j}->{c}": float(v) for (j, c), v in zip(k3.edges, k3.kappa)}
+
+
+def kappa_in_plane_backprojected(xyz_mm, cam, node_ids, graph, geometry, preset, observed=None) -> dict:
+    """{"p->c": kappa} of the in-plane bends only, with each node's 3-D point replaced by its pixel ray's
+    intersection with the branch plane (normal and rest centroid of ``xyz_mm``): the depth then enters only
+    through the plane, fitted to every node and frame, not through each node's own depth."""
+    from rce_gtsam.bending.angles3d import branch_plane, compute_bending_3d
+    from rce_gtsam.model.kappa3d import fit_kappa_3d
+
+    n = branch_plane(xyz_mm)
+    c = np.nanmedian(xyz_mm, axis=1).mean(axis=0)
+    uv = cam.project(xyz_mm)
+    ray = np.stack([(uv[..., 0] - cam.cx) / cam.fx, (uv[..., 1] - cam.cy) / cam.fy, np.ones(uv.shape[:2])], -1)
+    on_plane = ray * ((n @ c) / (ray @ n))[..., None]
+    k = fit_kappa_3d(compute_bending_3d(on_plane, node_ids, graph, preset.bending, observed=observed), geometry,
+                     preset)
+    return {f"{j}->{c_}": float(v) for (j, c_), v in zip(k.edges, k.kappa_in_plane)}
 
 
 def noisy_depth(xyz_mm: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -89,7 +109,8 @@ def oracles(seed: int, frames: int, variants: dict | None = None, tracks_xy=None
            "image": log_rmse({f"{b.edge[0]}->{b.edge[1]}": float(k) for b, k in zip(g.bends, t3.kappa_image)},
                              truth)}
     zm, zs = noisy_depth(P, seed)
-    uv_true = t3.camera.project(P)
+    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x0AC1F]))
+    uv_true = t3.camera.project(P) + rng.normal(0.0, PX0_SIGMA, P.shape[:2] + (2,))  # a 0.1 px tracker
     xy_n = sim.tracks.xy if tracks_xy is None else tracks_xy
     sig_n = sim.tracks.sigma_px if tracks_sigma is None else tracks_sigma
     sig0 = np.where(np.isfinite(sig_n), sig_n, np.nanmedian(sig_n))
@@ -108,4 +129,8 @@ def oracles(seed: int, frames: int, variants: dict | None = None, tracks_xy=None
             key = label + (f" {name}" if name else "")
             out[key] = log_rmse(k, truth)
             out[key + " s"] = sm.report.seconds_total
+            if not name and label != "pxN+z0":  # the in-plane bends from the pixels on the branch plane
+                kb = kappa_in_plane_backprojected(sm.xyz_mm, t3.camera, ids, g,
+                                                  res.geometry if label == "pxN+z" else geo, pre, sm.observed)
+                out[label + " bp_in"] = log_rmse(kb, truth)
     return out

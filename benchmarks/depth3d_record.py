@@ -1,0 +1,88 @@
+"""The validation record of bench_depth3d.py (docs/validation/depth3d.json, per-seed values in
+benchmarks/results/depth3d_seeds.json and depth3d_oracles.json), written with :func:`record.save_record`."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from record import save_record
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+#: (column of a rendered-recording row, what it is)
+RENDERED = [("2d_video", "rce run video.mp4 (2-D)"),
+            ("2d_rec", "rce run recording.db3, the 2-D fit of its tracks"),
+            ("3d", "rce run recording.db3, kappa from the 3-D angles"),
+            ("3d_in", "the same, in-plane 3-D bends only"),
+            ("3d+len@off", "re-fit from that run's tracks.csv and depths (no inextensibility)"),
+            ("3d+len@0.01", "the same with the inextensibility factor (sigma 1 % of L)"),
+            ("3d bp_in", "the same (no inextensibility), in-plane bends from the pixels on the branch plane"),
+            ("3d z-exact", "re-fit from that run's tracks.csv with the true depth (rounded to mm)"),
+            ("ceiling", "a perfect 2-D tracker (kappa_true_image)")]
+#: (column of an oracle row, what it is)
+ORACLES = [("true3d", "oracle: the true 3-D positions"),
+           ("px0+z", "oracle: true pixels (0.1 px) + D435i depth noise"),
+           ("px0+z +len", "the same with the inextensibility factor"),
+           ("px0+z bp_in", "the same (no inextensibility), in-plane bends from the pixels on the branch plane"),
+           ("pxN+z0", "oracle: tracker-noise pixels + exact depth"),
+           ("pxN+z", "oracle: tracker-noise pixels + D435i depth noise"),
+           ("pxN+z +len", "the same with the inextensibility factor"),
+           ("pxN+z bp_in", "the same (no inextensibility), in-plane bends from the pixels on the branch plane"),
+           ("pxN 2d", "oracle: the 2-D pipeline on the tracker-noise pixels")]
+
+
+def _med(rows, key):
+    v = np.array([r[key] for r in rows if key in r], float)
+    return (float(np.median(v)), len(v)) if v.size else (float("nan"), 0)
+
+
+def write(rows: list[dict], orows: list[dict], frames: int, command: str) -> Path:
+    """Save the record from the rendered rows (without errors) and the oracle rows."""
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / "depth3d_seeds.json").write_text(json.dumps(rows, indent=1) + "\n")
+    (RESULTS / "depth3d_oracles.json").write_text(json.dumps(orows, indent=1) + "\n")
+    table = []
+    for src, spec in ((rows, RENDERED), (orows, ORACLES)):
+        for key, label in spec:
+            m, n = _med(src, key)
+            if n:
+                table.append([label, n, round(m, 3)])
+    notes = []
+    if rows and all("2d_video" in r and "3d" in r for r in rows):
+        ratio = np.array([r["3d"] / r["2d_video"] for r in rows])
+        notes.append(f"rce run recording.db3 (3-D) against video.mp4 (2-D): median ratio {np.median(ratio):.2f} over "
+                     f"{len(rows)} seeds, <= 0.5 in {int(np.sum(ratio <= 0.5))}: the goal of 0.5x is not reached.")
+    o = {k: _med(orows, k)[0] for k, _ in ORACLES}
+    if orows:
+        notes.append(
+            f"The ceiling ({len(orows)} seeds, no video): the fit itself gives {o['true3d']:.3f}; the tracker-noise "
+            f"model's pixels alone (exact depth) {o['pxN+z0']:.3f}, as bad as the 2-D pipeline on the same pixels "
+            f"({o['pxN 2d']:.3f}): with ~0.8 px tracks no depth handling can halve the 2-D error. Depth noise alone "
+            f"(true pixels) gives {o['px0+z']:.3f}; the inextensibility factor cuts that to {o['px0+z +len']:.3f}, "
+            f"but with the tracker-noise pixels it gives {o['pxN+z +len']:.3f} against {o['pxN+z']:.3f} without: the "
+            f"segment's length turns the pixel error along it into depth error (x L/dz, 2-4), so it is off by default.")
+    if rows:
+        pm, pr, pg = (_med(rows, k)[0] for k in ("px_err_median", "px_err_rms", "px_gross_pct"))
+        zm, zd, zs = (_med(rows, k)[0] for k in ("z_err_median", "z_err_mad", "z_sigma_median"))
+        notes.append(f"The rendered runs' tracker: median pixel error {pm:.2f} px, but RMS {pr:.1f} px ({pg:.1f} % of "
+                     f"node-frames off by > 1 px; medians over seeds); with the true depth its tracks give "
+                     f"{_med(rows, '3d z-exact')[0]:.3f}: the pixel error, not the depth, bounds the 3-D kappa.")
+        notes.append(f"The read depth (stem surface) is {-zm:.1f} mm nearer than the stem's axis and scatters "
+                     f"{zd:.1f} mm (1.4826 MAD) about it, while the reader claims {zs:.1f} mm (its D435 model, "
+                     f"focal 430 px, against the simulator's 674 px).")
+        s3, s2 = _med(rows, "smooth_3d_s")[0], _med(rows, "smooth_2d_s")[0]
+        sl = _med(rows, "smooth_3d_s+len@0.01")[0]
+        notes.append(f"The 3-D smoother costs {s3:.1f} s (with the inextensibility factor {sl:.1f} s) against "
+                     f"{s2:.2f} s for the 2-D one (median, loaded 2-core machine).")
+    return save_record(
+        "depth3d", title="Kappa from the RealSense depth stream against kappa from the 2-D video (out-of-plane "
+                         "swing), and its ceiling", command=command,
+        description=(f"rce simulate --effect out_of_plane --depth (share 0.5, tilt 30 deg, {frames} frames): the same "
+                     "recording through rce run as video.mp4 (2-D) and as recording.db3 (depth per node, the 3-D "
+                     "GTSAM smoother, 3-D turning angles), and the oracles of benchmarks/depth3d_oracles.py (no video: "
+                     "the simulator's truth with chosen errors). Kappa log-RMSE against the 3-D truth, median over "
+                     "seeds; per-seed values in benchmarks/results/depth3d_seeds.json and depth3d_oracles.json."),
+        columns=["kappa from", "seeds", "log-RMSE vs the 3-D truth (median)"], rows=table, notes=notes)
