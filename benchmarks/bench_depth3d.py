@@ -212,6 +212,10 @@ def main(argv=None) -> int:
         from depth3d_record import write
         if args.oracle_rows is not None:
             orows = json.loads(args.oracle_rows.read_text())
+            from depth3d_oracles import px0_2d, simulate_seed
+            for r in orows:  # rows from before the px0 2-D oracle existed
+                if "px0 2d" not in r and "error" not in r:
+                    r["px0 2d"] = px0_2d(simulate_seed(r["seed"], args.frames))
         cmd = "OMP_NUM_THREADS=1 python benchmarks/bench_depth3d.py " + " ".join(
             a for a in (argv if argv is not None else sys.argv[1:]) if not a.startswith("/"))
         print("record:", write(ok, [r for r in orows if "error" not in r], args.frames, cmd))

@@ -15,6 +15,7 @@ Rows (kappa log-RMSE against ``kappa_true_3d``, the geometric-mean-free error of
 * ``pxN+z0``: those pixel tracks with the exact depth (rounded to mm): what the tracker's pixels allow;
 * ``px0+z bp_in``, ``pxN+z bp_in``: kappa of the in-plane bends only, each smoothed node moved along its pixel
   ray onto the branch plane (:func:`kappa_in_plane_backprojected`): the depth noise kept out of those angles;
+* ``px0 2d``: the 2-D pipeline on the 0.1 px pixels of ``px0+z``;
 * ``pxN 2d``: the 2-D pipeline on those same noisy tracks (what the 2-D analysis loses to the same pixel error);
 * ``image``: kappa_true_image (a perfect 2-D tracker, the 2-D ceiling).
 
@@ -87,6 +88,28 @@ def noisy_depth(xyz_mm: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
     return zm, d435_depth_rms_mm(zm)
 
 
+def px0_pixels(sim) -> np.ndarray:
+    """(N, F, 2) the true pixels plus white noise of :data:`PX0_SIGMA` (seeded by the simulation's seed)."""
+    rng = np.random.default_rng(np.random.SeedSequence([int(sim.config.seed), 0x0AC1F]))
+    P = np.asarray(sim.three_d.positions_mm, float)
+    return sim.three_d.camera.project(P) + rng.normal(0.0, PX0_SIGMA, P.shape[:2] + (2,))
+
+
+def px0_2d(sim, uv=None, preset=None) -> float:
+    """kappa log-RMSE (vs kappa_true_3d) of the 2-D pipeline on the 0.1 px pixels (:func:`px0_pixels`)."""
+    from rce_gtsam.pipeline import analyze
+    from rce_gtsam.presets import get_preset
+    from rce_gtsam.tracks import Tracks
+
+    g = sim.graph
+    uv = px0_pixels(sim) if uv is None else uv
+    pre = preset or get_preset("default").with_(compliance={"n_boot": 0})
+    res = analyze(Tracks(node_ids=np.array(g.nodes), xy=uv, sigma_px=np.full(uv.shape[:2], PX0_SIGMA),
+                         source="oracle"), g, pre)
+    truth = {f"{b.edge[0]}->{b.edge[1]}": float(k) for b, k in zip(g.bends, sim.three_d.kappa_3d)}
+    return log_rmse({f"{p}->{c}": float(k) for (p, c), k in zip(res.response.edges, res.fit.kappa)}, truth)
+
+
 def oracles(seed: int, frames: int, variants: dict | None = None, tracks_xy=None, tracks_sigma=None) -> dict:
     """The oracle rows of one seed (see the module docstring). ``tracks_xy``/``tracks_sigma`` (N, F, 2)/(N, F):
     other pixel tracks for the ``pxN`` rows (e.g. a rendered run's), rows in graph.nodes order."""
@@ -109,11 +132,11 @@ def oracles(seed: int, frames: int, variants: dict | None = None, tracks_xy=None
            "image": log_rmse({f"{b.edge[0]}->{b.edge[1]}": float(k) for b, k in zip(g.bends, t3.kappa_image)},
                              truth)}
     zm, zs = noisy_depth(P, seed)
-    rng = np.random.default_rng(np.random.SeedSequence([int(seed), 0x0AC1F]))
-    uv_true = t3.camera.project(P) + rng.normal(0.0, PX0_SIGMA, P.shape[:2] + (2,))  # a 0.1 px tracker
+    uv_true = px0_pixels(sim)  # a 0.1 px tracker
     xy_n = sim.tracks.xy if tracks_xy is None else tracks_xy
     sig_n = sim.tracks.sigma_px if tracks_sigma is None else tracks_sigma
     sig0 = np.where(np.isfinite(sig_n), sig_n, np.nanmedian(sig_n))
+    out["px0 2d"] = px0_2d(sim, uv_true, pre)
     res = analyze(Tracks(node_ids=ids, xy=xy_n, sigma_px=sig_n, source="oracle"), g, pre)
     out["pxN 2d"] = log_rmse({f"{p}->{c}": float(k) for (p, c), k in zip(res.response.edges, res.fit.kappa)},
                              truth)

@@ -17,7 +17,9 @@ Factors, all on the same frames and nodes as the 2-D smoother (:mod:`.smoother`)
   out-of-plane swing to the rest shape (tip depth error 4-10 mm against 3 mm raw on a simulated chain,
   kappa log-RMSE 0.06-0.08 against 0.04-0.06 without it). Velocity and acceleration take the 2-D smoother's
   weights (``SmootherConfig``, 1/px^2) turned into mm at the branch's median depth (``mm_per_px = median z / fx``),
-  so a 3-D recording is smoothed as strongly in time as its 2-D tracks are.
+  so a 3-D recording is smoothed as strongly in time as its 2-D tracks are;
+* optionally (``stretch_rel``, off by default), inextensibility: every segment keeps one 3-D length, a free
+  variable per edge (:data:`STRETCH_REL`, with the measurements that keep it off by default).
 
 Every factor is linear, so each solve is one Levenberg-Marquardt step over ``LinearContainerFactor``s (C++;
 the Python ``CustomFactor`` route is ~100x slower, see docs/ecosystem notes). Marginal covariances per frame
