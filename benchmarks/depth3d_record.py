@@ -66,14 +66,16 @@ def write(rows: list[dict], orows: list[dict], frames: int, command: str) -> Pat
             f"model's pixels (~0.8 px) even the exact depth gives {o['pxN+z0']:.3f} against {o['pxN 2d']:.3f} for the "
             f"2-D pipeline on the same pixels (and the noisy depth {o['pxN+z']:.3f}, not explained here): at that "
             f"pixel error no depth handling halves the 2-D error.")
+        r3, rl = o["px0+z"] / o["px0 2d"], o["px0+z +len"] / o["px0 2d"]
         notes.append(
-            f"With a 0.1 px tracker the 2-D pipeline gives {o['px0 2d']:.3f} and the 3-D angles {o['px0+z']:.3f}: "
-            f"the D435i depth noise (1.5-2.4 mm at 0.7-0.9 m over 15-30 mm segments) enters the 3-D angles, the "
-            f"in-plane ones too through the 30 deg tilt. The inextensibility factor gives {o['px0+z +len']:.3f} "
-            f"({cmp('px0+z +len', 'px0+z')}), with the ~0.8 px pixels {o['pxN+z +len']:.3f} against {o['pxN+z']:.3f} "
-            f"(it turns the pixel error along a segment into depth error, x L/dz = 2-4): off by default. The in-plane "
-            f"bends from the pixels moved onto the branch plane (depth only fits the plane) give {o['px0+z bp_in']:.3f} "
-            f"with the 0.1 px pixels and {o['pxN+z bp_in']:.3f} with the ~0.8 px ones.")
+            f"With a 0.1 px tracker (no gross failures) the 2-D pipeline gives {o['px0 2d']:.3f} (its out-of-plane "
+            f"bias: the perfect 2-D tracker's {_med(orows, 'image')[0]:.3f}), the 3-D angles {o['px0+z']:.3f} ({r3:.2f}x) and, "
+            f"with the inextensibility factor, {o['px0+z +len']:.3f} ({rl:.2f}x): there the length factor is what "
+            f"brings the 3-D kappa near half the 2-D error. With the ~0.8 px tracker-noise pixels it gives "
+            f"{o['pxN+z +len']:.3f} against {o['pxN+z']:.3f} without (the length turns the pixel error along a segment "
+            f"into depth error, x L/dz = 2-4), so it is off by default. The in-plane bends from the pixels moved "
+            f"onto the branch plane (depth only fits the plane) give {o['px0+z bp_in']:.3f} (0.1 px) and "
+            f"{o['pxN+z bp_in']:.3f} (~0.8 px).")
     if rows:
         pm, pr, pg = (_med(rows, k)[0] for k in ("px_err_median", "px_err_rms", "px_gross_pct"))
         zm, zd, zs = (_med(rows, k)[0] for k in ("z_err_median", "z_err_mad", "z_sigma_median"))
