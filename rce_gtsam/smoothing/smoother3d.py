@@ -63,7 +63,8 @@ STRETCH_LINEARISATIONS = 1
 #: Inextensibility: a branch segment does not stretch, so each edge's 3-D length |p_c - p_p| is one constant L_e
 #: (mm, a free variable of the graph, estimated with the positions). Its factor per edge and frame is the
 #: linearisation ``u . (p_c - p_p) - L_e = 0`` with ``u`` the current unit direction (exact to first order,
-#: re-linearised like the projections). Its sigma is STRETCH_REL * L_e (the first solution's median length):
+#: re-linearised like the projections). Its sigma combines STRETCH_REL * L_e (L_e the first solution's median
+#: length) with the robust scatter of that solution's lengths over frames (:func:`_stretch_sigma`). STRETCH_REL:
 #: the chord between two tracked points on a stem changes by the stem's axial strain (well under 1e-3 for a stem
 #: bent by wind) plus the points' offset from the stem's axis times the bend (radius ~1-3 mm x a few degrees,
 #: ~0.1-0.2 mm, under 1 % of a 15-30 mm segment); 1 % bounds both. With pixels good to a fraction of a pixel the
