@@ -17,7 +17,9 @@ Factors, all on the same frames and nodes as the 2-D smoother (:mod:`.smoother`)
   out-of-plane swing to the rest shape (tip depth error 4-10 mm against 3 mm raw on a simulated chain,
   kappa log-RMSE 0.06-0.08 against 0.04-0.06 without it). Velocity and acceleration take the 2-D smoother's
   weights (``SmootherConfig``, 1/px^2) turned into mm at the branch's median depth (``mm_per_px = median z / fx``),
-  so a 3-D recording is smoothed as strongly in time as its 2-D tracks are.
+  so a 3-D recording is smoothed as strongly in time as its 2-D tracks are;
+* optionally (``stretch_rel``, off by default), inextensibility: every segment keeps one 3-D length, a free
+  variable per edge (:data:`STRETCH_REL`, with the measurements that keep it off by default).
 
 Every factor is linear, so each solve is one Levenberg-Marquardt step over ``LinearContainerFactor``s (C++;
 the Python ``CustomFactor`` route is ~100x slower, see docs/ecosystem notes). Marginal covariances per frame
@@ -55,6 +57,28 @@ CV_EVERY = 5
 CV_BLOCK = 8
 #: Solves per fit: the projections' depths are re-linearised at the first solution (and the depths gated).
 N_LINEARISATIONS = 2
+#: Extra solves with the inextensibility factor (its directions re-linearised at each solution).
+STRETCH_LINEARISATIONS = 1
+
+#: Inextensibility: a branch segment does not stretch, so each edge's 3-D length |p_c - p_p| is one constant L_e
+#: (mm, a free variable of the graph, estimated with the positions). Its factor per edge and frame is the
+#: linearisation ``u . (p_c - p_p) - L_e = 0`` with ``u`` the current unit direction (exact to first order,
+#: re-linearised like the projections). Its sigma combines STRETCH_REL * L_e (L_e the first solution's median
+#: length) with the robust scatter of that solution's lengths over frames (:func:`_stretch_sigma`). STRETCH_REL:
+#: the chord between two tracked points on a stem changes by the stem's axial strain (well under 1e-3 for a stem
+#: bent by wind) plus the points' offset from the stem's axis times the bend (radius ~1-3 mm x a few degrees,
+#: ~0.1-0.2 mm, under 1 % of a 15-30 mm segment); 1 % bounds both. With pixels good to a fraction of a pixel the
+#: depth difference along a segment tilted out of the image plane then follows from its projected length
+#: (d dz = L dL / dz), and depth is needed mostly for the sign and the scale. It constrains no direction, so the
+#: out-of-plane swing stays free (unlike a prior on the 3-D offset, see above).
+#: Measured (benchmarks/bench_depth3d.py --oracles, 20 simulated out-of-plane recordings, kappa log-RMSE median):
+#: with 0.1 px pixel tracks and D435i depth noise it cuts the 3-D kappa error from 0.143 to 0.097 (better on 18 of
+#: 20; the 2-D pipeline on those pixels: 0.182); with the default tracker-noise model's pixels (~0.8 px, along the
+#: stem 3x across) it raises it from 0.312 to 0.447, because the length then turns the pixel error along the
+#: segment into depth error (x L/dz, 2-4 here); on the rendered runs' tracks (median 0.07 px, 4.5 % off by > 1 px)
+#: 0.409 against 0.415. So it is off by default (``smooth_tracks_3d(stretch_rel=STRETCH_REL)`` switches it on).
+STRETCH_REL = 0.01
+LENGTH_KEY = gtsam.symbol("l", 0)
 
 #: Depth measurements further than this many sigmas from the first solution are dropped before the final solve.
 DEPTH_GATE = 4.0
@@ -64,7 +88,11 @@ DEPTH_GATE = 4.0
 class Smoother3DReport:
     """What the 3-D smoother did. Seconds; counts; ``mm_per_px`` scales the 2-D weights to mm;
     ``z_accel_factor`` the depth axis' acceleration factor used and ``z_accel_cv`` its cross-validation scores
-    (factor -> mean squared standardised held-out depth error; empty when the factor was given)."""
+    (factor -> mean squared standardised held-out depth error; empty when the factor was given).
+    ``stretch_rel``: the inextensibility sigma's share of a segment's length (None: no such factor);
+    ``lengths_mm``: the estimated 3-D length per edge (mm, ``graph.edges`` order among the tracked nodes);
+    ``length_rms_mm``: RMS of |p_c - p_p| - L_e over edges and frames (mm), ``length_rms_sigmas`` the same in
+    units of the factor's sigma (about 1 or below when the segments keep their length within the model)."""
 
     iterations: int
     z_accel_factor: float | None
@@ -77,6 +105,10 @@ class Smoother3DReport:
     seconds_build: float
     seconds_optimize: float
     seconds_marginals: float
+    stretch_rel: float | None = None
+    lengths_mm: tuple | None = None
+    length_rms_mm: float | None = None
+    length_rms_sigmas: float | None = None
 
     @property
     def seconds_total(self) -> float:
@@ -149,15 +181,18 @@ def _check(xy, sigma_px, z_mm, z_sigma_mm, node_ids, source) -> None:
 class _Graph:
     """Builds the linear factors of one solve."""
 
-    def __init__(self, n: int, f: int):
+    def __init__(self, n: int, f: int, n_lengths: int = 0):
         self.n, self.f = n, f
         self.graph = gtsam.NonlinearFactorGraph()
         self.zero = gtsam.Values()
         for t in range(f):
             self.zero.insert(gtsam.symbol("x", t), np.zeros(3 * n))
+        if n_lengths:  # the segments' 3-D lengths (mm), one free constant per edge
+            self.zero.insert(LENGTH_KEY, np.zeros(n_lengths))
 
     def add(self, blocks: list[tuple[int, np.ndarray]], b: np.ndarray, sigmas: np.ndarray) -> None:
-        keys = [(gtsam.symbol("x", t), np.asarray(A, float)) for t, A in blocks]
+        """A linear factor ``sum A_t x_t = b``; a block's frame ``t`` of ``None`` is the lengths' variable."""
+        keys = [(LENGTH_KEY if t is None else gtsam.symbol("x", t), np.asarray(A, float)) for t, A in blocks]
         noise = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigmas, float))
         if len(keys) == 1:
             jf = gtsam.JacobianFactor(keys[0][0], keys[0][1], np.asarray(b, float), noise)
@@ -170,11 +205,13 @@ class _Graph:
 
 
 def _build(xy, sig_px, z, z_sig, use_depth, lin, edges_rows, rest, cam: CameraIntrinsics,
-           cfg: SmootherConfig, mm_per_px: float, z_accel_mm: np.ndarray | None = None) -> _Graph:
-    """The linear factors, linearised at ``lin`` (N, F, 3) mm (the projections' depths)."""
+           cfg: SmootherConfig, mm_per_px: float, z_accel_mm: np.ndarray | None = None,
+           stretch_mm: np.ndarray | None = None) -> _Graph:
+    """The linear factors, linearised at ``lin`` (N, F, 3) mm (the projections' depths and, with ``stretch_mm``
+    (E,) the inextensibility sigmas per edge in mm, the segments' directions)."""
     n, f = xy.shape[:2]
     z0 = np.maximum(lin[..., 2], 1.0)
-    g = _Graph(n, f)
+    g = _Graph(n, f, len(edges_rows) if stretch_mm is not None else 0)
     eye = np.eye(3 * n)
     obs = np.isfinite(xy).all(axis=2)
     for t in range(f):
@@ -202,6 +239,16 @@ def _build(xy, sig_px, z, z_sig, use_depth, lin, edges_rows, rest, cam: CameraIn
                     A[2 * k + ax, 3 * ic + ax] = foc / z0[ic, t]
                     A[2 * k + ax, 3 * ip + ax] = -foc / z0[ip, t]
             g.add([(t, A)], rest.reshape(-1), np.full(2 * len(edges_rows), 1.0 / np.sqrt(cfg.edge_weight)))
+        if stretch_mm is not None:  # u . (p_c - p_p) - L_e = 0
+            e = len(edges_rows)
+            ip, ic = (np.array(v) for v in zip(*edges_rows))
+            d = lin[ic, t] - lin[ip, t]
+            u = d / np.maximum(np.linalg.norm(d, axis=1, keepdims=True), 1e-9)
+            A = np.zeros((e, 3 * n))
+            for k in range(3):
+                A[np.arange(e), 3 * ic + k] += u[:, k]
+                A[np.arange(e), 3 * ip + k] -= u[:, k]
+            g.add([(t, A), (None, -np.eye(e))], np.zeros(e), stretch_mm)
     if cfg.velocity_weight > 0:
         sv = np.full(3 * n, mm_per_px / np.sqrt(cfg.velocity_weight))
         for t in range(f - 1):
@@ -224,6 +271,22 @@ def _image_accel_mm(pre_xy: np.ndarray, z0: np.ndarray, cam: CameraIntrinsics) -
     return np.maximum(rms_px * np.median(z0, axis=1) / cam.fx, 0.01)
 
 
+def _lengths(xyz: np.ndarray, edges_rows) -> np.ndarray:
+    """(E, F) 3-D length of every edge (mm) in every frame."""
+    ip, ic = (np.array(v) for v in zip(*edges_rows))
+    return np.linalg.norm(xyz[ic] - xyz[ip], axis=-1)
+
+
+def _stretch_sigma(lengths: np.ndarray, stretch_rel: float) -> np.ndarray:
+    """(E,) sigma (mm) of each edge's inextensibility factor from its lengths (E, F) in a solution without it:
+    the stem's own stretch (``stretch_rel`` x the median length) combined with the lengths' robust scatter over
+    frames (1.4826 MAD), which holds the tracked points' sliding along the stem and the depth noise: the factor is
+    never trusted more than the data show the segment keeps its length."""
+    med = np.median(lengths, axis=1)
+    mad = 1.4826 * np.median(np.abs(lengths - med[:, None]), axis=1)
+    return np.hypot(stretch_rel * med, mad)
+
+
 def _solve(g: _Graph) -> tuple[gtsam.Values, int]:
     params = gtsam.LevenbergMarquardtParams()
     params.setMaxIterations(10)
@@ -239,7 +302,8 @@ def _positions(values: gtsam.Values, n: int, f: int) -> np.ndarray:
 def smooth_tracks_3d(xy_px: np.ndarray, sigma_px: np.ndarray | None, z_mm: np.ndarray, z_sigma_mm: np.ndarray,
                      node_ids, graph: BranchGraph, intrinsics: CameraIntrinsics,
                      config: SmootherConfig = SmootherConfig(), source: str = "tracks",
-                     z_accel_factor: float | str | None = "cv") -> Smoothed3D:
+                     z_accel_factor: float | str | None = "cv",
+                     stretch_rel: float | None = None) -> Smoothed3D:
     """Smooth pixel tracks ``xy_px`` (N, F, 2; NaN = not observed) with their depths ``z_mm`` (N, F; NaN = none)
     into 3-D positions (mm, camera frame) with marginal covariances. ``sigma_px`` (N, F) per-observation pixel
     sigma (None: ``1/sqrt(config.measurement_weight)``); ``z_sigma_mm`` (N, F) depth sigma."""
@@ -265,16 +329,20 @@ def smooth_tracks_3d(xy_px: np.ndarray, sigma_px: np.ndarray | None, z_mm: np.nd
     rest = np.array([np.median(xy0[c] - xy0[p], axis=0) for p, c in edges_rows]).reshape(-1, 2)  # px
     init = intrinsics.deproject(xy0, z0)
 
-    def fit(use0, pre_z_, z_acc, n_lin=N_LINEARISATIONS):
-        lin, use, iters = init, use0, 0
-        for k in range(n_lin):
+    stretch_on = stretch_rel is not None and bool(edges_rows)
+
+    def fit(use0, pre_z_, z_acc, n_lin=N_LINEARISATIONS, stretch=False):
+        lin, use, iters, s_mm = init, use0, 0, None
+        for k in range(n_lin + (STRETCH_LINEARISATIONS if stretch else 0)):
             g = _build(pre_xy, sig, pre_z_, zs, use, lin, edges_rows, rest, intrinsics, config, mm_per_px,
-                       z_acc)
+                       z_acc, s_mm)
             values, it = _solve(g)
             iters += it
             lin = _positions(values, n, f)
-            if k == 0:  # gate the depths against the first solution
+            if k == 0:  # gate the depths against the first solution; the segments' lengths from it
                 use = use0 & (np.where(use0, np.abs(pre_z_ - lin[..., 2]) / zs, 0.0) <= DEPTH_GATE)
+                if stretch:
+                    s_mm = _stretch_sigma(_lengths(lin, edges_rows), stretch_rel)
         return g, values, lin, use, iters
 
     accel_mm = _image_accel_mm(pre_xy, z0, intrinsics)
@@ -291,7 +359,11 @@ def smooth_tracks_3d(xy_px: np.ndarray, sigma_px: np.ndarray | None, z_mm: np.nd
         factor = min(scores, key=scores.get)
     else:
         factor = z_accel_factor
-    g, values, xyz, use, iters = fit(has_z, pre_z, None if factor is None else factor * accel_mm)
+    g, values, xyz, use, iters = fit(has_z, pre_z, None if factor is None else factor * accel_mm, stretch=stretch_on)
+    lengths = resid = None
+    if stretch_on:
+        lengths = values.atVector(LENGTH_KEY)
+        resid = _lengths(xyz, edges_rows) - lengths[:, None]
     t_opt = time.perf_counter() - t1
     t2 = time.perf_counter()
     frame_cov = cov = None
@@ -305,6 +377,10 @@ def smooth_tracks_3d(xy_px: np.ndarray, sigma_px: np.ndarray | None, z_mm: np.nd
     report = Smoother3DReport(iterations=iters, z_accel_factor=factor, z_accel_cv=scores, n_variables=f, n_factors=int(g.graph.size()),
                               n_depth=int(has_z.sum()), n_depth_dropped=int((has_z & ~use).sum()),
                               mm_per_px=float(mm_per_px), seconds_build=t_build, seconds_optimize=t_opt,
-                              seconds_marginals=t_marg)
+                              seconds_marginals=t_marg, stretch_rel=stretch_rel if stretch_on else None,
+                              lengths_mm=None if lengths is None else tuple(float(v) for v in lengths),
+                              length_rms_mm=None if resid is None else float(np.sqrt(np.mean(resid ** 2))),
+                              length_rms_sigmas=None if resid is None else
+                              float(np.sqrt(np.mean((resid / (stretch_rel * lengths[:, None])) ** 2))))
     return Smoothed3D(node_ids=node_ids, xyz_mm=xyz, observed=obs, depth_used=use, frame_cov=frame_cov, cov=cov,
                       report=report)
