@@ -54,6 +54,10 @@ class SmootherConfig:
         discarded (burn-in; at most ``window_frames`` frames). The estimate at a frame forgets a
         measurement geometrically in the observed frames between them; with 150 the cores match the
         whole-recording solve to ~1e-9 px (tests/test_long_recordings.py).
+    sigma_mode: ``"per_observation"`` solves with each observation's own ``sigma_px``; ``"uniform"`` solves the
+        positions with the recording's median observed sigma at every observation, so every node and frame is
+        low-passed alike, and scales the covariances back to each observation's own sigma
+        (:mod:`rce_gtsam.smoothing.uniform_sigma`; issue #38). Tracks without ``sigma_px`` are unaffected.
     """
 
     presmooth_window: int = 5
@@ -68,6 +72,7 @@ class SmootherConfig:
     marginals: bool = True
     window_frames: int = 1200
     window_margin: int = 150
+    sigma_mode: Literal["per_observation", "uniform"] = "per_observation"
 
     def __post_init__(self):
         _check(self, {
@@ -79,6 +84,9 @@ class SmootherConfig:
             "along_across_ratio": (lambda v: 1e-3 <= v <= 1e3, "between 1e-3 and 1e3"),
             "robust_k": (lambda v: v > 0, "> 0 (sigmas)"),
         })
+        if self.sigma_mode not in ("per_observation", "uniform"):
+            raise ValueError(f"smoother.sigma_mode must be one of ['per_observation', 'uniform'], "
+                             f"got {self.sigma_mode!r}")
 
 
 @dataclass(frozen=True)
