@@ -96,16 +96,21 @@ class BendingConfig:
     signed: True = signed turning angle via atan2 (degrees, 0 = straight); False = the paper's unsigned
         interior angle arccos in [0, 180] degrees.
     rest: ``"first"`` = rest angle at the first common frame (paper); ``"median"`` = median over inlier
-        frames (robust to a deflected or noisy first frame).
+        frames (robust to a deflected or noisy first frame); ``"common_median"`` = median over the frames where
+        every bend is observed (:func:`~rce_gtsam.bending.angles.common_frames`; each bend's own median when
+        there are too few): with nodes lost in gusts, each bend's own median sits at a different excitation and
+        biases kappa (issue #38).
     mad_threshold: modified z-score cut-off (0.6745 |d - med| / MAD) for the outlier mask.
     """
 
     signed: bool = False
-    rest: Literal["first", "median"] = "first"
+    rest: Literal["first", "median", "common_median"] = "first"
     mad_threshold: float = 3.5
 
     def __post_init__(self):
         _check(self, {"mad_threshold": (lambda v: v >= 0, ">= 0 (a modified z-score)")})
+        if self.rest not in ("first", "median", "common_median"):
+            raise ValueError(f"bending.rest must be one of ['first', 'median', 'common_median'], got {self.rest!r}")
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,157 @@
+"""Kappa's bias from the tracker's lost frames and sigmas, with exact positions (issue #38): mechanism and fix.
+
+Three beds, each with the smoother's ``sigma_mode`` ``per_observation`` (before) and ``uniform`` (after,
+:mod:`rce_gtsam.smoothing.uniform_sigma`) in the same run (default preset otherwise):
+
+* texture bed (``bench_texture_bed.py``'s cached videos and truth, the default tracker's cached tracks
+  ``tracks_<--tracks-rev>_*.npz``): the TRUE positions with (a) all frames visible and the tracker's sigma (lost
+  frames' sigma: the node's median), (b) the tracker's visibility and one sigma (the recording's median), (c) both,
+  i.e. the texture record's "none" row; and the tracker's own positions ("truth + E");
+* simulator (``rce_gtsam.sim``, tracks with per-node sigma, ``emit_sigma``): exact positions (the true ones on the
+  noisy tracks' visibility) and the simulated tracks, with no artifact and with ``gust_occlusion`` (nodes lost when
+  fast: missing not at random) at 1x and 2x its measured strength.
+
+Scores per row: kappa log-RMSE against the true kappa (mean and min-max over cases), Spearman, and the share of
+segments whose true kappa is inside the 95 % CI (bootstrap: the preset's ``n_boot`` unless ``--n-boot``).
+``--record NAME`` saves docs/validation/NAME.json.
+
+Usage: python benchmarks/bench_gap_bias.py [--seeds 0,1,2,3,4] [--sim-seeds 20] [--tracks-rev cc40a21]
+       [--n-boot N] [--record NAME]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+MODES = ("per_observation", "uniform")
+
+
+def scores(tracks, graph, kappa_true: dict, mode: str, n_boot: int | None) -> tuple[float, float, float]:
+    """(log-RMSE, Spearman, share of true kappa inside the 95 % CI) of the default preset with ``mode``."""
+    from scipy.stats import spearmanr
+
+    import rce_gtsam
+    from rce_gtsam.presets import get_preset
+
+    pre = get_preset("default").with_(smoother={"sigma_mode": mode})
+    r = rce_gtsam.analyze(tracks, graph, preset=pre, n_boot=n_boot, seed=0)
+    est = np.array([r.kappa[e] for e in r.response.edges])
+    tru = np.array([kappa_true[e] for e in r.response.edges])
+    return (float(np.sqrt(np.mean(np.log(est / tru) ** 2))), float(spearmanr(est, tru)[0]),
+            float(np.mean((tru >= r.ci.low) & (tru <= r.ci.high))))
+
+
+def bed_rows(seeds, cache: Path, rev: str, n_boot) -> dict:
+    """{row name: [(log-RMSE, Spearman, inside), ...] per case} on the texture bed."""
+    from bench_texture_bed import bed_case
+    from rce_gtsam.tracks import Tracks
+
+    out: dict[str, list] = {}
+    for cond in ((), ("delay",)):
+        for seed in seeds:
+            bed, cf, path = bed_case(seed, cond, 300, 60.0, cache)
+            npz = cache / f"tracks_{rev}_{path.stem}.npz"
+            if not npz.is_file():
+                raise SystemExit(f"{npz}: no cached tracks of revision {rev}; run bench_texture_errors.py first")
+            d = np.load(npz)
+            graph = cf.graph
+            nodes = list(graph.nodes)
+            vis = d["vis"][nodes]
+            sig = np.where(vis, d["sig"][nodes], np.nan)
+            node_med = np.nanmedian(sig, axis=1, keepdims=True)
+            true = bed.true_xy[nodes]
+            cases = {"bed: true positions, all visible, tracker's sigma": (true, np.where(vis, sig, node_med)),
+                     "bed: true positions, tracker's visibility, one sigma":
+                         (np.where(vis[..., None], true, np.nan), np.where(vis, np.nanmedian(sig), np.nan)),
+                     "bed: true positions, tracker's visibility and sigma (texture 'none')":
+                         (np.where(vis[..., None], true, np.nan), sig),
+                     "bed: our tracks (texture 'truth + E')": (np.where(vis[..., None], d["xy"][nodes], np.nan), sig)}
+            for name, (xy, s) in cases.items():
+                t = Tracks(node_ids=np.array(nodes), xy=xy, sigma_px=s, source=name)
+                for mode in MODES:
+                    out.setdefault((name, mode), []).append(scores(t, graph, bed.kappa_true, mode, n_boot))
+            print(f"  bed {'-'.join(cond) or 'none'} seed {seed}: lost {100 * (1 - vis.mean()):.2f} % of points",
+                  flush=True)
+    return out
+
+
+def sim_rows(n_seeds: int, frames: int, n_boot) -> dict:
+    """{row name: [(log-RMSE, Spearman, inside), ...] per seed} on the simulator."""
+    from rce_gtsam.sim.artifacts import ArtifactConfig
+    from rce_gtsam.sim.simulate import NoiseConfig, SimulationConfig, simulate
+    from rce_gtsam.tracks import Tracks
+
+    out: dict[str, list] = {}
+    lost: dict[str, list] = {}
+    for label, art in (("no artifact", ArtifactConfig()),
+                       ("gust_occlusion 1x", ArtifactConfig(families=("gust_occlusion",), scale=1.0)),
+                       ("gust_occlusion 2x", ArtifactConfig(families=("gust_occlusion",), scale=2.0))):
+        for seed in range(n_seeds):
+            sim = simulate(SimulationConfig(seed=seed, n_frames=frames, artifacts=art,
+                                            noise=NoiseConfig(emit_sigma=True)))
+            tr = sim.tracks
+            obs = tr.observed
+            lost.setdefault(label, []).append(1 - obs.mean())
+            exact = Tracks(node_ids=tr.node_ids, xy=np.where(obs[..., None], sim.true_xy, np.nan),
+                           sigma_px=tr.sigma_px, source="exact")
+            for kind, t in ((f"sim {label}: exact positions", exact), (f"sim {label}: simulated tracks", tr)):
+                for mode in MODES:
+                    out.setdefault((kind, mode), []).append(scores(t, sim.graph, sim.kappa_true, mode, n_boot))
+        print(f"  sim {label}: {n_seeds} seeds, {100 * np.mean(lost[label]):.1f} % of points lost", flush=True)
+    return out
+
+
+def main() -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", default="0,1,2,3,4", help="texture-bed seeds (each with conditions none and delay)")
+    ap.add_argument("--sim-seeds", type=int, default=20)
+    ap.add_argument("--sim-frames", type=int, default=450)
+    ap.add_argument("--tracks-rev", default="cc40a21",
+                    help="revision tag of the cached default-tracker tracks (the tracker is unchanged since)")
+    ap.add_argument("--n-boot", type=int, default=None, help="bootstrap resamples (default: the preset's)")
+    ap.add_argument("--cache", type=Path, default=None)
+    ap.add_argument("--no-bed", action="store_true", help="simulator only (no plant 2 footage needed)")
+    ap.add_argument("--record", default=None, metavar="NAME")
+    args = ap.parse_args()
+    table: dict = {}
+    if not args.no_bed:
+        from bench_texture_bed import PLANT, default_cache
+        if not (PLANT / "annotated_nodes.mp4").is_file():
+            raise SystemExit(f"plant 2 footage not found at {PLANT}")
+        table.update(bed_rows([int(s) for s in args.seeds.split(",")], args.cache or default_cache(),
+                              args.tracks_rev, args.n_boot))
+    if args.sim_seeds > 0:
+        table.update(sim_rows(args.sim_seeds, args.sim_frames, args.n_boot))
+    rows = []
+    print(f"  {'case':72s} {'sigma_mode':16s} {'logRMSE (min-max)':>19s} {'Spearman':>8s} {'inCI %':>6s}")
+    for (name, mode), v in table.items():
+        a = np.array(v)
+        print(f"  {name:72s} {mode:16s} {a[:, 0].mean():6.3f} ({a[:, 0].min():.2f}-{a[:, 0].max():.2f}) "
+              f"{a[:, 1].mean():8.2f} {100 * a[:, 2].mean():6.1f}")
+        rows.append([name, mode, len(v), round(a[:, 0].mean(), 3), round(a[:, 0].min(), 3), round(a[:, 0].max(), 3),
+                     round(a[:, 1].mean(), 2), round(100 * a[:, 2].mean(), 1)])
+    if args.record:
+        from record import save_record
+        save_record(args.record, title="Kappa's bias from the tracker's lost frames and sigmas, with exact positions "
+                                       "(issue #38): smoother sigma_mode before/after",
+                    command="python benchmarks/bench_gap_bias.py --seeds " + args.seeds
+                            + f" --sim-seeds {args.sim_seeds} --tracks-rev {args.tracks_rev}"
+                            + (f" --n-boot {args.n_boot}" if args.n_boot is not None else "")
+                            + f" --record {args.record}",
+                    description=__doc__.split("\n\n")[1].replace("\n", " "),
+                    columns=["case", "smoother sigma_mode", "cases", "kappa log-RMSE (mean)", "min", "max",
+                             "Spearman", "truth in 95 % CI (%)"], rows=rows)
+    return table
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    main()
