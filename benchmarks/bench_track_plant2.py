@@ -10,7 +10,7 @@ and how many of ours lie inside the TAPIR run's CI. ``--baseline REV`` runs the 
 same frames in the same process (before/after). Speed: the tracker on the decoded frames against plain OpenCV
 pyramidal LK (``cv2.calcOpticalFlowPyrLK``, 21x21, 3 levels, frame to frame) on the same points, one core.
 
-Usage: python benchmarks/bench_track_plant2.py [--baseline REV] [--kappa] [--frames N]
+Usage: python benchmarks/bench_track_plant2.py [--baseline REV] [--kappa [--sigma-modes per_observation,uniform]] [--frames N]
 """
 
 from __future__ import annotations
@@ -61,17 +61,23 @@ def window_table(xy, visible, tap, width: int = 60):
     return rows
 
 
-def kappa_vs_tapir(res, tap, graph, n_boot: int = 250):
-    """(Spearman, log-RMS of the ratio, n inside the TAPIR run's CI, n segments) of kappa from ``res``."""
+def kappa_vs_tapir(res, tap, graph, n_boot: int = 250, sigma_mode: str | None = None):
+    """(Spearman, log-RMS of the ratio, n inside the TAPIR run's CI, n segments) of kappa from ``res``; ``sigma_mode``
+    overrides the default preset's ``smoother.sigma_mode`` (TAPIR's tracks carry no sigma: only ours change)."""
     import rce_gtsam
+    from rce_gtsam.presets import get_preset
     from rce_gtsam.tracks import Tracks, load_tracks
+
+    preset = get_preset("default")
+    if sigma_mode:
+        preset = preset.with_(smoother={"sigma_mode": sigma_mode})
 
     with tempfile.TemporaryDirectory() as tmp:
         ours = load_tracks(res.write_csv(Path(tmp) / "t.csv"), graph)
     ids = np.arange(tap.shape[0])
     ref = Tracks(node_ids=ids[list(graph.nodes)], xy=tap[list(graph.nodes)], source="tapir")
-    a = rce_gtsam.analyze(ours, graph, preset="default", n_boot=n_boot)
-    b = rce_gtsam.analyze(ref, graph, preset="default", n_boot=n_boot)
+    a = rce_gtsam.analyze(ours, graph, preset=preset, n_boot=n_boot)
+    b = rce_gtsam.analyze(ref, graph, preset=preset, n_boot=n_boot)
     ka = np.array([a.kappa[e] for e in b.response.edges])
     kb = np.array([b.kappa[e] for e in b.response.edges])
     inside = int(((ka >= b.ci.low) & (ka <= b.ci.high)).sum())
@@ -88,7 +94,7 @@ def plain_lk_time(frames, q) -> float:
     return time.perf_counter() - t
 
 
-def report(name, res, q, graph, tap, kappa: bool):
+def report(name, res, q, graph, tap, kappa: bool, sigma_modes=(None,)):
     rows = window_table(res.xy, res.visible, tap)
     print(f"{name}: visible {100 * res.visible.mean():.1f} % of point-frames; "
           f"{res.n_frames / res.info['time_total_s']:.0f} frames/s")
@@ -107,9 +113,10 @@ def report(name, res, q, graph, tap, kappa: bool):
     worst = min(r[2] for r in rows[2:6])
     print(f"  frames 120-359: visible {' / '.join(f'{100 * r[2]:.0f}' for r in rows[2:6])} % "
           f"(worst {100 * worst:.0f}); p90 {' / '.join(f'{r[3]:.2f}' for r in rows[2:6])} px")
-    if kappa:
-        rho, lr, inside, n = kappa_vs_tapir(res, tap, graph)
-        print(f"  kappa vs the TAPIR run's: Spearman {rho:.2f}, log-RMS {lr:.2f}, inside its CI {inside}/{n}")
+    for mode in sigma_modes if kappa else ():
+        rho, lr, inside, n = kappa_vs_tapir(res, tap, graph, sigma_mode=mode)
+        print(f"  kappa vs the TAPIR run's{f' (smoother sigma_mode {mode})' if mode else ''}: Spearman {rho:.2f}, "
+              f"log-RMS {lr:.2f}, inside its CI {inside}/{n}")
     return rows
 
 
@@ -118,7 +125,10 @@ def main():
     ap.add_argument("--baseline", default=None, help="git revision of the default tracker (rce_gtsam/track/lk*.py) to run as well")
     ap.add_argument("--kappa", action="store_true", help="also compare kappa with the TAPIR run's (bootstrap)")
     ap.add_argument("--frames", type=int, default=None, help="only the first N frames")
+    ap.add_argument("--sigma-modes", default=None,
+                    help="with --kappa: smoother sigma_mode values to compare, e.g. per_observation,uniform")
     args = ap.parse_args()
+    modes = tuple(args.sigma_modes.split(",")) if args.sigma_modes else (None,)
     cv2.setNumThreads(1)
     if not (PLANT / "annotated_nodes.mp4").is_file():
         raise SystemExit(f"plant 2 footage not found at {PLANT}")
@@ -135,7 +145,7 @@ def main():
     for name, cls in trackers.items():
         cls().track(ArraySource(frames[:3]), q, graph)  # load the compiled kernels outside the timing
         res = cls().track(ArraySource(frames), q, graph)
-        report(name, res, q, graph, tap, args.kappa)
+        report(name, res, q, graph, tap, args.kappa, modes)
     t = plain_lk_time(frames, q)
     print(f"plain pyramidal LK on the same {len(q)} points: {len(frames) / t:.0f} frames/s")
     tmp.cleanup()

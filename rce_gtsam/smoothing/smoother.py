@@ -49,6 +49,7 @@ from .presmooth import moving_average
 from ..tracks import Tracks
 from .memory import release_freed_memory
 from .windowing import plan_windows
+from .uniform_sigma import rescale_covariances, uniform_sigma
 
 @dataclass(frozen=True)
 class SmootherReport:
@@ -399,6 +400,7 @@ def smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) ->
 def _smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) -> SmoothedTracks:
     _check_inputs(tracks, graph, config)
     pre = moving_average(tracks, config.presmooth_window)
+    solve_in, ratio = uniform_sigma(pre) if config.sigma_mode == "uniform" else (pre, None)
     linear = is_linear(config)
     shape = rest_shape(pre, graph, config)
     windows = plan_windows(pre.observed, config.window_frames, config.window_margin)
@@ -411,7 +413,7 @@ def _smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) -
         frame_cov = np.empty((F, 2 * N, 2 * N), dtype=np.float32)
     parts = []
     for w in windows:
-        part = _solve_window(_frames(pre, w.lo, w.hi), graph, config, shape, linear, w.lo)
+        part = _solve_window(_frames(solve_in, w.lo, w.hi), graph, config, shape, linear, w.lo)
         xy[:, w.core_lo:w.core_hi] = part.xy[:, w.core]
         if config.marginals:
             fc = part.frame_cov[w.core]
@@ -427,6 +429,8 @@ def _smooth_tracks(tracks: Tracks, graph: BranchGraph, config: SmootherConfig) -
         n_factors=sum(r.n_factors for r in parts), converged=all(r.converged for r in parts),
         seconds_build=sum(r.seconds_build for r in parts), seconds_optimize=sum(r.seconds_optimize for r in parts),
         seconds_marginals=sum(r.seconds_marginals for r in parts), n_windows=len(windows))
+    if ratio is not None and config.marginals:
+        rescale_covariances(cov, frame_cov, ratio)
     out = Tracks(node_ids=tracks.node_ids.copy(), xy=xy, sigma_px=None, source=tracks.source)
     return SmoothedTracks(tracks=out, observed=tracks.observed.copy(), presmoothed=pre, cov=cov,
                           frame_cov=frame_cov, report=report)
