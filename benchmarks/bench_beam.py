@@ -60,22 +60,39 @@ def pipeline_case(effect: str | None, seed: int, frames: int, mult: float, boot:
     r = res.response
     row = {b.edge: i for i, b in enumerate(sim.graph.bends)}
     idx = [row[tuple(e)] for e in r.edges]
-    return {"inputs": diagnose_inputs(res), "Y": r.Y, "truth": sim.response_true[idx][:, r.frames],
+    return {"phys": sim_phys(sim), "inputs": diagnose_inputs(res), "Y": r.Y, "truth": sim.response_true[idx][:, r.frames],
             "truth_effect_free": sim.response_effect_free[idx][:, r.frames],
             "kappa_true": np.array([sim.kappa_true[tuple(e)] for e in r.edges]), "kappa": np.asarray(res.fit.kappa),
             "ci": None if res.ci is None else (np.asarray(res.ci.low), np.asarray(res.ci.high)),
             "pipeline_s": tp}
 
 
+def sim_phys(sim) -> dict:
+    """How far the simulated branch moves (:func:`beam_curve.phys_measures`)."""
+    from beam_curve import phys_measures
+    return phys_measures(sim.true_xy, sim.response_true, float(sum(sim.segment_px.values())))
+
+
+def case_path(cache: str, effect, seed, frames, mult, boot) -> Path:
+    """The pickle of one case in ``cache`` (its outcome, :mod:`beam_curve`, sits beside it as ``.outcome.json``)."""
+    return Path(cache) / f"{effect or 'none'}_{mult:g}_{seed}_{frames}_boot{boot if boot is not None else 'preset'}.pkl"
+
+
 def cached_case(cache: str | None, effect, seed, frames, mult, boot) -> dict:
-    """:func:`pipeline_case`, kept in (and read back from) ``cache``; the pipeline seconds of a cached case are 0."""
+    """:func:`pipeline_case`, kept in (and read back from) ``cache``; the pipeline seconds of a cached case are 0.
+    A case cached before the motion measures were kept gets them from a fresh simulation (not saved)."""
     if cache is None:
         return pipeline_case(effect, seed, frames, mult, boot)
-    path = Path(cache) / f"{effect or 'none'}_{mult:g}_{seed}_{frames}_boot{boot if boot is not None else 'preset'}.pkl"
+    path = case_path(cache, effect, seed, frames, mult, boot)
     if path.exists():
         with open(path, "rb") as fh:
             out = pickle.load(fh)
         out["pipeline_s"] = 0.0
+        if "phys" not in out:
+            from rce_gtsam.sim.beam import BEAM_EFFECT_DEFAULTS, BeamConfig, simulate_beam
+            strength = None if effect is None else {effect: BEAM_EFFECT_DEFAULTS[effect] * mult}
+            out["phys"] = sim_phys(simulate_beam(BeamConfig(n_frames=frames, seed=seed, effects=(effect,) if effect
+                                                            else (), effect_strength=strength)))
         return out
     out = pipeline_case(effect, seed, frames, mult, boot)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -113,6 +130,56 @@ def effect_size(y: np.ndarray) -> float:
     return m / r
 
 
+def curve_mode(a, effects: list[str]) -> int:
+    """``--curve``: pass rate against strength per effect from the outcomes in ``--cache`` (``--frames``), the 90 %
+    points of the diagnosis and its oracle (:func:`beam_curve.curve`); ``--record NAME`` saves it."""
+    from beam_curve import curve, fmt_point, load_outcomes, print_curve
+    from rce_gtsam.sim.beam import BEAM_EFFECT_MEANING
+
+    if a.no_cache:
+        print("bench_beam: --curve reads the case outcomes in --cache; it cannot run with --no-cache", file=sys.stderr)
+        return 2
+    if not Path(a.cache).is_dir():
+        print(f"bench_beam: --cache {a.cache}: no such directory", file=sys.stderr)
+        return 2
+    outcomes = load_outcomes(a.cache, effects, a.frames)
+    if not outcomes:
+        print(f"bench_beam: --cache {a.cache}: no case outcomes for {','.join(effects)} at {a.frames} frames "
+              "(run the cases first, without --curve)", file=sys.stderr)
+        return 2
+    res = curve(outcomes)
+    print_curve(res, a.frames)
+    if a.record:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from record import save_record
+        rows = []
+        for eff, r in res.items():
+            for row in r["rows"]:
+                gap = ", ".join(f"{k} {v}" for k, v in sorted(row["gap_rules"].items(), key=lambda kv: -kv[1]))
+                rows.append([eff, row["mult"], round(row["strength"], 3), a.frames, row["n"],
+                             f"{row['right']} of {row['n']}", f"{row['oracle']} of {row['n']}", round(row["size"], 3),
+                             round(row["max_joint_deg"], 1), round(row["tip_pct"]), gap or "-"])
+        notes = [f"{eff}: 90 % point: diagnosis {fmt_point(r['diagnosis_90'])}, oracle {fmt_point(r['oracle_90'])}, "
+                 f"ratio {'undefined' if r['ratio'] is None else round(r['ratio'], 2)}" for eff, r in res.items()]
+        notes += [f"{eff} strength: {BEAM_EFFECT_MEANING[eff]}" for eff in res]
+        save_record(a.record, title="The beam simulator: detection against strength, the diagnosis and its oracle",
+                    command=f"python benchmarks/bench_beam.py --curve --frames {a.frames} --effects {','.join(res)} "
+                            f"--cache {a.cache} (after running the cases: see the description)",
+                    description=("Per beam effect and strength (a multiple of the default, its physical value beside "
+                                 "it), the share of seeds on which the diagnosis names the effect ('right') and on "
+                                 "which its oracle (the verdict's own test with the true form and shared parameters, "
+                                 "rce_gtsam.diagnosis.oracle) passes. The 90 % points are read off by linear "
+                                 "interpolation of the pass rate between tested strengths. 'size': rank-1 misfit of "
+                                 "the noise-free response / its RMS (median); largest joint bend from rest (deg, "
+                                 "max over seeds) and median tip excursion (% of branch length) say whether the "
+                                 "strength is physical; 'refused where the oracle passed': the rule of the diagnosis "
+                                 "that refused the mapped candidate (benchmarks/beam_curve.py refusal)."),
+                    columns=["effect", "x strength", "strength", "frames", "seeds", "right", "oracle", "size",
+                             "largest joint bend (deg)", "tip excursion (% length)", "refused where the oracle passed"],
+                    rows=rows, notes=notes)
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=5)
@@ -124,12 +191,15 @@ def main() -> int:
     ap.add_argument("--cache", default=DEFAULT_CACHE)
     ap.add_argument("--no-cache", action="store_true")
     ap.add_argument("--no-oracle", action="store_true")
+    ap.add_argument("--curve", action="store_true",
+                    help="run nothing: summarise pass rate against strength from the case outcomes in --cache")
     ap.add_argument("--record", default=None, metavar="NAME",
                     help="save the table as the docs' validation record docs/validation/NAME.json")
     a = ap.parse_args()
     from rce_gtsam.diagnosis.diagnose import diagnose
     from rce_gtsam.diagnosis.oracle import oracle_test
-    from rce_gtsam.sim.beam import BEAM_EFFECTS, DIAGNOSIS_NAME
+    from beam_curve import case_outcome, save_outcome
+    from rce_gtsam.sim.beam import BEAM_EFFECT_DEFAULTS, BEAM_EFFECTS, DIAGNOSIS_NAME
 
     conditions = [e.strip() for e in a.effects.split(",") if e.strip()]
     bad = [e for e in conditions if e != "none" and e not in BEAM_EFFECTS]
@@ -137,6 +207,8 @@ def main() -> int:
         ap.error(f"--effects: unknown {bad}; choose from none, {', '.join(BEAM_EFFECTS)}")
     mults = [float(m) for m in a.strength_mult.split(",")]
     cache = None if a.no_cache else a.cache
+    if a.curve:
+        return curve_mode(a, [e for e in conditions if e != "none"])
     print(f"beam simulator -> analyze (default preset) -> diagnose_inputs/diagnose; {a.seeds} seeds from "
           f"{a.first_seed}, {a.frames} frames, strength x {a.strength_mult}; verdict right by "
           f"{ {k: '|'.join(v) for k, v in DIAGNOSIS_NAME.items()} }; cache {cache}", flush=True)
@@ -155,7 +227,7 @@ def main() -> int:
                 verdicts[d.verdict or "none"] += 1
                 ok = d.verdict is None if hidden is None else d.verdict in DIAGNOSIS_NAME[hidden]
                 right += ok
-                o_txt = ""
+                o_txt, o = "", None
                 if not a.no_oracle and hidden is not None:
                     o = oracle_test(d, c["Y"], c["truth"], DIAGNOSIS_NAME[hidden][0])
                     orc += bool(o["supported"])
@@ -165,6 +237,12 @@ def main() -> int:
                 cover.append(cv)
                 ratio.append(floor_ratio(c, c["inputs"]["noise_floor"]))
                 size.append(effect_size(c["truth"]))
+                if cache is not None and hidden is not None:
+                    out = case_outcome(hidden, mult, BEAM_EFFECT_DEFAULTS[hidden] * mult, sd, a.frames, d, ok, o,
+                                       size[-1], c.get("phys"))
+                    save_outcome(case_path(cache, hidden, sd, a.frames, mult, a.boot).with_suffix(".outcome.json"),
+                                 out)
+                    o_txt += f"; {out['refusal']['text']}; {c['phys']}"
                 cands = ", ".join(f"{x.effect} {x.improvement_pct:+.1f}% t={x.evidence:.1f}{'*' if x.supported else ''}"
                                   for x in d.candidates)
                 print(f"  {cond} x{mult:g} seed {sd}: verdict {d.verdict}"
