@@ -134,13 +134,17 @@ def curve_mode(a, effects: list[str]) -> int:
     """``--curve``: pass rate against strength per effect from the outcomes in ``--cache`` (``--frames``), the 90 %
     points of the diagnosis and its oracle (:func:`beam_curve.curve`); ``--record NAME`` saves it."""
     from beam_curve import curve, fmt_point, load_outcomes, print_curve
-    from rce_gtsam.sim.beam import BEAM_EFFECT_MEANING
 
     if a.no_cache:
         print("bench_beam: --curve reads the case outcomes in --cache; it cannot run with --no-cache", file=sys.stderr)
         return 2
     if not Path(a.cache).is_dir():
         print(f"bench_beam: --cache {a.cache}: no such directory", file=sys.stderr)
+        return 2
+    from rce_gtsam.sim.beam import BEAM_EFFECTS
+    bad = [e for e in effects if e not in BEAM_EFFECTS]
+    if bad:
+        print(f"bench_beam: --effects: unknown {bad}; choose from {', '.join(BEAM_EFFECTS)}", file=sys.stderr)
         return 2
     outcomes = load_outcomes(a.cache, effects, a.frames)
     if not outcomes:
@@ -161,6 +165,7 @@ def curve_mode(a, effects: list[str]) -> int:
                              round(row["max_joint_deg"], 1), round(row["tip_pct"]), gap or "-"])
         notes = [f"{eff}: 90 % point: diagnosis {fmt_point(r['diagnosis_90'])}, oracle {fmt_point(r['oracle_90'])}, "
                  f"ratio {'undefined' if r['ratio'] is None else round(r['ratio'], 2)}" for eff, r in res.items()]
+        from rce_gtsam.sim.beam import BEAM_EFFECT_MEANING
         notes += [f"{eff} strength: {BEAM_EFFECT_MEANING[eff]}" for eff in res]
         save_record(a.record, title="The beam simulator: detection against strength, the diagnosis and its oracle",
                     command=f"python benchmarks/bench_beam.py --curve --frames {a.frames} --effects {','.join(res)} "
@@ -196,6 +201,8 @@ def main() -> int:
     ap.add_argument("--record", default=None, metavar="NAME",
                     help="save the table as the docs' validation record docs/validation/NAME.json")
     a = ap.parse_args()
+    if a.curve:  # before the heavy imports: a missing cache is named at once
+        return curve_mode(a, [e.strip() for e in a.effects.split(",") if e.strip() and e.strip() != "none"])
     from rce_gtsam.diagnosis.diagnose import diagnose
     from rce_gtsam.diagnosis.oracle import oracle_test
     from beam_curve import case_outcome, save_outcome
@@ -207,8 +214,6 @@ def main() -> int:
         ap.error(f"--effects: unknown {bad}; choose from none, {', '.join(BEAM_EFFECTS)}")
     mults = [float(m) for m in a.strength_mult.split(",")]
     cache = None if a.no_cache else a.cache
-    if a.curve:
-        return curve_mode(a, [e for e in conditions if e != "none"])
     print(f"beam simulator -> analyze (default preset) -> diagnose_inputs/diagnose; {a.seeds} seeds from "
           f"{a.first_seed}, {a.frames} frames, strength x {a.strength_mult}; verdict right by "
           f"{ {k: '|'.join(v) for k, v in DIAGNOSIS_NAME.items()} }; cache {cache}", flush=True)

@@ -1,0 +1,63 @@
+"""bench_beam --curve (benchmarks/beam_curve.py): the 90 % point by interpolation, the curve's counts, the rule that
+refused a candidate read off a real diagnosis, and a missing cache named before any work."""
+
+import sys
+from pathlib import Path
+
+import pytest
+
+from _effect_data import synth
+from rce_gtsam.diagnosis.diagnose import diagnose
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "benchmarks"))
+import beam_curve  # noqa: E402
+
+
+def test_the_90_point_is_interpolated_between_the_strengths_around_it():
+    assert beam_curve.point_at([1, 2, 4], [0.2, 0.6, 1.0]) == (pytest.approx(3.5), "=")
+    assert beam_curve.point_at([1, 2], [0.9, 1.0]) == (1, "<=")          # already there at the weakest
+    assert beam_curve.point_at([1, 2, 3], [0.5, 0.8, 0.4]) == (None, "not reached")
+    assert beam_curve.fmt_point((None, "not reached")) == "not reached"
+
+
+def _outcome(mult, seed, right, oracle, rule):
+    return {"effect": "creep", "mult": mult, "strength": 2.0 * mult, "seed": seed, "frames": 450, "verdict": None,
+            "right": right, "oracle": {"supported": oracle, "t": 1.0, "threshold_t": 2.6, "score_p": None},
+            "refusal": {"rule": "named" if right else rule, "fold_t": 1.0}, "size": 0.1,
+            "phys": {"max_joint_deg": 5.0 + mult, "p99_joint_deg": 4.0, "tip_pct": 50.0}}
+
+
+def test_the_curve_counts_passes_and_names_the_refusals_where_the_oracle_passed():
+    outs = ([_outcome(1, s, False, s < 5, "drift_checks") for s in range(10)]
+            + [_outcome(2, s, s < 5, True, "significance") for s in range(10)]
+            + [_outcome(4, s, s < 9, True, "significance") for s in range(10)])
+    r = beam_curve.curve(outs)["creep"]
+    assert [(x["mult"], x["right"], x["oracle"]) for x in r["rows"]] == [(1, 0, 5), (2, 5, 10), (4, 9, 10)]
+    assert r["rows"][0]["gap_rules"] == {"drift_checks": 5} and r["rows"][0]["miss_rules"] == {"drift_checks": 10}
+    assert r["rows"][2]["max_joint_deg"] == 9.0
+    assert r["oracle_90"] == (pytest.approx(1.8), "=") and r["diagnosis_90"] == (4.0, "=")
+    assert r["ratio"] == pytest.approx(4.0 / 1.8)
+
+
+def test_the_refusal_is_read_off_the_real_diagnosis():
+    Y, s, *_ = synth("delay", seed=0, E=10, T=300, strength=6.0)
+    d = diagnose(Y, root_distance=s, effects=["delay"], edge_nodes=[{i} for i in range(10)])
+    r = beam_curve.refusal(d, ("delay",))
+    c = next(c for c in d.candidates if c.effect == "delay")
+    assert r["candidate"] == "delay" and r["fold_t"] == pytest.approx(c.tests["fold_t"].statistic, abs=1e-4)
+    assert (r["rule"] == "named") == (d.verdict == "delay")
+    if r["rule"] == "significance":
+        assert not c.extra["significant"] and f"{c.tests['fold_t'].threshold:.2f}" in r["text"]
+    assert beam_curve.refusal(d, ("offset",))["rule"] == "absent"
+
+
+def test_curve_without_outcomes_names_the_cache_and_exits_2(tmp_path, monkeypatch, capsys):
+    import bench_beam
+    for cache, said in ((tmp_path / "nope", "no such directory"), (tmp_path, "no case outcomes")):
+        monkeypatch.setattr(sys, "argv", ["bench_beam.py", "--curve", "--cache", str(cache)])
+        assert bench_beam.main() == 2
+        err = capsys.readouterr().err
+        assert str(cache) in err and said in err and len(err.strip().splitlines()) == 1
+    monkeypatch.setattr(sys, "argv", ["bench_beam.py", "--curve", "--effects", "wobble", "--cache", str(tmp_path)])
+    assert bench_beam.main() == 2 and "--effects: unknown ['wobble']" in capsys.readouterr().err
