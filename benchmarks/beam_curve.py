@@ -111,12 +111,33 @@ def save_outcome(path: Path, outcome: dict) -> None:
     tmp.replace(path)
 
 
+def effect_and_noise_rms(Y: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    """(RMS of what no rank-1 model explains of the noise-free response, :func:`~rce_gtsam.diagnosis.oracle.
+    true_signature`; RMS of the angle noise, Y less the truth on Y's per-row rest reference), both degrees: the
+    part of an effect any rank-1 diagnosis can see against the noise it must see it through."""
+    from rce_gtsam.diagnosis.oracle import true_signature
+
+    sig = true_signature(truth)
+    n = Y - (truth + np.nanmean(Y - truth, axis=1, keepdims=True))
+    return float(np.sqrt(np.mean(sig ** 2))), float(np.sqrt(np.nanmean(n ** 2)))
+
+
 def load_outcomes(cache: str, effects: list[str], frames: int) -> list[dict]:
-    """Every case outcome in ``cache`` for ``effects`` at ``frames`` frames (bootstrap at the preset's count)."""
+    """Every case outcome in ``cache`` for ``effects`` at ``frames`` frames (bootstrap at the preset's count), with
+    :func:`effect_and_noise_rms` of its case read from the pickle beside it (``effect_rms_deg``,
+    ``noise_rms_deg``; None where the pickle is gone)."""
+    import pickle
+
     out = []
     for p in sorted(Path(cache).glob(f"*_{frames}_bootpreset.outcome.json")):
         o = json.loads(p.read_text())
         if o["effect"] in effects and o["frames"] == frames:
+            pkl = p.with_name(p.name.replace(".outcome.json", ".pkl"))
+            o["effect_rms_deg"] = o["noise_rms_deg"] = None
+            if pkl.exists():
+                with open(pkl, "rb") as fh:
+                    c = pickle.load(fh)
+                o["effect_rms_deg"], o["noise_rms_deg"] = effect_and_noise_rms(c["Y"], c["truth"])
             out.append(o)
     return out
 
@@ -132,6 +153,11 @@ def point_at(mults: list[float], rates: list[float], level: float = LEVEL) -> tu
             m0, r0 = mults[i - 1], rates[i - 1]
             return m0 + (level - r0) / (r - r0) * (m - m0), "="
     return None, "not reached"
+
+
+def _median(v: list) -> float:
+    v = [x for x in v if x is not None]
+    return float(np.median(v)) if v else float("nan")
 
 
 def curve(outcomes: list[dict]) -> dict:
@@ -152,6 +178,8 @@ def curve(outcomes: list[dict]) -> dict:
             rows.append({"mult": m, "strength": cs[0]["strength"], "n": len(cs), "right": sum(c["right"] for c in cs),
                          "oracle": sum(bool(c["oracle"] and c["oracle"]["supported"]) for c in cs),
                          "size": float(np.median([c["size"] for c in cs])),
+                         "effect_rms_deg": _median([c.get("effect_rms_deg") for c in cs]),
+                         "noise_rms_deg": _median([c.get("noise_rms_deg") for c in cs]),
                          "max_joint_deg": max((p["max_joint_deg"] for p in phys), default=float("nan")),
                          "tip_pct": float(np.median([p["tip_pct"] for p in phys])) if phys else float("nan"),
                          "oracle_t": float(np.median([c["oracle"]["t"] for c in cs if c["oracle"]])),
@@ -175,13 +203,14 @@ def fmt_point(p: tuple[float | None, str]) -> str:
 def print_curve(res: dict, frames: int) -> None:
     """The curve as a table per effect and the 90 % points."""
     print(f"\ndetection against strength, {frames} frames (right / oracle: passes of n; size: rank-1 misfit / RMS "
-          "of the noise-free response; joint: largest |bend| deg; tip: median tip excursion % of length; t: "
+          "of the noise-free response; effect/noise: RMS of its non-rank-1 part / of the angle noise; joint: largest |bend| deg; tip: median tip excursion % of length; t: "
           "median fold t of the oracle / of the mapped candidate; gap: why the diagnosis refused where the "
           "oracle passed; miss: why it refused, all misses)")
     for eff, r in res.items():
         for row in r["rows"]:
             print(f"  {eff:<12} x{row['mult']:<5g} ({row['strength']:g}) n {row['n']:>2}: right {row['right']:>2} "
-                  f"oracle {row['oracle']:>2}  size {row['size']:.3f} joint {row['max_joint_deg']:.1f} "
+                  f"oracle {row['oracle']:>2}  size {row['size']:.3f} effect/noise {row['effect_rms_deg']:.2f}/"
+                  f"{row['noise_rms_deg']:.2f} deg joint {row['max_joint_deg']:.1f} "
                   f"tip {row['tip_pct']:.0f} %  t {row['oracle_t']:+.1f}/{row['cand_t']:+.1f}  "
                   f"gap {row['gap_rules'] or '-'}  miss {row['miss_rules'] or '-'}")
         ratio = "undefined" if r["ratio"] is None else f"{r['ratio']:.2f}"

@@ -25,7 +25,8 @@ def _outcome(mult, seed, right, oracle, rule):
     return {"effect": "creep", "mult": mult, "strength": 2.0 * mult, "seed": seed, "frames": 450, "verdict": None,
             "right": right, "oracle": {"supported": oracle, "t": 1.0, "threshold_t": 2.6, "score_p": None},
             "refusal": {"rule": "named" if right else rule, "fold_t": 1.0}, "size": 0.1,
-            "phys": {"max_joint_deg": 5.0 + mult, "p99_joint_deg": 4.0, "tip_pct": 50.0}}
+            "phys": {"max_joint_deg": 5.0 + mult, "p99_joint_deg": 4.0, "tip_pct": 50.0},
+            "effect_rms_deg": 0.1 * mult, "noise_rms_deg": 1.4}
 
 
 def test_the_curve_counts_passes_and_names_the_refusals_where_the_oracle_passed():
@@ -35,7 +36,7 @@ def test_the_curve_counts_passes_and_names_the_refusals_where_the_oracle_passed(
     r = beam_curve.curve(outs)["creep"]
     assert [(x["mult"], x["right"], x["oracle"]) for x in r["rows"]] == [(1, 0, 5), (2, 5, 10), (4, 9, 10)]
     assert r["rows"][0]["gap_rules"] == {"drift_checks": 5} and r["rows"][0]["miss_rules"] == {"drift_checks": 10}
-    assert r["rows"][2]["max_joint_deg"] == 9.0
+    assert r["rows"][2]["max_joint_deg"] == 9.0 and r["rows"][2]["effect_rms_deg"] == pytest.approx(0.4)
     assert r["oracle_90"] == (pytest.approx(1.8), "=") and r["diagnosis_90"] == (4.0, "=")
     assert r["ratio"] == pytest.approx(4.0 / 1.8)
 
