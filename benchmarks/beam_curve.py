@@ -41,7 +41,8 @@ def refusal(d, names: tuple[str, ...]) -> dict:
     """Why the diagnosis ``d`` did not name one of ``names`` (the findings a beam effect is counted right by).
 
     The candidate looked at is the supported one of those findings if any, else the one with the lowest held-out
-    RMSE. ``rule``: ``named`` (the verdict is right), ``parsimony`` (supported, another candidate named),
+    RMSE. ``rule``: ``named`` (the verdict is right), ``other_verdict`` (supported, but the verdict picks another
+    candidate: lower held-out RMSE or simpler, :mod:`rce_gtsam.diagnosis.verdict`),
     ``outside_domain``, ``drift_checks`` (significant by its fold t, refused as tracker drift), ``significance``
     (fold t / score p short of their thresholds), ``plausibility`` (its fit's reasons), ``heldout_rmse`` (no lower
     held-out error), ``aic`` (effective-sample AIC not lower and no significant score test), ``resolution`` (less
@@ -58,7 +59,8 @@ def refusal(d, names: tuple[str, ...]) -> dict:
     ft = tests["fold_t"]
     sc = tests.get("score")
     out = {"candidate": c.effect, "fold_t": _num(ft.statistic), "threshold_t": _num(ft.threshold),
-           "score_p": None if sc is None else _num(sc.p), "score_threshold_p": None if sc is None else _num(sc.threshold)}
+           "score_p": None if sc is None else _num(sc.p),
+           "score_threshold_p": None if sc is None else _num(sc.threshold)}
     score_txt = "" if sc is None else f", score p {sc.p:.4f} vs {sc.threshold:.4f}"
     stat = f"fold t {ft.statistic:.2f} vs {ft.threshold:.2f}{score_txt}"
     if d.verdict in names:
@@ -66,9 +68,10 @@ def refusal(d, names: tuple[str, ...]) -> dict:
     if c.supported:
         if d.outside_domain:
             return {**out, "rule": "outside_domain", "text": f"{c.effect}: supported, outside {d.outside_domain}"}
-        return {**out, "rule": "parsimony", "text": f"{c.effect}: supported, verdict {d.verdict} ({stat})"}
+        return {**out, "rule": "other_verdict", "text": f"{c.effect}: supported, verdict {d.verdict} ({stat})"}
     if x.get("significant_by_fold_t") and not x.get("significant"):
-        parts = [f"held-out null p {x.get('heldout_null_p', float('nan')):.3f} vs {x.get('heldout_null_threshold_p', 0):.3f}"]
+        parts = [f"held-out null p {x.get('heldout_null_p', float('nan')):.3f} vs "
+                 f"{x.get('heldout_null_threshold_p', 0):.3f}"]
         if x.get("shared_course_p") is not None:
             parts.append(f"shared course p {x['shared_course_p']:.4f} vs {x['shared_course_threshold_p']:.4f}")
         if x.get("drift_pattern_p") is not None:
@@ -173,7 +176,8 @@ def curve(outcomes: list[dict]) -> dict:
         for m in sorted(per):
             cs = per[m]
             phys = [c["phys"] for c in cs if c.get("phys")]
-            gap = Counter(c["refusal"]["rule"] for c in cs if c["oracle"] and c["oracle"]["supported"] and not c["right"])
+            gap = Counter(c["refusal"]["rule"] for c in cs
+                          if c["oracle"] and c["oracle"]["supported"] and not c["right"])
             miss = Counter(c["refusal"]["rule"] for c in cs if not c["right"])
             rows.append({"mult": m, "strength": cs[0]["strength"], "n": len(cs), "right": sum(c["right"] for c in cs),
                          "oracle": sum(bool(c["oracle"] and c["oracle"]["supported"]) for c in cs),
@@ -203,7 +207,8 @@ def fmt_point(p: tuple[float | None, str]) -> str:
 def print_curve(res: dict, frames: int) -> None:
     """The curve as a table per effect and the 90 % points."""
     print(f"\ndetection against strength, {frames} frames (right / oracle: passes of n; size: rank-1 misfit / RMS "
-          "of the noise-free response; effect/noise: RMS of its non-rank-1 part / of the angle noise; joint: largest |bend| deg; tip: median tip excursion % of length; t: "
+          "of the noise-free response; effect/noise: RMS of its non-rank-1 part / of the angle noise; joint: "
+          "largest |bend| deg; tip: median tip excursion % of length; t: "
           "median fold t of the oracle / of the mapped candidate; gap: why the diagnosis refused where the "
           "oracle passed; miss: why it refused, all misses)")
     for eff, r in res.items():

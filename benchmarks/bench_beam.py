@@ -60,7 +60,8 @@ def pipeline_case(effect: str | None, seed: int, frames: int, mult: float, boot:
     r = res.response
     row = {b.edge: i for i, b in enumerate(sim.graph.bends)}
     idx = [row[tuple(e)] for e in r.edges]
-    return {"phys": sim_phys(sim), "inputs": diagnose_inputs(res), "Y": r.Y, "truth": sim.response_true[idx][:, r.frames],
+    return {"phys": sim_phys(sim),
+            "inputs": diagnose_inputs(res), "Y": r.Y, "truth": sim.response_true[idx][:, r.frames],
             "truth_effect_free": sim.response_effect_free[idx][:, r.frames],
             "kappa_true": np.array([sim.kappa_true[tuple(e)] for e in r.edges]), "kappa": np.asarray(res.fit.kappa),
             "ci": None if res.ci is None else (np.asarray(res.ci.low), np.asarray(res.ci.high)),
