@@ -204,6 +204,15 @@ def fmt_point(p: tuple[float | None, str]) -> str:
     return "not reached" if v is None else (f"<= x{v:g}" if how == "<=" else f"x{v:.2f}")
 
 
+def ratio_text(r: dict) -> str:
+    """The diagnosis' 90 % point over the oracle's as text: a bound where either point is only bounded (it lies at
+    or below the weakest strength tried), 'undefined' where either is not reached or both are bounds."""
+    (d, dh), (o, oh) = r["diagnosis_90"], r["oracle_90"]
+    if d is None or o is None or (dh == "<=" and oh == "<="):
+        return "undefined"
+    return {("=", "="): "", ("=", "<="): ">= ", ("<=", "="): "<= "}[(dh, oh)] + f"{d / o:.2f}"
+
+
 def print_curve(res: dict, frames: int) -> None:
     """The curve as a table per effect and the 90 % points."""
     print(f"\ndetection against strength, {frames} frames (right / oracle: passes of n; size: rank-1 misfit / RMS "
@@ -218,6 +227,5 @@ def print_curve(res: dict, frames: int) -> None:
                   f"{row['noise_rms_deg']:.2f} deg joint {row['max_joint_deg']:.1f} "
                   f"tip {row['tip_pct']:.0f} %  t {row['oracle_t']:+.1f}/{row['cand_t']:+.1f}  "
                   f"gap {row['gap_rules'] or '-'}  miss {row['miss_rules'] or '-'}")
-        ratio = "undefined" if r["ratio"] is None else f"{r['ratio']:.2f}"
         print(f"  {eff:<12} 90 % point: diagnosis {fmt_point(r['diagnosis_90'])}, oracle {fmt_point(r['oracle_90'])}"
-              f", ratio {ratio}")
+              f", ratio {ratio_text(r)}")

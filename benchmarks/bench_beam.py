@@ -131,10 +131,15 @@ def effect_size(y: np.ndarray) -> float:
     return m / r
 
 
+def _rounded(v: float, nd: int):
+    """``v`` rounded to ``nd`` decimals for a record, "-" where it is not finite (a case without its pickle)."""
+    return round(float(v), nd) if np.isfinite(v) else "-"
+
+
 def curve_mode(a, effects: list[str]) -> int:
     """``--curve``: pass rate against strength per effect from the outcomes in ``--cache`` (``--frames``), the 90 %
     points of the diagnosis and its oracle (:func:`beam_curve.curve`); ``--record NAME`` saves it."""
-    from beam_curve import curve, fmt_point, load_outcomes, print_curve
+    from beam_curve import curve, fmt_point, load_outcomes, print_curve, ratio_text
 
     if a.no_cache:
         print("bench_beam: --curve reads the case outcomes in --cache; it cannot run with --no-cache", file=sys.stderr)
@@ -147,41 +152,55 @@ def curve_mode(a, effects: list[str]) -> int:
     if bad:
         print(f"bench_beam: --effects: unknown {bad}; choose from {', '.join(BEAM_EFFECTS)}", file=sys.stderr)
         return 2
-    outcomes = load_outcomes(a.cache, effects, a.frames)
-    if not outcomes:
-        print(f"bench_beam: --cache {a.cache}: no case outcomes for {','.join(effects)} at {a.frames} frames "
-              "(run the cases first, without --curve)", file=sys.stderr)
-        return 2
-    res = curve(outcomes)
-    print_curve(res, a.frames)
+    frames_list = [a.frames] if a.curve_frames is None else a.curve_frames
+    results = {}
+    for frames in frames_list:
+        outcomes = load_outcomes(a.cache, effects, frames)
+        if not outcomes:
+            print(f"bench_beam: --cache {a.cache}: no case outcomes for {','.join(effects)} at {frames} frames "
+                  "(run the cases first, without --curve)", file=sys.stderr)
+            return 2
+        results[frames] = curve(outcomes)
+    for frames, res in results.items():
+        print_curve(res, frames)
     if a.record:
         sys.path.insert(0, str(Path(__file__).resolve().parent))
         from record import save_record
-        rows = []
-        for eff, r in res.items():
-            for row in r["rows"]:
-                gap = ", ".join(f"{k} {v}" for k, v in sorted(row["gap_rules"].items(), key=lambda kv: -kv[1]))
-                rows.append([eff, row["mult"], round(row["strength"], 3), a.frames, row["n"],
-                             f"{row['right']} of {row['n']}", f"{row['oracle']} of {row['n']}", round(row["size"], 3),
-                             round(row["max_joint_deg"], 1), round(row["tip_pct"]), gap or "-"])
-        notes = [f"{eff}: 90 % point: diagnosis {fmt_point(r['diagnosis_90'])}, oracle {fmt_point(r['oracle_90'])}, "
-                 f"ratio {'undefined' if r['ratio'] is None else round(r['ratio'], 2)}" for eff, r in res.items()]
         from rce_gtsam.sim.beam import BEAM_EFFECT_MEANING
-        notes += [f"{eff} strength: {BEAM_EFFECT_MEANING[eff]}" for eff in res]
+        rows, notes = [], []
+        for frames, res in results.items():
+            for eff, r in sorted(res.items()):
+                for row in r["rows"]:
+                    rules = [", ".join(f"{k} {v}" for k, v in sorted(row[key].items(), key=lambda kv: -kv[1])) or "-"
+                             for key in ("gap_rules", "miss_rules")]
+                    rows.append([eff, frames, row["mult"], round(row["strength"], 3), row["n"],
+                                 f"{row['right']} of {row['n']}", f"{row['oracle']} of {row['n']}",
+                                 _rounded(row["effect_rms_deg"], 2), _rounded(row["noise_rms_deg"], 2),
+                                 _rounded(row["max_joint_deg"], 1), _rounded(row["tip_pct"], 0), rules[0], rules[1]])
+                notes.append(f"{eff}, {frames} frames: 90 % point: diagnosis {fmt_point(r['diagnosis_90'])}, oracle "
+                             f"{fmt_point(r['oracle_90'])}, ratio {ratio_text(r)}")
+        effs = sorted({e for res in results.values() for e in res})
+        notes += [f"{eff} strength: {BEAM_EFFECT_MEANING[eff]}" for eff in effs]
         save_record(a.record, title="The beam simulator: detection against strength, the diagnosis and its oracle",
-                    command=f"python benchmarks/bench_beam.py --curve --frames {a.frames} --effects {','.join(res)} "
-                            f"--cache {a.cache} (after running the cases: see the description)",
-                    description=("Per beam effect and strength (a multiple of the default, its physical value beside "
-                                 "it), the share of seeds on which the diagnosis names the effect ('right') and on "
-                                 "which its oracle (the verdict's own test with the true form and shared parameters, "
-                                 "rce_gtsam.diagnosis.oracle) passes. The 90 % points are read off by linear "
-                                 "interpolation of the pass rate between tested strengths. 'size': rank-1 misfit of "
-                                 "the noise-free response / its RMS (median); largest joint bend from rest (deg, "
-                                 "max over seeds) and median tip excursion (% of branch length) say whether the "
-                                 "strength is physical; 'refused where the oracle passed': the rule of the diagnosis "
-                                 "that refused the mapped candidate (benchmarks/beam_curve.py refusal)."),
-                    columns=["effect", "x strength", "strength", "frames", "seeds", "right", "oracle", "size",
-                             "largest joint bend (deg)", "tip excursion (% length)", "refused where the oracle passed"],
+                    command=(f"python benchmarks/bench_beam.py --curve --curve-frames "
+                             f"{','.join(map(str, frames_list))} --effects {','.join(effs)} --cache {a.cache} "
+                             "(summarises the cases run before into that cache, one bench_beam.py run per effect, "
+                             "strengths, seeds and frames: the rows say which)"),
+                    description=("Per beam effect, record length and strength (a multiple of the default; its "
+                                 "physical value beside it), the share of seeds on which the diagnosis names the "
+                                 "effect ('right') and on which its oracle (the verdict's own test with the true form "
+                                 "and shared parameters, rce_gtsam.diagnosis.oracle) passes. 90 % points (notes): "
+                                 "linear interpolation of the pass rate between tested strengths. 'effect RMS': what "
+                                 "no rank-1 model explains of the noise-free response (true_signature), beside the "
+                                 "angle noise's RMS (Y less the truth), both deg, medians: what any rank-1 diagnosis "
+                                 "can see against what it sees it through. Largest joint bend from rest (deg, max over "
+                                 "seeds) and median tip excursion (% of branch length): is the strength physical. "
+                                 "'refused where the oracle passed' / 'why missed': the rule of the diagnosis that "
+                                 "refused the mapped candidate (benchmarks/beam_curve.py, refusal), counted over "
+                                 "those cases / over every miss."),
+                    columns=["effect", "frames", "x strength", "strength", "seeds", "right", "oracle",
+                             "effect RMS (deg)", "noise RMS (deg)", "largest joint bend (deg)",
+                             "tip excursion (% length)", "refused where the oracle passed", "why missed"],
                     rows=rows, notes=notes)
     return 0
 
@@ -199,6 +218,8 @@ def main() -> int:
     ap.add_argument("--no-oracle", action="store_true")
     ap.add_argument("--curve", action="store_true",
                     help="run nothing: summarise pass rate against strength from the case outcomes in --cache")
+    ap.add_argument("--curve-frames", default=None, type=lambda v: [int(x) for x in v.split(",")],
+                    help="--curve: record lengths to summarise, e.g. 450,900 (default: --frames)")
     ap.add_argument("--record", default=None, metavar="NAME",
                     help="save the table as the docs' validation record docs/validation/NAME.json")
     a = ap.parse_args()

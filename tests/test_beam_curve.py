@@ -38,7 +38,7 @@ def test_the_curve_counts_passes_and_names_the_refusals_where_the_oracle_passed(
     assert r["rows"][0]["gap_rules"] == {"drift_checks": 5} and r["rows"][0]["miss_rules"] == {"drift_checks": 10}
     assert r["rows"][2]["max_joint_deg"] == 9.0 and r["rows"][2]["effect_rms_deg"] == pytest.approx(0.4)
     assert r["oracle_90"] == (pytest.approx(1.8), "=") and r["diagnosis_90"] == (4.0, "=")
-    assert r["ratio"] == pytest.approx(4.0 / 1.8)
+    assert r["ratio"] == pytest.approx(4.0 / 1.8) and beam_curve.ratio_text(r) == "2.22"
 
 
 def test_the_refusal_is_read_off_the_real_diagnosis():
@@ -62,3 +62,24 @@ def test_curve_without_outcomes_names_the_cache_and_exits_2(tmp_path, monkeypatc
         assert str(cache) in err and said in err and len(err.strip().splitlines()) == 1
     monkeypatch.setattr(sys, "argv", ["bench_beam.py", "--curve", "--effects", "wobble", "--cache", str(tmp_path)])
     assert bench_beam.main() == 2 and "--effects: unknown ['wobble']" in capsys.readouterr().err
+
+
+def test_curve_writes_a_valid_record_from_the_outcomes_in_the_cache(tmp_path, monkeypatch, capsys):
+    import json
+
+    import bench_beam
+    from record import load_records
+    for i, o in enumerate([_outcome(1, 0, False, True, "significance"), _outcome(2, 0, True, True, "")]):
+        (tmp_path / f"creep_{o['mult']}_{o['seed']}_450_bootpreset.outcome.json").write_text(json.dumps(o))
+    out = tmp_path / "records"
+    monkeypatch.setenv("RCE_RECORD_DIR", str(out))
+    monkeypatch.setattr(sys, "argv", ["bench_beam.py", "--curve", "--effects", "creep", "--cache", str(tmp_path),
+                                      "--record", "beam_detection_test"])
+    assert bench_beam.main() == 0
+    (name, rec), = load_records(out)
+    assert name == "beam_detection_test" and [r[:7] for r in rec["rows"]] == [
+        ["creep", 450, 1.0, 2.0, 1, "0 of 1", "1 of 1"], ["creep", 450, 2.0, 4.0, 1, "1 of 1", "1 of 1"]]
+    assert rec["rows"][0][-2] == "significance 1" and rec["rows"][0][7] == "-"   # no pickle: no effect RMS
+    # 0 -> 1 of 1 between x1 and x2 reaches 0.9 at x1.9; the oracle passed at the weakest: the ratio is a bound
+    assert rec["notes"][0] == "creep, 450 frames: 90 % point: diagnosis x1.90, oracle <= x1, ratio >= 1.90"
+    assert "ratio >= 1.90" in capsys.readouterr().out
