@@ -23,12 +23,21 @@ rank-1 misfit of the noise-free response / its RMS (how large the effect is befo
 Every case's pipeline output is cached (``--cache``, default /work/cache/beam: one pickle per condition, strength,
 seed, length) so the diagnosis can be re-run without the pipeline.
 
-Measured: the ``beam_effect_free`` and ``beam_effects`` records in ``docs/validation/`` (``--record NAME`` writes
-one), shown on the docs' Validation page.
+Every case run with a cache also leaves its outcome beside its pickle (``.outcome.json``: the verdict, the oracle,
+the rule that refused the effect's candidate, how far the branch moved; :mod:`beam_curve`). ``--curve`` runs nothing:
+it summarises those outcomes as pass rate against strength per effect, diagnosis and oracle, with the strength where
+each reaches 90 % (linear interpolation) and their ratio (``--curve-frames 450,900`` for several record lengths).
+``benchmarks/beam_form_capture.py`` measures, on the same cases, how much of each effect the candidate's own form
+captures on the noise-free response against the angle noise.
+
+Measured: the ``beam_effect_free``, ``beam_effects`` and ``beam_detection`` (``--curve``) records in
+``docs/validation/`` (``--record NAME`` writes one), shown on the docs' Validation page.
 
 Usage: OMP_NUM_THREADS=1 python benchmarks/bench_beam.py [--seeds 5] [--first-seed 0] [--frames 450]
        [--effects none,modal,gust_front,two_sources,creep,stiffening] [--strength-mult 1[,0.5,2]] [--boot N]
        [--cache DIR | --no-cache] [--no-oracle]
+       OMP_NUM_THREADS=1 python benchmarks/bench_beam.py --curve [--curve-frames 450,900] [--effects ...] [--cache DIR]
+       [--record beam_detection]
 """
 
 from __future__ import annotations
