@@ -42,11 +42,13 @@ def refusal(d, names: tuple[str, ...]) -> dict:
 
     The candidate looked at is the supported one of those findings if any, else the one with the lowest held-out
     RMSE. ``rule``: ``named`` (the verdict is right), ``other_verdict`` (supported, but the verdict picks another
-    candidate: lower held-out RMSE or simpler, :mod:`rce_gtsam.diagnosis.verdict`),
-    ``outside_domain``, ``drift_checks`` (significant by its fold t, refused as tracker drift), ``significance``
-    (fold t / score p short of their thresholds), ``plausibility`` (its fit's reasons), ``heldout_rmse`` (no lower
-    held-out error), ``aic`` (effective-sample AIC not lower and no significant score test), ``resolution`` (less
-    than the resolution's share of the bending variance), ``absent`` (no such candidate ran). ``text`` says it
+    candidate: lower held-out RMSE or simpler, :mod:`rce_gtsam.diagnosis.verdict`), ``outside_domain``,
+    ``drift_checks`` (significant by its fold t, refused as tracker drift), ``significance`` (fold t / score p short
+    of their thresholds), ``fold_support`` (the score test fires, the fold t is below the support t a full-data test
+    needs beside it, :func:`~rce_gtsam.diagnosis.decision.is_significant`), ``plausibility`` (its fit's reasons),
+    ``heldout_rmse`` (no lower held-out error), ``aic`` (effective-sample AIC not lower and no significant score
+    test), ``resolution`` (less than the resolution's share of the bending variance), ``absent`` (no such candidate
+    ran). ``text`` says it
     with the statistic against its threshold."""
     from rce_gtsam.diagnosis.result import finding_of
 
@@ -78,6 +80,10 @@ def refusal(d, names: tuple[str, ...]) -> dict:
             parts.append(f"drift pattern p {x['drift_pattern_p']:.3f} vs {x['drift_pattern_threshold_p']:.3f}")
         return {**out, "rule": "drift_checks", "text": f"{c.effect}: {stat}, refused as drift ({'; '.join(parts)})"}
     if not x.get("significant"):
+        if sc is not None and sc.fires:
+            sup = d.settings.get("support_threshold_t", float("nan"))
+            return {**out, "rule": "fold_support", "text": f"{c.effect}: score test fires but the fold t does not "
+                                                           f"support it ({stat}; support t {sup:.2f})"}
         return {**out, "rule": "significance", "text": f"{c.effect}: not significant ({stat})"}
     if x.get("implausible"):
         return {**out, "rule": "plausibility", "text": f"{c.effect}: implausible ({'; '.join(x['implausible'])})"}
@@ -158,6 +164,16 @@ def point_at(mults: list[float], rates: list[float], level: float = LEVEL) -> tu
     return None, "not reached"
 
 
+def rule_of(o: dict) -> str:
+    """The refusal rule of outcome ``o``; an outcome kept before ``fold_support`` was told apart from
+    ``significance`` is told apart here from its score p and threshold."""
+    r = o["refusal"]
+    if (r["rule"] == "significance" and r.get("score_p") is not None and r.get("score_threshold_p") is not None
+            and r["score_p"] <= r["score_threshold_p"]):
+        return "fold_support"
+    return r["rule"]
+
+
 def _median(v: list) -> float:
     v = [x for x in v if x is not None]
     return float(np.median(v)) if v else float("nan")
@@ -176,9 +192,9 @@ def curve(outcomes: list[dict]) -> dict:
         for m in sorted(per):
             cs = per[m]
             phys = [c["phys"] for c in cs if c.get("phys")]
-            gap = Counter(c["refusal"]["rule"] for c in cs
+            gap = Counter(rule_of(c) for c in cs
                           if c["oracle"] and c["oracle"]["supported"] and not c["right"])
-            miss = Counter(c["refusal"]["rule"] for c in cs if not c["right"])
+            miss = Counter(rule_of(c) for c in cs if not c["right"])
             rows.append({"mult": m, "strength": cs[0]["strength"], "n": len(cs), "right": sum(c["right"] for c in cs),
                          "oracle": sum(bool(c["oracle"] and c["oracle"]["supported"]) for c in cs),
                          "size": float(np.median([c["size"] for c in cs])),

@@ -21,6 +21,13 @@ def test_the_90_point_is_interpolated_between_the_strengths_around_it():
     assert beam_curve.fmt_point((None, "not reached")) == "not reached"
 
 
+def test_a_score_test_without_the_fold_t_beside_it_is_told_apart():
+    o = {"refusal": {"rule": "significance", "score_p": 0.0025, "score_threshold_p": 0.005}}
+    assert beam_curve.rule_of(o) == "fold_support"
+    o["refusal"]["score_p"] = 0.01
+    assert beam_curve.rule_of(o) == "significance"
+
+
 def _outcome(mult, seed, right, oracle, rule):
     return {"effect": "creep", "mult": mult, "strength": 2.0 * mult, "seed": seed, "frames": 450, "verdict": None,
             "right": right, "oracle": {"supported": oracle, "t": 1.0, "threshold_t": 2.6, "score_p": None},
