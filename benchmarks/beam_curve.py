@@ -48,8 +48,7 @@ def refusal(d, names: tuple[str, ...]) -> dict:
     needs beside it, :func:`~rce_gtsam.diagnosis.decision.is_significant`), ``plausibility`` (its fit's reasons),
     ``heldout_rmse`` (no lower held-out error), ``aic`` (effective-sample AIC not lower and no significant score
     test), ``resolution`` (less than the resolution's share of the bending variance), ``absent`` (no such candidate
-    ran). ``text`` says it
-    with the statistic against its threshold."""
+    ran). ``text`` says it with the statistic against its threshold."""
     from rce_gtsam.diagnosis.result import finding_of
 
     cs = [c for c in d.candidates if finding_of(c) in names]
