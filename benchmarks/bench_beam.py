@@ -142,7 +142,16 @@ def effect_size(y: np.ndarray) -> float:
 
 def _rounded(v: float, nd: int):
     """``v`` rounded to ``nd`` decimals for a record, "-" where it is not finite (a case without its pickle)."""
-    return round(float(v), nd) if np.isfinite(v) else "-"
+    if not np.isfinite(v):
+        return "-"
+    return int(round(float(v))) if nd == 0 else round(float(v), nd)
+
+
+def best(rows: list[dict], key: str) -> str:
+    """The strength with the highest pass rate of ``key`` ("right" or "oracle") among ``rows`` (ties: more seeds,
+    then the weaker strength), as text."""
+    r = max(rows, key=lambda x: (x[key] / x["n"], x["n"]))
+    return f"{r[key]} of {r['n']} at x{r['mult']:g}" if r[key] else "none at any strength tried"
 
 
 def curve_mode(a, effects: list[str]) -> int:
@@ -187,7 +196,8 @@ def curve_mode(a, effects: list[str]) -> int:
                                  _rounded(row["effect_rms_deg"], 2), _rounded(row["noise_rms_deg"], 2),
                                  _rounded(row["max_joint_deg"], 1), _rounded(row["tip_pct"], 0), rules[0], rules[1]])
                 notes.append(f"{eff}, {frames} frames: 90 % point: diagnosis {fmt_point(r['diagnosis_90'])}, oracle "
-                             f"{fmt_point(r['oracle_90'])}, ratio {ratio_text(r)}")
+                             f"{fmt_point(r['oracle_90'])}, ratio {ratio_text(r)}; highest pass rate: diagnosis "
+                             f"{best(r['rows'], 'right')}, oracle {best(r['rows'], 'oracle')}")
         effs = sorted({e for res in results.values() for e in res})
         notes += [f"{eff} strength: {BEAM_EFFECT_MEANING[eff]}" for eff in effs]
         save_record(a.record, title="The beam simulator: detection against strength, the diagnosis and its oracle",

@@ -88,5 +88,6 @@ def test_curve_writes_a_valid_record_from_the_outcomes_in_the_cache(tmp_path, mo
         ["creep", 450, 1.0, 2.0, 1, "0 of 1", "1 of 1"], ["creep", 450, 2.0, 4.0, 1, "1 of 1", "1 of 1"]]
     assert rec["rows"][0][-2] == "significance 1" and rec["rows"][0][7] == "-"   # no pickle: no effect RMS
     # 0 -> 1 of 1 between x1 and x2 reaches 0.9 at x1.9; the oracle passed at the weakest: the ratio is a bound
-    assert rec["notes"][0] == "creep, 450 frames: 90 % point: diagnosis x1.90, oracle <= x1, ratio >= 1.90"
+    assert rec["notes"][0] == ("creep, 450 frames: 90 % point: diagnosis x1.90, oracle <= x1, ratio >= 1.90; "
+                               "highest pass rate: diagnosis 1 of 1 at x2, oracle 1 of 1 at x1")
     assert "ratio >= 1.90" in capsys.readouterr().out
