@@ -23,12 +23,21 @@ rank-1 misfit of the noise-free response / its RMS (how large the effect is befo
 Every case's pipeline output is cached (``--cache``, default /work/cache/beam: one pickle per condition, strength,
 seed, length) so the diagnosis can be re-run without the pipeline.
 
-Measured: the ``beam_effect_free`` and ``beam_effects`` records in ``docs/validation/`` (``--record NAME`` writes
-one), shown on the docs' Validation page.
+Every case run with a cache also leaves its outcome beside its pickle (``.outcome.json``: the verdict, the oracle,
+the rule that refused the effect's candidate, how far the branch moved; :mod:`beam_curve`). ``--curve`` runs nothing:
+it summarises those outcomes as pass rate against strength per effect, diagnosis and oracle, with the strength where
+each reaches 90 % (linear interpolation) and their ratio (``--curve-frames 450,900`` for several record lengths).
+``benchmarks/beam_form_capture.py`` measures, on the same cases, how much of each effect the candidate's own form
+captures on the noise-free response against the angle noise.
+
+Measured: the ``beam_effect_free``, ``beam_effects`` and ``beam_detection`` (``--curve``) records in
+``docs/validation/`` (``--record NAME`` writes one), shown on the docs' Validation page.
 
 Usage: OMP_NUM_THREADS=1 python benchmarks/bench_beam.py [--seeds 5] [--first-seed 0] [--frames 450]
        [--effects none,modal,gust_front,two_sources,creep,stiffening] [--strength-mult 1[,0.5,2]] [--boot N]
        [--cache DIR | --no-cache] [--no-oracle]
+       OMP_NUM_THREADS=1 python benchmarks/bench_beam.py --curve [--curve-frames 450,900] [--effects ...] [--cache DIR]
+       [--record beam_detection]
 """
 
 from __future__ import annotations
@@ -60,22 +69,40 @@ def pipeline_case(effect: str | None, seed: int, frames: int, mult: float, boot:
     r = res.response
     row = {b.edge: i for i, b in enumerate(sim.graph.bends)}
     idx = [row[tuple(e)] for e in r.edges]
-    return {"inputs": diagnose_inputs(res), "Y": r.Y, "truth": sim.response_true[idx][:, r.frames],
+    return {"phys": sim_phys(sim),
+            "inputs": diagnose_inputs(res), "Y": r.Y, "truth": sim.response_true[idx][:, r.frames],
             "truth_effect_free": sim.response_effect_free[idx][:, r.frames],
             "kappa_true": np.array([sim.kappa_true[tuple(e)] for e in r.edges]), "kappa": np.asarray(res.fit.kappa),
             "ci": None if res.ci is None else (np.asarray(res.ci.low), np.asarray(res.ci.high)),
             "pipeline_s": tp}
 
 
+def sim_phys(sim) -> dict:
+    """How far the simulated branch moves (:func:`beam_curve.phys_measures`)."""
+    from beam_curve import phys_measures
+    return phys_measures(sim.true_xy, sim.response_true, float(sum(sim.segment_px.values())))
+
+
+def case_path(cache: str, effect, seed, frames, mult, boot) -> Path:
+    """The pickle of one case in ``cache`` (its outcome, :mod:`beam_curve`, sits beside it as ``.outcome.json``)."""
+    return Path(cache) / f"{effect or 'none'}_{mult:g}_{seed}_{frames}_boot{boot if boot is not None else 'preset'}.pkl"
+
+
 def cached_case(cache: str | None, effect, seed, frames, mult, boot) -> dict:
-    """:func:`pipeline_case`, kept in (and read back from) ``cache``; the pipeline seconds of a cached case are 0."""
+    """:func:`pipeline_case`, kept in (and read back from) ``cache``; the pipeline seconds of a cached case are 0.
+    A case cached before the motion measures were kept gets them from a fresh simulation (not saved)."""
     if cache is None:
         return pipeline_case(effect, seed, frames, mult, boot)
-    path = Path(cache) / f"{effect or 'none'}_{mult:g}_{seed}_{frames}_boot{boot if boot is not None else 'preset'}.pkl"
+    path = case_path(cache, effect, seed, frames, mult, boot)
     if path.exists():
         with open(path, "rb") as fh:
             out = pickle.load(fh)
         out["pipeline_s"] = 0.0
+        if "phys" not in out:
+            from rce_gtsam.sim.beam import BEAM_EFFECT_DEFAULTS, BeamConfig, simulate_beam
+            strength = None if effect is None else {effect: BEAM_EFFECT_DEFAULTS[effect] * mult}
+            out["phys"] = sim_phys(simulate_beam(BeamConfig(n_frames=frames, seed=seed, effects=(effect,) if effect
+                                                            else (), effect_strength=strength)))
         return out
     out = pipeline_case(effect, seed, frames, mult, boot)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -113,6 +140,90 @@ def effect_size(y: np.ndarray) -> float:
     return m / r
 
 
+def _rounded(v: float, nd: int):
+    """``v`` rounded to ``nd`` decimals for a record, "-" where it is not finite (a case without its pickle)."""
+    if not np.isfinite(v):
+        return "-"
+    return int(round(float(v))) if nd == 0 else round(float(v), nd)
+
+
+def best(rows: list[dict], key: str) -> str:
+    """The strength with the highest pass rate of ``key`` ("right" or "oracle") among ``rows`` (ties: more seeds,
+    then the weaker strength), as text."""
+    r = max(rows, key=lambda x: (x[key] / x["n"], x["n"]))
+    return f"{r[key]} of {r['n']} at x{r['mult']:g}" if r[key] else "none at any strength tried"
+
+
+def curve_mode(a, effects: list[str]) -> int:
+    """``--curve``: pass rate against strength per effect from the outcomes in ``--cache`` (``--frames``), the 90 %
+    points of the diagnosis and its oracle (:func:`beam_curve.curve`); ``--record NAME`` saves it."""
+    from beam_curve import curve, fmt_point, load_outcomes, print_curve, ratio_text
+
+    if a.no_cache:
+        print("bench_beam: --curve reads the case outcomes in --cache; it cannot run with --no-cache", file=sys.stderr)
+        return 2
+    if not Path(a.cache).is_dir():
+        print(f"bench_beam: --cache {a.cache}: no such directory", file=sys.stderr)
+        return 2
+    from rce_gtsam.sim.beam import BEAM_EFFECTS
+    bad = [e for e in effects if e not in BEAM_EFFECTS]
+    if bad:
+        print(f"bench_beam: --effects: unknown {bad}; choose from {', '.join(BEAM_EFFECTS)}", file=sys.stderr)
+        return 2
+    frames_list = [a.frames] if a.curve_frames is None else a.curve_frames
+    results = {}
+    for frames in frames_list:
+        outcomes = load_outcomes(a.cache, effects, frames)
+        if not outcomes:
+            print(f"bench_beam: --cache {a.cache}: no case outcomes for {','.join(effects)} at {frames} frames "
+                  "(run the cases first, without --curve)", file=sys.stderr)
+            return 2
+        results[frames] = curve(outcomes)
+    for frames, res in results.items():
+        print_curve(res, frames)
+    if a.record:
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from record import save_record
+        from rce_gtsam.sim.beam import BEAM_EFFECT_MEANING
+        rows, notes = [], []
+        for frames, res in results.items():
+            for eff, r in sorted(res.items()):
+                for row in r["rows"]:
+                    rules = [", ".join(f"{k} {v}" for k, v in sorted(row[key].items(), key=lambda kv: -kv[1])) or "-"
+                             for key in ("gap_rules", "miss_rules")]
+                    rows.append([eff, frames, row["mult"], round(row["strength"], 3), row["n"],
+                                 f"{row['right']} of {row['n']}", f"{row['oracle']} of {row['n']}",
+                                 _rounded(row["effect_rms_deg"], 2), _rounded(row["noise_rms_deg"], 2),
+                                 _rounded(row["max_joint_deg"], 1), _rounded(row["tip_pct"], 0), rules[0], rules[1]])
+                notes.append(f"{eff}, {frames} frames: 90 % point: diagnosis {fmt_point(r['diagnosis_90'])}, oracle "
+                             f"{fmt_point(r['oracle_90'])}, ratio {ratio_text(r)}; highest pass rate: diagnosis "
+                             f"{best(r['rows'], 'right')}, oracle {best(r['rows'], 'oracle')}")
+        effs = sorted({e for res in results.values() for e in res})
+        notes += [f"{eff} strength: {BEAM_EFFECT_MEANING[eff]}" for eff in effs]
+        save_record(a.record, title="The beam simulator: detection against strength, the diagnosis and its oracle",
+                    command=(f"python benchmarks/bench_beam.py --curve --curve-frames "
+                             f"{','.join(map(str, frames_list))} --effects {','.join(effs)} --cache {a.cache} "
+                             "(summarises the cases run before into that cache, one bench_beam.py run per effect, "
+                             "strengths, seeds and frames: the rows say which)"),
+                    description=("Per beam effect, record length and strength (a multiple of the default; its "
+                                 "physical value beside it), the share of seeds on which the diagnosis names the "
+                                 "effect ('right') and on which its oracle (the verdict's own test with the true form "
+                                 "and shared parameters, rce_gtsam.diagnosis.oracle) passes. 90 % points (notes): "
+                                 "linear interpolation of the pass rate between tested strengths. 'effect RMS': what "
+                                 "no rank-1 model explains of the noise-free response (true_signature), beside the "
+                                 "angle noise's RMS (Y less the truth), both deg, medians: what any rank-1 diagnosis "
+                                 "can see against what it sees it through. Largest joint bend from rest (deg, max over "
+                                 "seeds) and median tip excursion (% of branch length): is the strength physical. "
+                                 "'refused where the oracle passed' / 'why missed': the rule of the diagnosis that "
+                                 "refused the mapped candidate (benchmarks/beam_curve.py, refusal), counted over "
+                                 "those cases / over every miss."),
+                    columns=["effect", "frames", "x strength", "strength", "seeds", "right", "oracle",
+                             "effect RMS (deg)", "noise RMS (deg)", "largest joint bend (deg)",
+                             "tip excursion (% length)", "refused where the oracle passed", "why missed"],
+                    rows=rows, notes=notes)
+    return 0
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seeds", type=int, default=5)
@@ -124,12 +235,19 @@ def main() -> int:
     ap.add_argument("--cache", default=DEFAULT_CACHE)
     ap.add_argument("--no-cache", action="store_true")
     ap.add_argument("--no-oracle", action="store_true")
+    ap.add_argument("--curve", action="store_true",
+                    help="run nothing: summarise pass rate against strength from the case outcomes in --cache")
+    ap.add_argument("--curve-frames", default=None, type=lambda v: [int(x) for x in v.split(",")],
+                    help="--curve: record lengths to summarise, e.g. 450,900 (default: --frames)")
     ap.add_argument("--record", default=None, metavar="NAME",
                     help="save the table as the docs' validation record docs/validation/NAME.json")
     a = ap.parse_args()
+    if a.curve:  # before the heavy imports: a missing cache is named at once
+        return curve_mode(a, [e.strip() for e in a.effects.split(",") if e.strip() and e.strip() != "none"])
     from rce_gtsam.diagnosis.diagnose import diagnose
     from rce_gtsam.diagnosis.oracle import oracle_test
-    from rce_gtsam.sim.beam import BEAM_EFFECTS, DIAGNOSIS_NAME
+    from beam_curve import case_outcome, save_outcome
+    from rce_gtsam.sim.beam import BEAM_EFFECT_DEFAULTS, BEAM_EFFECTS, DIAGNOSIS_NAME
 
     conditions = [e.strip() for e in a.effects.split(",") if e.strip()]
     bad = [e for e in conditions if e != "none" and e not in BEAM_EFFECTS]
@@ -155,7 +273,7 @@ def main() -> int:
                 verdicts[d.verdict or "none"] += 1
                 ok = d.verdict is None if hidden is None else d.verdict in DIAGNOSIS_NAME[hidden]
                 right += ok
-                o_txt = ""
+                o_txt, o = "", None
                 if not a.no_oracle and hidden is not None:
                     o = oracle_test(d, c["Y"], c["truth"], DIAGNOSIS_NAME[hidden][0])
                     orc += bool(o["supported"])
@@ -165,6 +283,12 @@ def main() -> int:
                 cover.append(cv)
                 ratio.append(floor_ratio(c, c["inputs"]["noise_floor"]))
                 size.append(effect_size(c["truth"]))
+                if cache is not None and hidden is not None:
+                    out = case_outcome(hidden, mult, BEAM_EFFECT_DEFAULTS[hidden] * mult, sd, a.frames, d, ok, o,
+                                       size[-1], c.get("phys"))
+                    save_outcome(case_path(cache, hidden, sd, a.frames, mult, a.boot).with_suffix(".outcome.json"),
+                                 out)
+                    o_txt += f"; {out['refusal']['text']}; {c['phys']}"
                 cands = ", ".join(f"{x.effect} {x.improvement_pct:+.1f}% t={x.evidence:.1f}{'*' if x.supported else ''}"
                                   for x in d.candidates)
                 print(f"  {cond} x{mult:g} seed {sd}: verdict {d.verdict}"
