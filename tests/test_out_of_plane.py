@@ -146,3 +146,21 @@ def test_an_inconclusive_budget_quotes_the_length_test():
     text = out_of_plane_text(SimpleNamespace(candidates=[cand]))
     assert "p = 0.046 against its level 0.01" in text and "share no course" in text
     assert "not tested here" in out_of_plane_text(SimpleNamespace(candidates=[]))
+
+
+def test_an_own_test_names_nothing_unless_its_held_out_error_falls():
+    """The length test alone is a full-data test: a significant p with no held-out gain on the lengths is not
+    significant (a planar user-path recording had p 0.007 and -1.9 %)."""
+    from rce_gtsam.diagnosis.own_family import own_test_significant
+
+    class Own:
+        def __init__(self, gain):
+            self.gain = gain
+
+        def own_family_test(self, fit, seed=0):
+            return {"p": 0.001, "alpha": ALPHA_OOP, "heldout_gain_pct": self.gain}
+
+    extra = {}
+    assert own_test_significant(Own(12.0), None, 0, extra) and extra["heldout_gain_pct"] == 12.0
+    assert not own_test_significant(Own(-1.9), None, 0, {})
+    assert not own_test_significant(Own(0.0), None, 0, {})

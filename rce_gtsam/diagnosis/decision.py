@@ -22,7 +22,8 @@ effect share one share), with the folds' t quantiles on (folds - 1) dof (:func:`
   named outside the domain the tests are calibrated on (:mod:`rce_gtsam.diagnosis.domain`).
 * An effect read from another channel than the bend residuals (``own_family``: out_of_plane, from segment
   lengths) is judged by its own test at its own level, outside the alpha above (family-wise alpha + its level),
-  supported when that test holds and its fit is plausible, and the verdict only where no other candidate is
+  supported when that test holds, its held-out error on that channel falls and its fit is plausible, and the
+  verdict only where no other candidate is
   (:mod:`rce_gtsam.diagnosis.own_family`, :func:`own_supported`).
 
 Nothing here computes a statistic: the tests' results come in from :mod:`rce_gtsam.diagnosis.evidence`, which

@@ -257,8 +257,9 @@ class Effect:
         return cls()
 
     def own_family_test(self, fit, seed: int = 0) -> dict | None:
-        """For an :attr:`own_family` effect: {"p": p-value, "alpha": its level, ...statistics} of its own test on the
-        baseline ``fit``, or None (no test: never named). Default None."""
+        """For an :attr:`own_family` effect: {"p": p-value, "alpha": its level, "heldout_gain_pct": how much the term
+        lowers the held-out error on the channel it models (%; optional: without it only p is judged),
+        ...statistics} of its own test on the baseline ``fit``, or None (no test: never named). Default None."""
         return None
 
     def explain(self, summary: dict, statistics: dict) -> str:

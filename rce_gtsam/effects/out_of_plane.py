@@ -196,7 +196,7 @@ class OutOfPlane(Effect):
         test = self.length_test(seed)
         if test is None:
             return None
-        return {"p": test.p, "alpha": ALPHA_OOP, **test.as_dict()}
+        return {"p": test.p, "alpha": ALPHA_OOP, "heldout_gain_pct": test.heldout_gain_pct, **test.as_dict()}
 
     def explain(self, summary: dict, statistics: dict) -> str:
         return (f"The segments' lengths in the image share a course beyond the in-plane bending (length-channel "
