@@ -90,29 +90,13 @@ def _sobel(t, gx, gy):
             gy[i, j] = 0.125 * ((t[ip, jm] + 2.0 * t[ip, j] + t[ip, jp]) - (t[im, jm] + 2.0 * t[im, j] + t[im, jp]))
 
 
-#: Lag (px, each axis) of the residual correlation :func:`weighted_lk`'s standard error allows for. Bilinear
-#: resampling correlates neighbouring pixels (lag 1); the 3x3 Sobel gradient, blur and H.264's smoothing reach
-#: further. A 17x17 template on smooth texture, 150 draws of noise blurred by a Gaussian of 1 px: the median
-#: standard error / the estimates' actual SD was 0.46 / 0.69 / 0.78 / 0.82 / 0.85 at lags 0..4 (lag 0: pixels
-#: independent); with white noise 1.02 (lag 0) and 0.99 (lag 3) (tests/test_track_sigma.py).
-#: On the texture bed the anchored matches' error / sigma barely moved from lag 2 to 4 (median 1.89 -> 1.83).
-SE_LAG_PX = 3
-
-
 @njit(cache=True, nogil=True)
-def weighted_lk(tmpl, wts, img, sx0, sy0, iters=20, eps=0.01, lag=SE_LAG_PX):
+def weighted_lk(tmpl, wts, img, sx0, sy0, iters=20, eps=0.01):
     """Weighted inverse-compositional LK of ``tmpl`` under ``wts`` in ``img`` from (sx0, sy0) px.
 
     Returns ``(ok, x, y, s_lk)``: ok False when ill-posed (weighted template variance below 1e-3 grey
     levels^2, singular structure tensor) or when the estimate leaves the start by more than the template
-    size. ``s_lk`` (px) is the standard error of the estimate in its least certain direction, sqrt of the largest
-    eigenvalue of the sandwich covariance H^-1 M H^-1: H the weighted structure tensor, M = sum over pixel pairs
-    i, j within ``lag`` px (each axis) of k(i - j) s_i s_j^T, s_i = w_i e_i grad_i (e the gain/bias-compensated
-    residual at the solution), k the product Bartlett kernel (1 - |dx| / (lag + 1)) (1 - |dy| / (lag + 1)).
-    ``lag = 0`` is the heteroscedasticity-robust (White) form; the classic sqrt(residual variance / smallest
-    eigenvalue of H) assumes independent pixels, and the residuals of a match are not: bilinear resampling,
-    blur and compression correlate them over 1-2 px, which made it 2.4x too small on the texture bed (see
-    ``SE_LAG_PX``).
+    size; ``s_lk`` = sqrt(weighted residual variance / smallest eigenvalue of the structure tensor) px.
     """
     th, tw = tmpl.shape
     t = tmpl.astype(np.float32)
@@ -174,48 +158,11 @@ def weighted_lk(tmpl, wts, img, sx0, sy0, iters=20, eps=0.01, lag=SE_LAG_PX):
             return False, 0.0, 0.0, 0.0
         if dx * dx + dy * dy < eps * eps:
             break
-    sx = np.empty((th, tw), np.float64)
-    sy = np.empty((th, tw), np.float64)
+    res = 0.0
     for i in range(th):
         for j in range(tw):
-            e = float(wts[i, j]) * ((float(pf[i, j]) - mu_p) * gain - (float(t[i, j]) - mu_t))
-            sx[i, j] = e * float(gx[i, j])
-            sy[i, j] = e * float(gy[i, j])
-    # M = sum_i s_i (K * s)_i^T: the Bartlett kernel is separable, so K * s is a row pass and a column pass
-    # (zero outside the template)
-    rx = np.zeros((th, tw), np.float64)
-    ry = np.zeros((th, tw), np.float64)
-    for i in range(th):
-        for j in range(tw):
-            ax = ay = 0.0
-            for dj in range(-lag, lag + 1):
-                jj = j + dj
-                if 0 <= jj < tw:
-                    k = 1.0 - abs(dj) / (lag + 1.0)
-                    ax += k * sx[i, jj]
-                    ay += k * sy[i, jj]
-            rx[i, j] = ax
-            ry[i, j] = ay
-    mxx = mxy = myy = 0.0
-    for i in range(th):
-        for j in range(tw):
-            ax = ay = 0.0
-            for di in range(-lag, lag + 1):
-                ii = i + di
-                if 0 <= ii < th:
-                    k = 1.0 - abs(di) / (lag + 1.0)
-                    ax += k * rx[ii, j]
-                    ay += k * ry[ii, j]
-            mxx += sx[i, j] * ax
-            mxy += sx[i, j] * ay
-            myy += sy[i, j] * ay
-    # H^-1 M H^-1 (H = [[hxx, hxy], [hxy, hyy]], det > 0)
-    ixx, ixy, iyy = hyy / det, -hxy / det, hxx / det
-    axx, axy = ixx * mxx + ixy * mxy, ixx * mxy + ixy * myy
-    ayx, ayy = ixy * mxx + iyy * mxy, ixy * mxy + iyy * myy
-    cxx = axx * ixx + axy * ixy
-    cxy = axx * ixy + axy * iyy
-    cyy = ayx * ixy + ayy * iyy
-    lam_max = 0.5 * (cxx + cyy + math.sqrt((cxx - cyy) ** 2 + 4 * cxy * cxy))
-    s_lk = math.sqrt(max(lam_max, 0.0))
+            e = (float(pf[i, j]) - mu_p) * gain - (float(t[i, j]) - mu_t)
+            res += float(wts[i, j]) * e * e
+    lam_min = 0.5 * (hxx + hyy - math.sqrt((hxx - hyy) ** 2 + 4 * hxy * hxy))
+    s_lk = math.sqrt((res / wsum) / max(lam_min, 1e-9))
     return True, x, y, s_lk

@@ -16,7 +16,7 @@ from .kernels_sampling import bilinear
 #: sha256 (first 16 hex digits) of each kernel file this module's compiled functions call into. numba's cache
 #: checks only a function's own file (numba issue 1833), so an edit there must change this file too, or its
 #: cached kernels keep the old code; ``tests/test_track_kernels.py`` checks the digests.
-CALLS_INTO = {"kernels_sampling.py": "6b2dc9f62c915451"}
+CALLS_INTO = {"kernels_sampling.py": "902913666eddb75f"}
 
 
 @njit(cache=True, nogil=True)

@@ -120,11 +120,9 @@ never recovers after an occlusion. This tracker uses frame-to-frame pyramidal LK
    0.28 on seeds 0-1); simulator renders (seeds 0-4) within the tracker's own jitter except seed 3's largest
    visible error 9.8 -> 13.4 px.
 4. **Uncertainty**: ``sigma_px = sqrt(s_lk^2 + (fb/2)^2 + sigma_floor_px^2)`` with the LK
-   least-squares standard error ``s_lk`` in its least certain direction, in the sandwich form that allows for
-   residuals correlated over ``SE_LAG_PX`` px (``kernels_sampling.weighted_lk``; residual = template minus the
-   matched patch, so appearance change counts), fb the forward-backward error, and a floor for the appearance
-   change a residual cannot show, measured on the texture bed (``LKConfig.sigma_floor_px``). Invisible entries
-   get sigma = the search radius.
+   least-squares standard error ``s_lk = sqrt(residual_variance / lambda_min(G))`` (G = structure
+   tensor of the template, residual = template minus the matched patch, so appearance change counts)
+   and fb the forward-backward error. Invisible entries get sigma = the search radius.
 
 Modules: this one holds :class:`LKTracker` and its frame loop (frame-to-frame LK, the refinement thread, the
 result); :mod:`~rce_gtsam.track.lk_config` its settings (:class:`LKConfig`, the constants' reasons) and :data:`HOW`;

@@ -40,13 +40,7 @@ class LKConfig:
     max_fb_fraction: forward-backward error limit as a fraction of h (never below ``min_fb_px``).
     min_fb_px: floor of the forward-backward limit.
     max_stretch, min_length_fraction, length_tol_px: segment-length plausibility (needs a graph).
-    sigma_floor_px: added in quadrature to every frame-0 match's standard error (``s_lk``, the sandwich form of
-        ``kernels_sampling.weighted_lk``, and half the forward-backward error): the error a match's own residual
-        cannot show -- the template's appearance change under blur, deformation and compression. From the texture
-        bed's measured error (plant 2's real texture, 5 seeds x effect-free/delay, 68,000 anchored matches,
-        ``benchmarks/bench_texture_sigma.py``): with 0.05 px the median |error| / sigma was 1.9 (a calibrated 2-D
-        Gaussian: 1.18), with 0.15 px 1.1. On the simulator's clean renders (5 clips, 52,000 matches) the same
-        floor makes sigma conservative (median 0.4): their synthetic texture has no appearance change to speak of.
+    sigma_floor_px: smallest reported 1-sigma (interpolation/quantisation limit).
     rotate_templates: rotate the first-frame template by the branch's rotation (needs a graph).
     mask_to_branch: weight template pixels by a band around the branch (the graph's segments in frame 0),
         so the static background inside a patch does not pin the match (needs a graph).
@@ -142,7 +136,7 @@ class LKConfig:
     max_stretch: float = 0.25
     min_length_fraction: float = 0.4
     length_tol_px: float = 1.5
-    sigma_floor_px: float = 0.15
+    sigma_floor_px: float = 0.05
     rotate_templates: bool = True
     mask_to_branch: bool = True
     band_margin_px: float = 1.5
