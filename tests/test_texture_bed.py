@@ -56,10 +56,12 @@ def test_tracker_follows_the_warped_texture(bed, frames):
     assert np.median(err[res.visible]) < 0.5
 
 
-def test_tracker_sigma_is_honest_on_real_texture_after_h264(bed, frames, tmp_path):
-    """|error| / sigma of the matches anchored to frame 0, after the bed's H.264: median 0.74 (a calibrated 2-D
-    Gaussian gives 1.18; the simulator's clean renders 0.4). With the former 0.05 px floor it was 1.40 here (2.6
-    over the 5-seed, 300-frame bed), and the independent-pixel standard error before that gave more still."""
+def test_tracker_sigma_is_within_a_factor_of_three_on_real_texture_after_h264(bed, frames, tmp_path):
+    """|error| / sigma of the matches anchored to frame 0, after the bed's H.264 (a calibrated 2-D Gaussian gives a
+    median of 1.18): the independent-pixel standard error with its 0.05 px floor reads about 1.4 here (2.6 over the
+    5-seed, 300-frame bed; on the simulator's clean renders 0.95). A calibrated sigma for real texture (a sandwich
+    standard error and a 0.15 px floor) was measured and not kept: it weakened the smoother on our own renders and
+    added false verdicts (docs/validation/track_sigma.json). This guards the factor, not the calibration."""
     from rce_gtsam.sim.render import write_h264
     from rce_gtsam.sim.texture_bed import RenderSettings
     from rce_gtsam.track import open_video
@@ -72,8 +74,8 @@ def test_tracker_sigma_is_honest_on_real_texture_after_h264(bed, frames, tmp_pat
         res = LKTracker().track(src, cf.points, cf.graph)
     m = res.visible & (res.info["how"] == 0)
     z = np.hypot(*(res.xy - b.true_xy).transpose(2, 0, 1))[m] / res.sigma_px[m]
-    assert 0.55 < np.median(z) < 1.2
-    assert np.percentile(z, 90) < 3.2
+    assert 0.4 < np.median(z) < 3.0
+    assert np.percentile(z, 90) < 8.0
 
 
 def test_angle_floor():
