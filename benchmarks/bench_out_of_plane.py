@@ -84,8 +84,9 @@ def diagnosis(a) -> None:
     from rce_gtsam.effects.out_of_plane import OutOfPlane
 
     print(f"\n2. the diagnosis (rce diagnose's path); {a.diagnose_seeds} seeds x {a.frames} frames")
-    for name, share, tilt in (("swing share 0.5, tilt 30", 0.5, 30.0), ("swing share 1.0, tilt 30", 1.0, 30.0),
-                              ("planar (2-D simulator)", 0.0, None)):
+    conditions = (("swing share 0.5, tilt 30", 0.5, 30.0), ("swing share 1.0, tilt 30", 1.0, 30.0),
+                  ("planar (2-D simulator)", 0.0, None))
+    for name, share, tilt in (c for c in conditions if not a.conditions or c[1] in a.conditions):
         t = time.perf_counter()
         named, imps, imps_named, verdicts, lgain, lgain_named = 0, [], [], {}, [], []
         lr_base, lr_ext, lr_img = [], [], []
@@ -171,8 +172,11 @@ def main(argv=None) -> None:
     p.add_argument("--scales", default="1,2")
     p.add_argument("--real", default=None, help="folder with plant_1/ and plant_2/ (tapir_tracks.csv, branch_graph.json)")
     p.add_argument("--skip", default="", help="comma list of parts to skip: calibration, diagnosis")
+    p.add_argument("--conditions", default="", help="comma list of swing shares the diagnosis part runs (0 = planar; "
+                                                    "default: 0.5, 1 and planar)")
     a = p.parse_args(argv)
     a.families = [f for f in a.families.split(",") if f]
+    a.conditions = [float(c) for c in a.conditions.split(",") if c]
     a.scales = [float(s) for s in a.scales.split(",") if s]
     skip = set(a.skip.split(","))
     warnings.simplefilter("ignore", RuntimeWarning)
