@@ -44,8 +44,8 @@ def test_uniform_sigma_removes_the_bias_of_unequal_smoothing(exact):
     sim, sigma = exact
     t = Tracks(node_ids=sim.tracks.node_ids, xy=sim.true_xy, sigma_px=sigma, source="exact")
     errs = {}
-    for mode, preset in (("per_observation", DEFAULT.with_(smoother={"sigma_mode": "per_observation"})),
-                         ("uniform", "default")):  # the default preset must keep the fix
+    for mode, preset in (("per_observation", "default"),  # the default preset (the option is off: see presets.py)
+                         ("uniform", DEFAULT.with_(smoother={"sigma_mode": "uniform"}))):
         errs[mode] = log_rmse(rce_gtsam.analyze(t, sim.graph, preset=preset, n_boot=0), sim.kappa_true)
     # one sigma for all: one filter for every bend, which z absorbs (measured 1e-5); per observation, the nodes
     # and frames the tracker is less sure of are low-passed harder and kappa reads it (measured 0.027)
