@@ -203,6 +203,8 @@ def test_real_plant_budgets_are_what_the_readme_says(shared_data):
         assert abs(pc(b.rank1) - rank1) <= 1 and abs(pc(b.noise_floor) - floor) <= 1
         assert abs(pc(b.unexplained_range[0]) - low) <= 1 and abs(pc(b.unexplained_range[1]) - high) <= 1
         assert len(b.floor_is_bound) == bound
+        # the node error the residual's node-by-node pattern implies (quoted by the diagnosis' explanation)
+        assert round(noise_floor_of(res).nodewise_sigma_px, 2) == {"plant_1": 0.41, "plant_2": 0.22}[name]
 
 
 @pytest.mark.slow

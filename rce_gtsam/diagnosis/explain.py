@@ -8,6 +8,8 @@ Units: degrees (RMSE), deg^2 (variances), frames.
 
 from __future__ import annotations
 
+import numpy as np
+
 from ..model import render_fit_report
 from .result import Diagnosis, complexity, score_is_significant
 
@@ -153,9 +155,13 @@ def explain(diag: Diagnosis) -> str:
                     f"{base:.3f} deg).{closest} Without a noise floor (tracks) this cannot say whether the remaining "
                     "misfit is measurement noise or an effect outside the library.")
         share = lambda v: 100.0 * b.share(v)  # noqa: E731
+        nf = getattr(diag, "noise_floor", None)
+        node_px = getattr(nf, "nodewise_sigma_px", float("nan")) if nf is not None else float("nan")
+        tracker = (f" (the residual's node-by-node pattern puts the tracking error at {node_px:.2f} px per node)"
+                   if np.isfinite(node_px) and node_px > 0 else "")
         head = (f"The rank-1 model explains {share(b.rank1):.0f}% of the bending variance ({b.total:.3g} deg^2); the "
-                f"model-free noise floor is {share(b.noise_floor):.0f}%, which leaves {share(b.unexplained):+.0f}% "
-                f"unexplained (+/- {share(b.unexplained_se):.0f}%).")
+                f"measured noise floor is {share(b.noise_floor):.0f}%{tracker}, which leaves "
+                f"{share(b.unexplained):+.0f}% unexplained (+/- {share(b.unexplained_se):.0f}%).")
         worst = sorted(b.per_segment, key=lambda r: -(r["unexplained"] or 0.0))[:3]
         where = ", ".join(f"{r['segment']} ({r['unexplained']:.2g} deg^2)" for r in worst
                           if (r["unexplained"] or 0) > 0)
