@@ -216,7 +216,7 @@ def out_of_plane_test(channel: LengthChannel, z: np.ndarray, seed: int = 0,
     same = float(np.mean(np.sign(load[fin]) == tot)) if fin.any() else 0.0
     growth = _spearman(channel.root_distance[fin], np.abs(load[fin])) if fin.sum() >= 3 else 0.0
     seg = [channel.segments[i] for i in kept]
-    gain = heldout_length_gain(channel, z, kept[halves[0]], kept[halves[1]])
+    gain = heldout_length_gain(channel, z, R, kept, halves)
     return LengthTest(heldout_gain_pct=gain, p=p, statistic=q, null_median=float(np.median(qs)),
                       rows_a=tuple(f"{a}->{b}" for a, b in (seg[i] for i in halves[0])),
                       rows_b=tuple(f"{a}->{b}" for a, b in (seg[i] for i in halves[1])),
@@ -229,32 +229,29 @@ def _leading_course(rows: np.ndarray) -> np.ndarray:
     return w / max(float(np.sqrt(np.mean(w * w))), 1e-300)
 
 
-def heldout_length_gain(channel: LengthChannel, z: np.ndarray, rows_a, rows_b, n_folds: int = HELDOUT_FOLDS) -> float:
+def heldout_length_gain(channel: LengthChannel, z: np.ndarray, R: np.ndarray, kept: np.ndarray, halves,
+                        n_folds: int = HELDOUT_FOLDS) -> float:
     """The out-of-plane term's held-out error on the observable it models, the segments' lengths (%).
 
-    For each of the two node-disjoint sets in turn: the swing course w is taken from the *other* set's length
-    residuals (:func:`length_residuals`, all frames: that set is measured there), and each segment of this set is
-    predicted on held-out frames (``n_folds`` contiguous blocks) from its fit on the remaining frames, once on the
-    baseline columns (:func:`excitation_columns`: what the rank-1 model's bending alone moves a length with) and
-    once on those columns plus w. Returned: 100 (1 - SSE_with_w / SSE_baseline), summed over both sets' held-out
-    frames (relative length changes). No segment's own data set its course, and no frame its own prediction, so a
+    ``R``, ``kept``: :func:`length_residuals` of ``channel`` and ``z``; ``halves``: two node-disjoint sets of row
+    positions in ``R``. For each set in turn: the swing course w is taken from the *other* set's length
+    residuals (all frames: that set is measured there), and each segment of this set is predicted on held-out
+    frames (``n_folds`` contiguous blocks) from its fit on the remaining frames, once on the baseline columns
+    (:func:`excitation_columns`: what the rank-1 model's bending alone moves a length with) and once on those
+    columns plus w. Returned: 100 (1 - SSE_with_w / SSE_baseline), summed over both sets' held-out frames
+    (relative length changes). No segment's own data set its course, and no frame its own prediction, so a
     tracker's node-wise error cannot make it positive; about 0 or below without a swing. NaN where a set has no
     usable row."""
-    z = np.asarray(z, float)
-    X = excitation_columns(z)
+    X = excitation_columns(np.asarray(z, float))
     T = X.shape[1]
-    R, kept = length_residuals(channel, z)
-    pos = {int(k): i for i, k in enumerate(kept)}
     blocks = np.array_split(np.arange(T), n_folds)
     sse = np.zeros(2)
-    for own, other in ((rows_a, rows_b), (rows_b, rows_a)):
-        oth = [pos[int(k)] for k in other if int(k) in pos]
-        if not oth:
+    for own, other in ((halves[0], halves[1]), (halves[1], halves[0])):
+        if len(other) == 0:
             return float("nan")
-        w = _leading_course(R[oth])
-        Xw = np.vstack([X, w])
-        for k in own:
-            r = channel.rel[int(k)]
+        Xw = np.vstack([X, _leading_course(R[list(other)])])
+        for i in own:
+            r = channel.rel[int(kept[i])]
             for blk in blocks:
                 test = np.zeros(T, bool)
                 test[blk] = True
