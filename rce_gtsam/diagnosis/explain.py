@@ -155,8 +155,7 @@ def explain(diag: Diagnosis) -> str:
                     f"{base:.3f} deg).{closest} Without a noise floor (tracks) this cannot say whether the remaining "
                     "misfit is measurement noise or an effect outside the library.")
         share = lambda v: 100.0 * b.share(v)  # noqa: E731
-        nf = getattr(diag, "noise_floor", None)
-        node_px = getattr(nf, "nodewise_sigma_px", float("nan")) if nf is not None else float("nan")
+        node_px = diag.noise_floor.nodewise_sigma_px if diag.noise_floor is not None else float("nan")
         tracker = (f" (the residual's node-by-node pattern puts the tracking error at {node_px:.2f} px per node)"
                    if np.isfinite(node_px) and node_px > 0 else "")
         head = (f"The rank-1 model explains {share(b.rank1):.0f}% of the bending variance ({b.total:.3g} deg^2); the "
