@@ -188,10 +188,15 @@ def main() -> int:
 
 def update_floor_columns(name: str, rows: list, a) -> None:
     """Replace the noise-floor columns of record ``name``'s rows of the families and sizes in ``rows`` (the
-    verdict columns stay: the diagnosis reads no noise floor here), and say so in its notes."""
-    import json
+    verdict columns stay: the diagnosis reads no noise floor here), and say so in its notes; written back through
+    ``record.save_record`` (its schema check, directory and atomic write), keeping the record's date."""
     import datetime
-    path = Path(__file__).resolve().parents[1] / "docs" / "validation" / f"{name}.json"
+    import json
+    import os
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from record import RECORD_DIR, save_record
+    path = Path(os.environ.get("RCE_RECORD_DIR") or RECORD_DIR) / f"{name}.json"
     rec = json.loads(path.read_text())
     cols = rec["columns"]
     i_med, i_rng, i_25 = (cols.index(c) for c in ("noise floor / true (median)", "range", "within 25 %"))
@@ -201,16 +206,18 @@ def update_floor_columns(name: str, rows: list, a) -> None:
             if r[0] == fam and float(r[1]) == float(sc):
                 r[i_med], r[i_rng], r[i_25] = round(med, 2), f"{lo:.2f}-{hi:.2f}", f"{w25} of {n}"
                 done.append(f"{fam} x{sc:g}")
+    if not done:
+        print(f"{path}: no row of these families and sizes, nothing updated")
+        return
     note = (f"Noise-floor columns of {', '.join(done)} recomputed with the node-wise floor "
             f"(python benchmarks/bench_artifacts.py --floor-only --seeds {a.seeds} --families {a.families} "
             f"--scales {a.scales}; {datetime.date.today()}); the verdict columns are the diagnosis', which reads no "
             f"noise floor.")
-    rec["notes"] = [n for n in rec.get("notes", []) if not n.startswith("Noise-floor columns of " + done[0].split()[0])]
-    rec["notes"].append(note)
-    tmp = path.with_suffix(".part")
-    tmp.write_text(json.dumps(rec, indent=1, ensure_ascii=False) + "\n")
-    tmp.replace(path)
-    print(f"updated the floor columns of {path}: {', '.join(done)}")
+    notes = [n for n in rec.get("notes", []) if not n.startswith("Noise-floor columns of " + done[0].split()[0])]
+    written = save_record(name, title=rec["title"], command=rec["command"], columns=cols, rows=rec["rows"],
+                          description=rec["description"], notes=notes + [note], date=rec["date"],
+                          directory=path.parent)
+    print(f"updated the floor columns of {written}: {', '.join(done)}")
 
 
 if __name__ == "__main__":
