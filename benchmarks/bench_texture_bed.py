@@ -35,7 +35,8 @@ from scipy.stats import spearmanr
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
-PLANT = ROOT.parent / "shared" / "data" / "plant_2"
+#: plant 2's folder: ``../shared/data/plant_2`` beside the repository, or $RCE_PLANT2_DIR (a git worktree elsewhere)
+PLANT = Path(os.environ.get("RCE_PLANT2_DIR", ROOT.parent / "shared" / "data" / "plant_2"))
 
 
 def default_cache() -> Path:

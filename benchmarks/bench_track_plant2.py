@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tempfile
 import time
@@ -29,7 +30,8 @@ from scipy.stats import spearmanr
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
-PLANT = ROOT.parent / "shared" / "data" / "plant_2"
+#: plant 2's folder: ``../shared/data/plant_2`` beside the repository, or $RCE_PLANT2_DIR (a git worktree elsewhere)
+PLANT = Path(os.environ.get("RCE_PLANT2_DIR", ROOT.parent / "shared" / "data" / "plant_2"))
 
 
 def load_plant(plant: Path = PLANT):

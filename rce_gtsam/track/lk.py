@@ -301,6 +301,8 @@ class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
         if q0.ndim != 2 or q0.shape[1] != 2 or len(q0) == 0:
             raise InputError("query points", f"expected a (P, 2) array, got {q0.shape}")
         self._setup(q0, graph, src_name)
+        self._static_dropped = 0
+        self._seg_d, self._seg_tau, self._seg_tau_n = [], None, 0
         from . import match_kernels  # numba: imported (and compiled, once per machine) only when tracking
         self._kernels = match_kernels
         h, n = self.h, len(q0)
@@ -317,7 +319,7 @@ class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
         counts = {"anchored": 0, "invisible": 0, "rejected_ncc": 0, "rejected_fb": 0, "rejected_length": 0,
                   "lost_match": 0, "predicted_from_graph": 0, "rejected_ambiguous": 0,
                   "predicted_from_segment": 0, "from_segment": 0, "rejected_unanchored": 0,
-                  "rejected_refine": 0, "held": 0, "recent_template": 0, "soft": 0, "bridged": 0}
+                  "rejected_refine": 0, "held": 0, "recent_template": 0, "soft": 0, "bridged": 0, "segment_check": 0}
         recent = [None] * n  # per node: (crop of its last frame-0-anchored frame, that position, its sigma)
         held = np.zeros(n, int)  # consecutive frames each node has been held by frame-to-frame LK alone
         sig_prev = np.full(n, cfg.sigma_floor_px)
