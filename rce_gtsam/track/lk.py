@@ -301,7 +301,6 @@ class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
         if q0.ndim != 2 or q0.shape[1] != 2 or len(q0) == 0:
             raise InputError("query points", f"expected a (P, 2) array, got {q0.shape}")
         self._setup(q0, graph, src_name)
-        self._static_dropped = 0
         self._seg_d, self._seg_tau, self._seg_tau_n = [], None, 0
         from . import match_kernels  # numba: imported (and compiled, once per machine) only when tracking
         self._kernels = match_kernels

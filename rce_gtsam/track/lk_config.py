@@ -162,7 +162,6 @@ class LKConfig:
     hold_min_ncc: float = 0.8
     soft_reject: bool = True
     bridge: bool = True
-    static_mask: bool = True
     segment_check: bool = True
 
     def __post_init__(self):

@@ -135,80 +135,11 @@ class Measurement:
         thetas = [tp] if p >= 0 else []
         for ch in self.children[i]:
             thetas.append(turn(est[i], est[ch], ang0[ch]) if vis[ch] else tp)
-        if cfg.static_mask and self._band is not None and thetas and self._stacks[i] is not None:
-            m = self._static_rematch(gray0, gray, i, q0[i], est[i], thetas)
-        else:
-            m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, self._margin, thetas)
+        m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, self._margin, thetas)
         if m is not None and m[1] >= cfg.min_ncc and m[2] <= fb_max:
             xy, _, fb, s_lk = m[:4]
             return xy, math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
         return None
-
-    def _static_rematch(self, gray0, gray, i, p0, q, thetas):
-        """The refinement pass's re-match of node i near ``q`` (px) with its articulated template, minus the template
-        pixels that the static background explains (``LKConfig.static_mask``).
-
-        A pale stem in front of a textured, static background: the band around the branch holds background pixels
-        that stay where they were in frame 0, and they pull the match back toward the node's frame-0 position (on
-        the texture bed the across-stem error of such nodes ran at -0.6 to -0.8 of their displacement). At the
-        match, each template pixel's current value ``I_t(x)`` is compared with two hypotheses: it moved with the
-        node (the template's value, after the gain and bias fitted over the band) or it stayed (frame 0's value at
-        the same image position ``I_0(x)``, same gain and bias). A pixel is dropped when the moving hypothesis misses
-        it by more than ``3 s`` (s = 1.4826 x the weighted median absolute moving residual over the band: the
-        match's own noise, sensor noise and compression included) and the static hypothesis explains it better.
-        Where the node has not moved, the two hypotheses coincide and nothing is dropped; a textureless pixel fits
-        both and is kept. The node is then matched again with the remaining weights (same search radius,
-        correlation, LK and forward-backward check); fewer than ``min_band`` weight left, or a failed re-match:
-        the plain re-match. Returns what :meth:`_anchor` returns (frame pixels).
-        """
-        h, margin, k = self.h, self._margin, self._kernels
-        bands, bg, min_band = self._stacks[i]
-        px, py, qx, qy = float(p0[0]), float(p0[1]), float(q[0]), float(q[1])
-        prev, tmpl, wts, wsum = k.articulated_template(gray0, px, py, np.array(thetas), bands, bg, min_band, h,
-                                                      margin, gray0.dtype == np.uint8)
-        r = margin
-        c = float(h + r)
-        cur = cv2.getRectSubPix(gray, (2 * (h + r) + 1, 2 * (h + r) + 1), (qx, qy)).astype(np.float32)
-        m = k.match_node(cur, tmpl, wts, prev, r, h, float(h + margin))
-        if not m[0]:
-            return None
-        x, y = qx + (m[1] - c), qy + (m[2] - c)
-        n = 2 * h + 1
-        now = cv2.getRectSubPix(gray, (n, n), (x, y), patchType=cv2.CV_32F)
-        still = cv2.getRectSubPix(gray0, (n, n), (x, y), patchType=cv2.CV_32F)
-        w = wts.astype(np.float64)
-        sw = w.sum()
-        if sw <= 0:
-            return None
-        t = tmpl.astype(np.float64)
-        mt, mn = (w * t).sum() / sw, (w * now).sum() / sw
-        vt = (w * (t - mt) ** 2).sum()
-        gain = (w * (t - mt) * (now - mn)).sum() / vt if vt > 1e-9 else 1.0
-        r_move = np.abs(now - (mn + gain * (t - mt)))
-        r_still = np.abs(now - (mn + gain * (still - mt)))
-        band = w > 0.5
-        if band.sum() < 8:
-            return self._pack(m, qx, qy, c, wsum)
-        s = 1.4826 * float(np.median(r_move[band]))
-        drop = (r_move > 3.0 * max(s, 0.5)) & (r_still < r_move)
-        if not drop.any():
-            return self._pack(m, qx, qy, c, wsum)
-        w2 = np.where(drop, np.float32(0), wts).astype(np.float32)
-        ws2 = float(w2.sum())
-        if ws2 < min_band:
-            return self._pack(m, qx, qy, c, wsum)
-        m2 = k.match_node(cur, tmpl, w2, prev, r, h, float(h + margin))
-        if not m2[0] or m2[3] < self.config.min_ncc:
-            return self._pack(m, qx, qy, c, wsum)
-        self._static_dropped += int(drop.sum())
-        return self._pack(m2, qx, qy, c, ws2)
-
-    @staticmethod
-    def _pack(m, qx, qy, c, wsum):
-        """:func:`~rce_gtsam.track.match_kernels.match_node`'s array ``m`` (crop px, crop centre ``c``, centred on
-        (qx, qy)) as :meth:`_anchor` returns it (frame px)."""
-        return ((qx + (m[1] - c), qy + (m[2] - c)), m[3], m[4], m[5], m[6], wsum,
-                ((qx + (m[7] - c), qy + (m[8] - c)) if m[9] else None))
 
     def _keep_recent(self, gray, est, sig, anchored, recent) -> None:
         """Store, for every node anchored to its frame-0 template in this frame, the (2(h + margin) + 1)^2 crop of

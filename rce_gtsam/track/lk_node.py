@@ -163,6 +163,8 @@ class NodeDecision:
                 counts["segment_check"] += 1
             elif tau is None or seg_d <= tau:
                 seg_d = None
+            else:
+                seg_d -= tau  # the part of the disagreement the clip's calibrated spread does not explain
         if ok:
             new_est[i], new_vis[i] = xy, True
             how[i] = 0
@@ -175,7 +177,7 @@ class NodeDecision:
             if seg_d is not None:
                 # two measurements of the node from different pixels (its patch; its whole segment strip)
                 # disagree beyond their calibrated spread: either may be the wrong one, so each is off by
-                # about d / sqrt(2) (``LKConfig.segment_check``)
+                # about the excess / sqrt(2) (``LKConfig.segment_check``)
                 sig[i] = math.sqrt(sig[i] ** 2 + seg_d ** 2 / 2)
                 how[i] = 4
                 counts["segment_check"] += 1
