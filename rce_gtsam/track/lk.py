@@ -301,7 +301,6 @@ class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
         if q0.ndim != 2 or q0.shape[1] != 2 or len(q0) == 0:
             raise InputError("query points", f"expected a (P, 2) array, got {q0.shape}")
         self._setup(q0, graph, src_name)
-        self._seg_d, self._seg_tau, self._seg_tau_n = [], None, 0
         from . import match_kernels  # numba: imported (and compiled, once per machine) only when tracking
         self._kernels = match_kernels
         h, n = self.h, len(q0)
@@ -327,6 +326,8 @@ class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
         n_done = 0
         pool = ThreadPoolExecutor(1, thread_name_prefix="lk-refine") if cfg.threads == 2 else None
         first = None
+        check = cfg.segment_check and graph is not None and cfg.mask_to_branch
+        seg_d_all, seg_xy_all = [], []  # per frame after the first: ``FirstPassFrame.seg_d`` / ``seg_xy``
         # the next frames decode (and are converted to grey) in a thread (GIL released) while this one is
         # tracked; closed on any exit
         with contextlib.closing(prefetched(_with_grey(source))) as frames, contextlib.ExitStack() as stack:
@@ -382,7 +383,8 @@ class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
                         done=done, cur_vis=cur_vis, theta_now=theta_now, preds=preds, wide=wide,
                         anchored_now=anchored_now, how=how, theta_last=theta_last, seg_rot=seg_rot, bend_rot=bend_rot,
                         held=held, recent=recent, counts=counts, sig_prev=sig_prev, fb_max=fb_max, hold_max=hold_max,
-                        first=first)
+                        first=first, seg_d=np.full(n, np.nan) if check else None,
+                        seg_xy=np.full((n, 2), np.nan) if check else None)
                     for i in self.order:  # in graph order: a node's segment search hinges at its parent's new match
                         self._first_pass_node(fr, i)
                     if refine is not None:
@@ -399,6 +401,9 @@ class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
                     new_est[:, 0] = np.clip(new_est[:, 0], -0.5, ww - 0.5)
                     new_est[:, 1] = np.clip(new_est[:, 1], -0.5, hh - 0.5)
                     est, vis = new_est, new_vis
+                    if check:
+                        seg_d_all.append(fr.seg_d)
+                        seg_xy_all.append(fr.seg_xy)
                     if cfg.recent_template:
                         self._keep_recent(ga, est, sig, anchored_now, recent)
                 prev_gray = gray
@@ -414,7 +419,11 @@ class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
                     on_frame(n_done - 1, est.copy(), vis.copy())
         if n_done == 0:
             raise InputError(src_name, "the video has no frames")
-        info = {"how": np.stack(how_all, axis=1), "tracker": "lk-anchored", "patch_radius_px": h, "branch_halfwidth_px": self.branch_halfwidth_px, "frames": n_done,
+        xy_t, vis_t, sig_t, how_t = (np.stack(a, axis=1) for a in (xs, vis_all, sig_all, how_all))
+        self.segment_check_px = None
+        if check and seg_d_all:  # frame 0 has no segment search: its column is NaN
+            self._segment_check(xy_t, vis_t, sig_t, how_t, np.stack([np.full(n, np.nan)] + seg_d_all, axis=1),
+                                np.stack([np.full((n, 2), np.nan)] + seg_xy_all, axis=1), counts)
+        info = {"how": how_t, "segment_check_px": self.segment_check_px, "tracker": "lk-anchored", "patch_radius_px": h, "branch_halfwidth_px": self.branch_halfwidth_px, "frames": n_done,
                 "time_total_s": time.perf_counter() - t0, **counts}
-        return TrackResult(point_ids=np.arange(n), xy=np.stack(xs, axis=1), visible=np.stack(vis_all, axis=1),
-                           sigma_px=np.stack(sig_all, axis=1), fps=source.fps, info=info)
+        return TrackResult(point_ids=np.arange(n), xy=xy_t, visible=vis_t, sigma_px=sig_t, fps=source.fps, info=info)

@@ -27,7 +27,9 @@ class FirstPassFrame:
     enough to store a recent template), ``how`` (a key of ``HOW``). Carried over frames (also written):
     ``theta_last``, ``seg_rot``, ``bend_rot`` (radians), ``held`` (frames held), ``recent`` (recent templates),
     ``counts``. ``sig_prev`` the previous frame's sigmas; ``fb_max``, ``hold_max`` limits (px); ``first`` the
-    refinement thread's progress (None without it)."""
+    refinement thread's progress (None without it). ``seg_d`` (P,) / ``seg_xy`` (P, 2): where a node's frame-0 match
+    was accepted and its hinged segment search matched at >= ``min_segment_ncc``, the distance between the two (px)
+    and the search's position (NaN elsewhere; written); None without ``LKConfig.segment_check``."""
 
     gray0: np.ndarray
     ga: np.ndarray
@@ -59,6 +61,8 @@ class FirstPassFrame:
     fb_max: float
     hold_max: float
     first: object = None
+    seg_d: np.ndarray | None = None
+    seg_xy: np.ndarray | None = None
 
 
 class NodeDecision:
@@ -151,20 +155,11 @@ class NodeDecision:
                 if d > (1 + cfg.max_stretch) * l0 + cfg.length_tol_px or d < cfg.min_length_fraction * l0 - cfg.length_tol_px:
                     ok, soft = False, True
                     counts["rejected_length"] += 1
-        seg_d = None  # distance (px) between the frame-0 match and the hinged segment search's position
-        if ok and cfg.segment_check and seg is not None and seg[2] >= cfg.min_segment_ncc:
-            seg_d = math.hypot(xy[0] - seg[0][0], xy[1] - seg[0][1])
-            tau = self._segment_check_px()
-            self._seg_d.append(seg_d)
-            if tau is not None and seg_d > tau and i in self._tips:
-                # a tip's own match disagrees with its whole segment, hinged at a measured parent: the tip's
-                # band is short and thin and its patch mostly background, and that match was the wrong one
-                ok = False
-                counts["segment_check"] += 1
-            elif tau is None or seg_d <= tau:
-                seg_d = None
-            else:
-                seg_d -= tau  # the part of the disagreement the clip's calibrated spread does not explain
+        if ok and fr.seg_d is not None and seg is not None and seg[2] >= cfg.min_segment_ncc:
+            # for ``LKConfig.segment_check`` (after the clip, :meth:`_segment_check`): this match against the
+            # hinged segment search's position, two measurements of the node from different pixels
+            fr.seg_d[i] = math.hypot(xy[0] - seg[0][0], xy[1] - seg[0][1])
+            fr.seg_xy[i] = seg[0]
         if ok:
             new_est[i], new_vis[i] = xy, True
             how[i] = 0
@@ -174,16 +169,9 @@ class NodeDecision:
                 if new_vis[p]:
                     bend_rot[i] = seg_rot[i] - seg_rot[p]
             sig[i] = math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
-            if seg_d is not None:
-                # two measurements of the node from different pixels (its patch; its whole segment strip)
-                # disagree beyond their calibrated spread: either may be the wrong one, so each is off by
-                # about the excess / sqrt(2) (``LKConfig.segment_check``)
-                sig[i] = math.sqrt(sig[i] ** 2 + seg_d ** 2 / 2)
-                how[i] = 4
-                counts["segment_check"] += 1
             counts["anchored"] += 1
             held[i] = 0
-        elif ((cfg.segment_fallback or (cfg.tip_segment_fallback and i in self._tips) or seg_d is not None)
+        elif ((cfg.segment_fallback or (cfg.tip_segment_fallback and i in self._tips))
               and seg is not None and seg[2] >= cfg.min_segment_ncc
               ):
             # the node's own patch failed (a leaf over the joint, a template spoiled by a leaf in
