@@ -16,7 +16,8 @@ package), so both trackers run on the same frames in the same process.
 2. Accuracy, on rendered clips (``--clips SEED:FRAMES,...``; default seeds 0-4, 600 frames, seed 1 400, as in the
    README), each tracked by both: median, 99th percentile and largest error of points marked visible (px, against
    the true node positions), visible share of point-frames, and Spearman(kappa, kappa_true) from the full analysis
-   (default preset, no bootstrap: kappa does not depend on it), plus the largest position difference between the
+   (default preset, no bootstrap: kappa does not depend on it), the median and 90th percentile of the reported sigma
+   of visible points (sig50, sig90, px: the smoother's measurement weight), plus the largest position difference between the
    two trackers on points both call visible. A third row, ``baseline~``, is the baseline tracker with every
    annotated point moved by ``--jitter-px`` (default 0.001 px) in x and y: how much these figures move under a
    perturbation far below any real annotation error, i.e. the resolution at which two trackers' figures can be
@@ -190,7 +191,7 @@ def speed(trackers, cache: Path, n_frames: int, repeat: int) -> None:
 def accuracy(trackers, cache: Path, clips: list[tuple[int, int]], jitter_px: float) -> None:
     print("accuracy on rendered clips (px against the true node positions; rho = Spearman(kappa, kappa_true)):")
     print(f"  {'seed':>4s} {'frames':>6s} {'tracker':9s} {'median':>7s} {'p99':>6s} {'max':>6s} {'visible':>7s} "
-          f"{'rho':>6s} {'s':>5s}")
+          f"{'rho':>6s} {'s':>5s} {'sig50':>6s} {'sig90':>6s}")
     runs = {**{k: (cls, 0.0) for k, cls in trackers.items()}, "baseline~": (trackers["baseline"], jitter_px)}
     rows = {k: [] for k in runs}
     for seed, n in clips:
@@ -202,8 +203,10 @@ def accuracy(trackers, cache: Path, clips: list[tuple[int, int]], jitter_px: flo
             err = np.hypot(*(r.xy - truth).transpose(2, 0, 1))[r.visible]
             rho = spearman_kappa(r, sim)
             rows[name].append((np.median(err), np.percentile(err, 99), err.max(), r.visible.mean(), rho))
+            sig = r.sigma_px[r.visible]  # the reported sigma is the smoother's weight: where it sits on a clean render
             print(f"  {seed:4d} {n:6d} {name:9s} {rows[name][-1][0]:7.3f} {rows[name][-1][1]:6.2f} "
-                  f"{rows[name][-1][2]:6.1f} {rows[name][-1][3]:7.3f} {rho:6.3f} {t:5.0f}", flush=True)
+                  f"{rows[name][-1][2]:6.1f} {rows[name][-1][3]:7.3f} {rho:6.3f} {t:5.0f} {np.median(sig):6.3f} "
+                  f"{np.percentile(sig, 90):6.3f}", flush=True)
         both = res["baseline"].visible & res["current"].visible
         d = np.hypot(*(res["baseline"].xy - res["current"].xy).transpose(2, 0, 1))[both]
         print(f"  {'':11s} both visible: {both.mean():.3f}, |current - baseline| median {np.median(d):.4f} px, "

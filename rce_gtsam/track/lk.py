@@ -327,7 +327,7 @@ class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
         pool = ThreadPoolExecutor(1, thread_name_prefix="lk-refine") if cfg.threads == 2 else None
         first = None
         check = cfg.segment_check and graph is not None and cfg.mask_to_branch
-        seg_d_all, seg_xy_all = [], []  # per frame after the first: ``FirstPassFrame.seg_d`` / ``seg_xy``
+        seg_d_all = []  # per frame after the first: ``FirstPassFrame.seg_d``
         # the next frames decode (and are converted to grey) in a thread (GIL released) while this one is
         # tracked; closed on any exit
         with contextlib.closing(prefetched(_with_grey(source))) as frames, contextlib.ExitStack() as stack:
@@ -383,8 +383,7 @@ class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
                         done=done, cur_vis=cur_vis, theta_now=theta_now, preds=preds, wide=wide,
                         anchored_now=anchored_now, how=how, theta_last=theta_last, seg_rot=seg_rot, bend_rot=bend_rot,
                         held=held, recent=recent, counts=counts, sig_prev=sig_prev, fb_max=fb_max, hold_max=hold_max,
-                        first=first, seg_d=np.full(n, np.nan) if check else None,
-                        seg_xy=np.full((n, 2), np.nan) if check else None)
+                        first=first, seg_d=np.full(n, np.nan) if check else None)
                     for i in self.order:  # in graph order: a node's segment search hinges at its parent's new match
                         self._first_pass_node(fr, i)
                     if refine is not None:
@@ -403,7 +402,6 @@ class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
                     est, vis = new_est, new_vis
                     if check:
                         seg_d_all.append(fr.seg_d)
-                        seg_xy_all.append(fr.seg_xy)
                     if cfg.recent_template:
                         self._keep_recent(ga, est, sig, anchored_now, recent)
                 prev_gray = gray
@@ -422,8 +420,7 @@ class LKTracker(Bridge, NodeDecision, Measurement, Frame0Setup):
         xy_t, vis_t, sig_t, how_t = (np.stack(a, axis=1) for a in (xs, vis_all, sig_all, how_all))
         self.segment_check_px = None
         if check and seg_d_all:  # frame 0 has no segment search: its column is NaN
-            self._segment_check(xy_t, vis_t, sig_t, how_t, np.stack([np.full(n, np.nan)] + seg_d_all, axis=1),
-                                np.stack([np.full((n, 2), np.nan)] + seg_xy_all, axis=1), counts)
+            self._segment_check(vis_t, sig_t, how_t, np.stack([np.full(n, np.nan)] + seg_d_all, axis=1), counts)
         info = {"how": how_t, "segment_check_px": self.segment_check_px, "tracker": "lk-anchored", "patch_radius_px": h, "branch_halfwidth_px": self.branch_halfwidth_px, "frames": n_done,
                 "time_total_s": time.perf_counter() - t0, **counts}
         return TrackResult(point_ids=np.arange(n), xy=xy_t, visible=vis_t, sigma_px=sig_t, fps=source.fps, info=info)

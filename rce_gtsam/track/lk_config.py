@@ -117,22 +117,23 @@ class LKConfig:
         test. On plant 2's gust windows (frames 120-359) it raised the visible share of TAPIR's rows 89/82/82/96 ->
         91/90/90/99 % at the same p90 distance to TAPIR (1.4-2.1 px); on the simulator's renders (seeds 0/1/3) the
         figures moved within the tracker's own jitter resolution.
-    segment_check: compare a node's frame-0 match with where its hinged segment search puts it (when that search, at a
-        visible parent, matched at >= ``min_segment_ncc``): two measurements of the node from different pixels (its
-        own patch; the whole frame-0 strip of its segment). Their distance d is checked against a bound calibrated on
-        the clip itself (:meth:`~rce_gtsam.track.lk_measure.Measurement._segment_check_px`: the distances seen so
-        far taken as the length of a 2-D Gaussian difference, sigma = median / 1.1774, bound = 3.035 sigma, i.e. 99 %
-        of such differences; none before 200 distances were seen). Beyond it, a tip takes the segment position
-        (``HOW`` 3; a tip's own band is short, its patch mostly background), and any other node keeps its match with
-        sigma^2 + (d - bound)^2 / 2 (``HOW`` 4: either measurement may be the wrong one, so each is off by about the
-        unexplained part / sqrt(2); continuous at the bound). Issue 38: on the texture bed most of the squared error in
-        errors > 1 px came from frame-0 matches at texture-poor nodes (a pale stem before a background that moves
-        less than the node) reported with sigma 0.1-0.3 px at median |error|/sigma 2.6-5.3; the match-to-segment
-        distance correlated 0.74 with the match's error (0.96 at the tip), and where it exceeded 1 px at the tip the
-        segment position was right to median 0.33 px against the match's 1.27 px. Measured
-        (``benchmarks/bench_texture_gross.py``, record ``texture_gross``; simulator renders and plant 2 in
-        :mod:`rce_gtsam.track.lk`). Widening by the whole distance instead of its excess tripled the flagged nodes'
-        sigma against their error on clean simulator renders (error median 0.09-0.14 px, sigma 0.26-0.29 px).
+    segment_check: compare each node's accepted frame-0 match with where its hinged segment search puts it (when that
+        search, at a visible parent, matched at >= ``min_segment_ncc``): two measurements of the node from different
+        pixels (its own patch; the whole frame-0 strip of its segment). After the clip, their distances d are checked
+        against a bound calibrated on the clip itself (:meth:`~rce_gtsam.track.lk_measure.Measurement._segment_check`:
+        the distances taken as the length of a 2-D Gaussian difference, sigma = median / 1.1774, bound = 3.035 sigma,
+        i.e. 99 % of such differences; nothing with fewer than 200 distances; ``info["segment_check_px"]``). Beyond it
+        the node keeps its match, with sigma^2 + (d - bound)^2 / 2 (``HOW`` 4: either measurement may be the wrong one,
+        so each is off by about the unexplained part / sqrt(2); continuous at the bound). No position or visibility
+        changes. Issue 38: on the texture bed most of the squared error in errors > 1 px came from frame-0 matches at
+        texture-poor nodes (a pale stem before surroundings that move less than the node) reported with sigma
+        0.1-0.3 px at median |error|/sigma 2.6-5.3; the match-to-segment distance correlated 0.74 with the match's
+        error. Measured: ``benchmarks/bench_texture_gross.py`` (record ``texture_gross``), the simulator renders and
+        plant 2 in :mod:`rce_gtsam.track.lk` (3d). Tried and not kept: a tip beyond the bound taking the segment
+        position (bed: tip error median 0.73 -> 0.52 px; but on plant 2 the replaced tip was 2.3 px from TAPIR's
+        where its own match was 0.6 px), widening by the whole distance (on clean simulator renders the flagged
+        nodes' sigma became 3x their error), and checking online with the bound from the frames so far (the first
+        frames, near the rest pose, gave a low bound: a third of a 40-frame render's node-frames flagged).
     threads: 2 = the refinement pass runs in a second thread, node by node right behind the first pass (a node
         is re-matched as soon as the first pass has finished it, its parent and its children, and after its
         parent's re-match: exactly the values a pass after the first reads, so the tracks are bit-identical to

@@ -171,17 +171,17 @@ class Measurement:
             return None
         return xy, math.sqrt(m[5] ** 2 + (m[4] / 2) ** 2)
 
-    def _segment_check(self, xy, vis, sig, how, seg_d, seg_xy, counts) -> None:
-        """``LKConfig.segment_check`` on the whole clip, in place: (P, F, 2) ``xy``, (P, F) ``vis``, ``sig`` (px) and
-        ``how`` of the tracker's result; ``seg_d`` (P, F) the distance (px) between each accepted frame-0 match and its
-        hinged segment search's position ``seg_xy`` (P, F, 2) (NaN where there is none).
+    def _segment_check(self, vis, sig, how, seg_d, counts) -> None:
+        """``LKConfig.segment_check`` on the whole clip, in place: (P, F) ``vis``, ``sig`` (px) and ``how`` of the
+        tracker's result; ``seg_d`` (P, F) the distance (px) between each accepted frame-0 match and its hinged segment
+        search's position (NaN where there is none).
 
         The bound is calibrated on the clip: the distances taken as the length of a 2-D Gaussian difference
         (Rayleigh: sigma = median / 1.1774), the bound is the distance 99 % of such differences stay below,
         ``3.035 sigma`` (sqrt of chi2_2's 99th percentile). Nothing happens with fewer than ``_SEG_CHECK_MIN``
-        distances. Beyond the bound, at a position still found by its frame-0 match (``HOW`` 0): a tip takes the
-        segment position (``HOW`` 3, sigma as ``tip_segment_fallback`` gives it: sqrt(sigma_parent^2 + 0.5^2)), any
-        other node keeps its match with sigma^2 + (d - bound)^2 / 2 (``HOW`` 4).
+        distances. Beyond the bound, at a position still found by its frame-0 match (``HOW`` 0), the node keeps its match
+        with sigma^2 + (d - bound)^2 / 2 (``HOW`` 4): which of the two is wrong is not known (see
+        ``LKConfig.segment_check``).
         """
         ok = np.isfinite(seg_d)
         if ok.sum() < _SEG_CHECK_MIN:
@@ -189,20 +189,9 @@ class Measurement:
         bound = 3.035 * float(np.median(seg_d[ok])) / 1.1774
         self.segment_check_px = bound
         flag = ok & vis & (how == 0) & (np.where(ok, seg_d, 0.0) > bound)
-        for i in range(len(xy)):
-            f = np.flatnonzero(flag[i])
-            if f.size == 0:
-                continue
-            counts["segment_check"] += int(f.size)
-            if i in self._tips:
-                # a tip's own band is short and thin and its patch mostly background: its whole segment, hinged at a
-                # measured parent, placed it better (see ``LKConfig.segment_check``)
-                xy[i, f] = seg_xy[i, f]
-                sig[i, f] = np.sqrt(sig[self.parent[i], f] ** 2 + 0.5 ** 2)
-                how[i, f] = 3
-            else:
-                sig[i, f] = np.sqrt(sig[i, f] ** 2 + (seg_d[i, f] - bound) ** 2 / 2)
-                how[i, f] = 4
+        counts["segment_check"] += int(flag.sum())
+        sig[flag] = np.sqrt(sig[flag] ** 2 + (seg_d[flag] - bound) ** 2 / 2)
+        how[flag] = 4
 
     def _length_ok(self, i: int, xy, est, vis) -> bool:
         """Whether ``xy`` for node i keeps the segment to its parent (when the parent is visible) within the

@@ -27,9 +27,9 @@ class FirstPassFrame:
     enough to store a recent template), ``how`` (a key of ``HOW``). Carried over frames (also written):
     ``theta_last``, ``seg_rot``, ``bend_rot`` (radians), ``held`` (frames held), ``recent`` (recent templates),
     ``counts``. ``sig_prev`` the previous frame's sigmas; ``fb_max``, ``hold_max`` limits (px); ``first`` the
-    refinement thread's progress (None without it). ``seg_d`` (P,) / ``seg_xy`` (P, 2): where a node's frame-0 match
-    was accepted and its hinged segment search matched at >= ``min_segment_ncc``, the distance between the two (px)
-    and the search's position (NaN elsewhere; written); None without ``LKConfig.segment_check``."""
+    refinement thread's progress (None without it). ``seg_d`` (P,): where a node's frame-0 match was accepted and its
+    hinged segment search matched at >= ``min_segment_ncc``, the distance between the two (px; NaN elsewhere;
+    written); None without ``LKConfig.segment_check``."""
 
     gray0: np.ndarray
     ga: np.ndarray
@@ -62,7 +62,6 @@ class FirstPassFrame:
     hold_max: float
     first: object = None
     seg_d: np.ndarray | None = None
-    seg_xy: np.ndarray | None = None
 
 
 class NodeDecision:
@@ -159,7 +158,6 @@ class NodeDecision:
             # for ``LKConfig.segment_check`` (after the clip, :meth:`_segment_check`): this match against the
             # hinged segment search's position, two measurements of the node from different pixels
             fr.seg_d[i] = math.hypot(xy[0] - seg[0][0], xy[1] - seg[0][1])
-            fr.seg_xy[i] = seg[0]
         if ok:
             new_est[i], new_vis[i] = xy, True
             how[i] = 0
