@@ -17,8 +17,8 @@ package), so both trackers run on the same frames in the same process.
    README), each tracked by both: median, 99th percentile and largest error of points marked visible (px, against
    the true node positions), visible share of point-frames, and Spearman(kappa, kappa_true) from the full analysis
    (default preset, no bootstrap: kappa does not depend on it), the median and 90th percentile of the reported sigma
-   of visible points (sig50, sig90, px: the smoother's measurement weight), plus the largest position difference between the
-   two trackers on points both call visible. A third row, ``baseline~``, is the baseline tracker with every
+   of visible points (sig50, sig90, px: the smoother's measurement weight), plus the largest position difference
+   between the two trackers on points both call visible. A third row, ``baseline~``, is the baseline tracker with every
    annotated point moved by ``--jitter-px`` (default 0.001 px) in x and y: how much these figures move under a
    perturbation far below any real annotation error, i.e. the resolution at which two trackers' figures can be
    called different (the tail figures and rho move at the printed precision). Clips are cached in ``--cache``.
