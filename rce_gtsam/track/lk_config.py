@@ -125,7 +125,9 @@ class LKConfig:
         i.e. 99 % of such differences; nothing with fewer than 200 distances; ``info["segment_check_px"]``). Beyond it
         the node keeps its match, with sigma^2 + (d - bound)^2 / 2 (``HOW`` 4: either measurement may be the wrong one,
         so each is off by about the unexplained part / sqrt(2); continuous at the bound). No position or visibility
-        changes. Issue 38: on the texture bed most of the squared error in errors > 1 px came from frame-0 matches at
+        changes. Off by default (see :mod:`rce_gtsam.track.lk` 3d: it moved no kappa figure clearly on the bed or
+        the simulator renders, and on simulator seed 3 Spearman of kappa fell 0.68 -> 0.53). Issue 38: on the
+        texture bed most of the squared error in errors > 1 px came from frame-0 matches at
         texture-poor nodes (a pale stem before surroundings that move less than the node) reported with sigma
         0.1-0.3 px at median |error|/sigma 2.6-5.3; the match-to-segment distance correlated 0.74 with the match's
         error. Measured: ``benchmarks/bench_texture_gross.py`` (record ``texture_gross``), the simulator renders and
@@ -179,7 +181,7 @@ class LKConfig:
     hold_min_ncc: float = 0.8
     soft_reject: bool = True
     bridge: bool = True
-    segment_check: bool = True
+    segment_check: bool = False
 
     def __post_init__(self):
         if isinstance(self.threads, bool) or not isinstance(self.threads, int) or self.threads not in (1, 2):

@@ -179,8 +179,8 @@ class Measurement:
         The bound is calibrated on the clip: the distances taken as the length of a 2-D Gaussian difference
         (Rayleigh: sigma = median / 1.1774), the bound is the distance 99 % of such differences stay below,
         ``3.035 sigma`` (sqrt of chi2_2's 99th percentile). Nothing happens with fewer than ``_SEG_CHECK_MIN``
-        distances. Beyond the bound, at a position still found by its frame-0 match (``HOW`` 0), the node keeps its match
-        with sigma^2 + (d - bound)^2 / 2 (``HOW`` 4): which of the two is wrong is not known (see
+        distances. Beyond the bound, at a position still found by its frame-0 match (``HOW`` 0), the node keeps its
+        match with sigma^2 + (d - bound)^2 / 2 (``HOW`` 4): which of the two is wrong is not known (see
         ``LKConfig.segment_check``).
         """
         ok = np.isfinite(seg_d)
