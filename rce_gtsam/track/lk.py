@@ -139,10 +139,11 @@ never recovers after an occlusion. This tracker uses frame-to-frame pyramidal LK
    until the user path (``benchmarks/bench_user_path.py``) has been re-run with it.
    Measured and not kept(``bench_texture_gross.py``): the smoother's robust loss on the bed (Huber 1.345 / Cauchy
    2.385: kappa log-RMSE 0.851 / 0.851 against 0.856; the gross errors are persistent biases, not outliers), a band
-   margin of 0 px (error RMS 0.360 -> 0.323 px but kappa log-RMSE 0.891), dropping from the refinement re-match the
-   template pixels the static background explains better (error RMS 0.360 -> 0.349 px; plant 2's tip visible 96 ->
-   84 %), and a tip beyond the bound taking its segment position (bed tip error median 0.73 -> 0.52 px, but on plant
-   2 those tips were 2.3 px from TAPIR's where the match was 0.6 px).
+   margin of 0 px (bed error RMS 0.360 -> 0.323 px but kappa log-RMSE 0.891; plant 2 visible in the gusts
+   91/90/90/99 -> 87/83/82/94 %, kappa Spearman against TAPIR's 0.74 -> 0.63), dropping from the refinement re-match
+   the template pixels the static background explains better (error RMS 0.360 -> 0.349 px; plant 2's tip visible 96
+   -> 84 %), and a tip beyond the bound taking its segment position (bed tip error median 0.73 -> 0.52 px, but on
+   plant 2 those tips were 2.3 px from TAPIR's where the match was 0.6 px).
 4. **Uncertainty**: ``sigma_px = sqrt(s_lk^2 + (fb/2)^2 + sigma_floor_px^2)`` with the LK
    least-squares standard error ``s_lk = sqrt(residual_variance / lambda_min(G))`` (G = structure
    tensor of the template, residual = template minus the matched patch, so appearance change counts)
