@@ -137,7 +137,7 @@ never recovers after an occlusion. This tracker uses frame-to-frame pyramidal LK
    px, and Spearman of kappa 0.78/0.90/0.91/0.68/0.96 -> 0.78/0.89/0.94/0.53/0.94 (the 0.001-px jitter row moves
    seed 3 by 0.00): a change of the smoother's weights that helps nowhere clearly and costs seed 3, so it is off
    until the user path (``benchmarks/bench_user_path.py``) has been re-run with it.
-   Measured and not kept(``bench_texture_gross.py``): the smoother's robust loss on the bed (Huber 1.345 / Cauchy
+   Measured and not kept (``bench_texture_gross.py``): the smoother's robust loss on the bed (Huber 1.345 / Cauchy
    2.385: kappa log-RMSE 0.851 / 0.851 against 0.856; the gross errors are persistent biases, not outliers), a band
    margin of 0 px (bed error RMS 0.360 -> 0.323 px but kappa log-RMSE 0.891; plant 2 visible in the gusts
    91/90/90/99 -> 87/83/82/94 %, kappa Spearman against TAPIR's 0.74 -> 0.63), dropping from the refinement re-match
