@@ -192,7 +192,7 @@ def _one_node_check(named, base, Y, W, s, labels, nodes, cands, config, n_folds,
     """:class:`~rce_gtsam.diagnosis.one_node.OneNodeCheck` of the named candidate: the diagnosis again, for it
     alone, without the bends of the node that carries most of its in-sample gain; None where it gains nothing
     in-sample or too few bends are left."""
-    found = carrying_node(base.residuals, named.fit.residuals, nodes)
+    found = carrying_node(base.residuals, named.fit.residuals, nodes, W)
     if found is None:
         return None
     node, share = found

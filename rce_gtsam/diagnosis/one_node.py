@@ -13,8 +13,8 @@ offset 2, dynamics 1). On 6 of them one node's bends carried 0.74-1.0 of the ver
 without them the effect's held-out gain was gone (-41 % to +0.1 %).
 
 **Statistic.** The *carrying node*: the node whose bends (every bend it enters: as the joint, the parent or the
-child) carry the largest share of the verdict candidate's in-sample gain, sum over frames of (baseline residual^2
-- candidate residual^2) (:func:`carrying_node`). The diagnosis runs again, for that candidate alone, on the
+child) carry the largest share of the verdict candidate's in-sample gain, sum over frames of weight x (baseline
+residual^2 - candidate residual^2) (:func:`carrying_node`). The diagnosis runs again, for that candidate alone, on the
 other bends (:func:`rows_without`), and reads the candidate's fold t and held-out gain there.
 
 **Rule (a sign, no tuned level).** The finding holds when, without the carrying node, the candidate still
@@ -82,13 +82,15 @@ def holds(fold_t: float, gain_pct: float) -> bool:
     return bool(fold_t > 0.0 and gain_pct > 0.0)
 
 
-def node_shares(base_residuals: np.ndarray, cand_residuals: np.ndarray, edge_nodes) -> dict:
+def node_shares(base_residuals: np.ndarray, cand_residuals: np.ndarray, edge_nodes, weights=None) -> dict:
     """{node: share of the candidate's in-sample gain in the bends that node enters} (shares of one total; a bend
     counts for each of its nodes, so they sum to more than 1). Gain per bend = sum over its observed frames of
-    baseline residual^2 - candidate residual^2 (deg^2)."""
+    weight x (baseline residual^2 - candidate residual^2) (deg^2; ``weights`` (E, T) the fit's, as both fits
+    minimise the weighted sum; None = 1)."""
     rb, rc = np.asarray(base_residuals, float), np.asarray(cand_residuals, float)
-    ok = np.isfinite(rb) & np.isfinite(rc)
-    gain = np.where(ok, rb * rb - rc * rc, 0.0).sum(axis=1)
+    w = np.ones_like(rb) if weights is None else np.asarray(weights, float)
+    ok = np.isfinite(rb) & np.isfinite(rc) & np.isfinite(w)
+    gain = np.where(ok, w * (rb * rb - rc * rc), 0.0).sum(axis=1)
     total = float(gain.sum())
     nodes = sorted({int(n) for ns in edge_nodes for n in ns})
     if total <= 0:
@@ -96,9 +98,11 @@ def node_shares(base_residuals: np.ndarray, cand_residuals: np.ndarray, edge_nod
     return {n: float(sum(gain[i] for i, ns in enumerate(edge_nodes) if n in ns) / total) for n in nodes}
 
 
-def carrying_node(base_residuals: np.ndarray, cand_residuals: np.ndarray, edge_nodes) -> tuple[int, float] | None:
+def carrying_node(base_residuals: np.ndarray, cand_residuals: np.ndarray, edge_nodes,
+                  weights=None) -> tuple[int, float] | None:
     """(node, share) of :func:`node_shares`' largest share, or None where the candidate gains nothing in-sample."""
-    shares = {n: v for n, v in node_shares(base_residuals, cand_residuals, edge_nodes).items() if np.isfinite(v)}
+    shares = {n: v for n, v in node_shares(base_residuals, cand_residuals, edge_nodes, weights).items()
+              if np.isfinite(v)}
     if not shares:
         return None
     n = max(shares, key=lambda k: (shares[k], -k))
