@@ -26,6 +26,11 @@ effect share one share), with the folds' t quantiles on (folds - 1) dof (:func:`
   verdict only where no other candidate is
   (:mod:`rce_gtsam.diagnosis.own_family`, :func:`own_supported`).
 
+* **one node** (last, in :func:`~rce_gtsam.diagnosis.diagnose.diagnose`): the verdict stands only if, without the
+  bends of the node that carries most of its in-sample gain, the effect still lowers the held-out error (fold t
+  > 0, :mod:`rce_gtsam.diagnosis.one_node`); an own-family effect's test and length gain must hold without that
+  node's segments (:func:`~rce_gtsam.diagnosis.own_family.own_test_significant`).
+
 Nothing here computes a statistic: the tests' results come in from :mod:`rce_gtsam.diagnosis.evidence`, which
 runs an encompassing test where :func:`support_richer_forms` asks for one (``ask``). Why each rule is there,
 with its measurements, is in the test modules' docstrings. Units: degrees (RMSE); p and t unitless.

@@ -209,4 +209,5 @@ def _one_node_check(named, base, Y, W, s, labels, nodes, cands, config, n_folds,
         else float("nan")
     return OneNodeCheck(effect=named.effect, node=node, share=share,
                         rows=tuple(str(l) for l, k in zip(labels, keep) if not k),
-                        fold_t=float(c.evidence), heldout_gain_pct=float(gain))
+                        fold_t=float(c.evidence), heldout_gain_pct=float(gain),
+                        significant=bool(c.extra.get("significant", False)))

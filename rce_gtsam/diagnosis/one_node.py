@@ -53,7 +53,8 @@ class OneNodeCheck:
     """The check's result for the named candidate ``effect``: ``node`` (tracked node id) and ``share`` of the
     in-sample gain its bends carry; ``rows`` the bends left out (labels); ``fold_t`` and ``heldout_gain_pct``
     the candidate's fold t and held-out RMSE gain (%) without them (NaN where the re-run could not score it);
-    ``holds`` the rule."""
+    ``significant`` whether the re-run also found it significant (its own rule at the nominal level: it is the only
+    candidate there); ``holds`` the rule."""
 
     effect: str
     node: int
@@ -61,6 +62,7 @@ class OneNodeCheck:
     rows: tuple
     fold_t: float
     heldout_gain_pct: float
+    significant: bool = False
 
     @property
     def holds(self) -> bool:
@@ -72,7 +74,7 @@ class OneNodeCheck:
     def as_dict(self) -> dict:
         return {"effect": self.effect, "node": int(self.node), "share": float(self.share), "rows": list(self.rows),
                 "fold_t": float(self.fold_t), "heldout_gain_pct": float(self.heldout_gain_pct),
-                "holds": bool(self.holds)}
+                "significant_without_node": bool(self.significant), "holds": bool(self.holds)}
 
 
 def holds(fold_t: float, gain_pct: float) -> bool:
