@@ -261,3 +261,32 @@ def form_asker(h: HeldoutSetting, levels):
                                                                                 levels.p_score)
         return test
     return ask
+
+
+def nested_heldout(h: HeldoutSetting, bend, own) -> dict | None:
+    """The held-out test of bend candidate ``bend`` beside an own-family candidate ``own``: the model with both
+    terms (``own``'s fitted state and ``bend``'s as starts, refitted on all frames from ``bend``'s kappa and z,
+    several starts as for every candidate: :func:`~rce_gtsam.model.starts.solve_from_starts`), scored on the same
+    folds and row sets as every candidate. Returns {"t": fold-paired t of ``own``'s fold MSE against the nested
+    model's (> 0: the bend term lowers the error beyond ``own``'s term), "heldout_rmse": the nested model's (deg),
+    "improvement_over_own_pct"} or None where a fold of ``own`` has no counterpart. Units: deg, t unitless."""
+    effs = list(own.fit.model.effects) + [e for e in bend.fit.model.effects if e.name != own.effect]
+    states = {e.name: st for e, st in zip(own.fit.model.effects, own.fit.states)}
+    states.update({e.name: st for e, st in zip(bend.fit.model.effects, bend.fit.states)})
+    model = h.base_model.with_effects(effs)
+    full, _ = solve_from_starts(model, h.Y, h.W, h.s, h.halves,
+                                start=(bend.fit.kappa.copy(), bend.fit.z.copy(), states), max_iter=FULL_ITER)
+    sse, cnt = heldout_errors(model, full, h.Y, h.W, h.s, h.blocks, h.halves, h.gap, cv_iter=CV_ITER)
+    mse = sse[h.used] / np.maximum(cnt[h.used], 1)
+    if len(mse) != len(own.fold_mse) or not (cnt[h.used] > 0).all():
+        return None
+    rmse = float(math.sqrt(sse[h.used].sum() / max(cnt[h.used].sum(), 1)))
+    return {"t": paired_t(own.fold_mse, mse), "heldout_rmse": rmse,
+            "improvement_over_own_pct": 100.0 * (1.0 - rmse / own.heldout_rmse) if own.heldout_rmse > 0 else 0.0}
+
+
+def beside_asker(h: HeldoutSetting):
+    """The ``beside(bend, own)`` the decision calls where a bend candidate and an own-family one are both
+    supported (:func:`~rce_gtsam.diagnosis.verdict.weigh_beside_own`): :func:`nested_heldout` on the setting
+    ``h``."""
+    return lambda bend, own: nested_heldout(h, bend, own)
