@@ -2,8 +2,8 @@
 
 Before: an own-family candidate (out_of_plane, read from the segments' lengths) was the verdict only where no
 bend-residual candidate was supported. Now (:func:`rce_gtsam.diagnosis.verdict.weigh_beside_own`) a supported
-bend verdict is refitted beside the out_of_plane term and keeps the verdict only where it still lowers the
-held-out error significantly. "before" is read from the same diagnosis (the bend verdict it weighed), so each
+bend verdict is refitted beside the out_of_plane term and yields only where it no longer lowers the held-out error
+significantly and its time course is the swing's. "before" is read from the same diagnosis (the bend verdict it weighed), so each
 case is diagnosed once, with the shipped code. Also printed: what naming out_of_plane wherever it is supported
 (the simpler rule, not shipped) would give.
 
@@ -90,8 +90,8 @@ def summary(rows: list[dict]) -> list[list]:
         def count(k, name):
             return sum(1 for r in rs if r[k] == name)
         names = Counter(r["now"] for r in rs if r["now"])
-        changed = [f"{r['key']}: {r['before']} -> {r['now']} (t {r['beside'].get('t', float('nan')):.2f})"
-                   for r in rs if r["beside"]]
+        changed = [f"{r['key']}: {r['before']} -> {r['now']} (t {r['beside'].get('t', float('nan')):.2f}, course p "
+                   f"{r['beside'].get('course_p', float('nan')):.3g})" for r in rs if r["beside"]]
         out.append([group, hidden, n,
                     "-" if hidden == "none" else f"{count('before', hidden)} -> {count('now', hidden)} of {n}",
                     f"{count('before', OOP)} -> {count('now', OOP)} of {n}",
@@ -183,12 +183,12 @@ def record_rows(rows: list[dict], table: list[list]) -> None:
         rs = [] if m is None else [x for x in rows if x["group"] in m[1] and x["hidden"] == m[2]]
         if rs:
             now, before = (sum(1 for x in rs if x[k] == OOP) for k in ("now", "before"))
-            others = Counter(x["now"] or "none" for x in rs if x["now"] != OOP)
+            others = Counter(x["now"] or "no verdict" for x in rs if x["now"] != OOP)
             rest = after_first_clause(r[3]) if r[3].startswith("the other") else ""
             r = [r[0], r[1], f"{now} of {len(rs)}",
                  (f"before the nested check {before} of {len(rs)}; "
                   + (("the others: " + ", ".join(f"{k} {v}" for k, v in sorted(others.items()))) if others else "")
-                  + (f"; {rest}" if rest else ""))]
+                  + (f"; the earlier run (before the nested check): {rest}" if rest else ""))]
         out.append(r)
     what = "verdict before -> after the nested check"
     for group, hidden, n, hid, oop, anyv, own_first, names, changed in table:
@@ -199,12 +199,13 @@ def record_rows(rows: list[dict], table: list[list]) -> None:
                     f"names now: {names}; naming out_of_plane wherever supported would name it {own_first}; "
                     f"nested checks: {changed}"])
     note = ("Nested check (bench_oop_beside.py): where a bend candidate is the verdict and out_of_plane is supported, "
-            "the model with both terms is scored on the same folds; the bend candidate keeps the verdict only with "
-            "fold-paired t > the bend candidates' threshold against out_of_plane's model (verdict.weigh_beside_own).")
+            "the model with both terms is scored on the same folds; the bend candidate yields to out_of_plane only "
+            "where its fold-paired t against out_of_plane's model is at most the bend candidates' threshold AND its "
+            "time course is the swing's (phase-surrogate p of the swing courses' R^2 <= 0.01) (verdict.weigh_beside_own).")
     save_record("out_of_plane", title=rec["title"],
                 command=rec["command"].split("; python benchmarks/bench_oop_beside.py")[0]
                 + "; python benchmarks/bench_oop_beside.py --rows R.jsonl --user-path DIR --cases GLOBS "
-                  "--sim-second-mode 20 --sim-swing 20 --sim-swing-second 20 --second-mult 2 --record",
+                  "--sim-second-mode 20 --sim-swing 20 --sim-swing-second 20 --second-mult 2 (and 4) --record",
                 description=rec["description"], columns=rec["columns"], rows=out,
                 notes=[n for n in rec["notes"] if not n.startswith("Nested check")] + [note])
 

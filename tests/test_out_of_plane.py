@@ -103,6 +103,7 @@ def test_with_lengths_the_term_predicts_the_bending_and_keeps_the_others_alpha()
     assert without.verdict == "second_mode" and with_it.verdict == "out_of_plane"
     rec = with_it.settings["parsimony"]["beside_own"]
     assert rec["bend"] == "second_mode" and not rec["kept"] and rec["t"] <= rec["threshold_t"]
+    assert rec["course_p"] <= ALPHA_OOP and rec["course_r2"] > 0.5  # second_mode's course is the swing's
     assert "also support second_mode" in with_it.explanation and "no longer lowers" in with_it.explanation
     alone = diagnose(Y, effects=["offset", eff], n_folds=8)
     assert alone.verdict == "out_of_plane" and "length" in alone.explanation
@@ -117,7 +118,26 @@ def test_a_second_excitation_beside_a_swing_keeps_the_verdict():
     assert d.candidate("out_of_plane").supported and d.verdict == "second_mode"
     rec = d.settings["parsimony"]["beside_own"]
     assert rec["kept"] and rec["t"] > rec["threshold_t"] and rec["improvement_over_own_pct"] > 0
+    # second_mode's course mixes v with the swing's w (the bends carry both), so the course test alone would rename
+    # it: the nested held-out test keeps it
+    assert "course_p" in rec
     assert "out_of_plane is supported too" in d.explanation and "still lowers" in d.explanation
+
+
+@pytest.mark.parametrize("t, rmse, course_p, kept", [
+    (3.0, 0.9, 0.001, True),    # adds beside the swing's term: kept, whatever its course
+    (1.0, 0.9, 0.001, False),   # adds nothing and its course is the swing's: out_of_plane
+    (1.0, 0.9, 0.2, True),      # adds nothing, but its course is not the swing's: kept (a real second excitation)
+    (3.0, 1.1, 0.001, False),   # t above the threshold but a higher held-out RMSE: adds nothing
+    (1.0, 0.9, None, False),    # no per-frame course to compare: the nested held-out test alone decides
+])
+def test_weigh_beside_own_needs_both_conditions_to_rename(t, rmse, course_p, kept):
+    from types import SimpleNamespace
+    from rce_gtsam.diagnosis.verdict import weigh_beside_own
+    own = SimpleNamespace(heldout_rmse=1.0, extra={"alpha": ALPHA_OOP})
+    nested = {"t": t, "heldout_rmse": rmse, **({} if course_p is None else {"course_p": course_p})}
+    assert weigh_beside_own(None, own, nested, t_crit=2.6) is kept
+    assert weigh_beside_own(None, own, None, t_crit=2.6)  # the nested fit could not be scored: kept
 
 
 @pytest.fixture(scope="module")

@@ -24,7 +24,8 @@ effect share one share), with the folds' t quantiles on (folds - 1) dof (:func:`
   lengths) is judged by its own test at its own level, outside the alpha above (family-wise alpha + its level),
   supported when that test holds, its held-out error on that channel falls and its fit is plausible, and the
   verdict where no other candidate is, or where the bend verdict, refitted beside its term, no longer lowers the
-  held-out error significantly (fold t <= t(1 - alpha / n): :func:`~rce_gtsam.diagnosis.verdict.weigh_beside_own`)
+  held-out error significantly (fold t <= t(1 - alpha / n)) and its time course, where it has one, is the own
+  term's (phase-surrogate p <= the own level: :func:`~rce_gtsam.diagnosis.verdict.weigh_beside_own`)
   (:mod:`rce_gtsam.diagnosis.own_family`, :func:`own_supported`).
 
 Nothing here computes a statistic: the tests' results come in from :mod:`rce_gtsam.diagnosis.evidence`, which

@@ -69,18 +69,25 @@ def beside_own_text(diag: Diagnosis) -> str:
     if "t" not in rec:
         return (f"{own} is supported too; the model with both {bend.effect} and {own} could not be scored on "
                 f"every fold, so {bend.effect}, supported on its own, stays the verdict.")
-    nested = (f"fold t = {rec['t']:.2f} {'>' if rec['kept'] else '<='} {thr:.2f}; held-out RMSE "
+    adds = rec["t"] > thr and rec["heldout_rmse"] < diag.candidate(own).heldout_rmse
+    nested = (f"fold t = {rec['t']:.2f} {'>' if rec['t'] > thr else '<='} {thr:.2f}; held-out RMSE "
               f"{rec['heldout_rmse']:.3f} deg with both terms, {rec['improvement_over_own_pct']:+.1f}% against "
               f"{own}'s alone")
+    level = diag.candidate(own).extra.get("alpha", float("nan"))
+    course = ("" if "course_p" not in rec else
+              f"the swing's courses explain {100 * rec['course_r2']:.0f}% of {bend.effect}'s time course (p = "
+              f"{rec['course_p']:.3g} against phase surrogates, level {level:g})")
     if rec["kept"]:
+        why = (f"{bend.effect} still lowers the held-out error significantly ({nested})" if adds else
+               f"{bend.effect}'s time course is not the swing's ({course}; {nested})")
         return (f"{own} is supported too (its own test on the segments' lengths): the branch also swings out of "
-                f"the image plane. Refitted beside the {own} term, {bend.effect} still lowers the held-out error "
-                f"significantly ({nested}), so it is named; both are in these data.")
+                f"the image plane. Refitted beside the {own} term, {why}, so {bend.effect} is named; both are in "
+                f"these data.")
     return (f"The bend angles also support {bend.effect} (held-out RMSE {bend.improvement_pct:.1f}% below the "
             f"rank-1 model's), but refitted beside the {own} term it no longer lowers the held-out error "
-            f"significantly ({nested}): an out-of-plane swing turns the projected bend angles, and what that "
-            f"leaves of rank 1 a {bend.effect} term can take, while the segments' lengths show the swing itself. "
-            f"{own} is named; {bend.effect} is not excluded.")
+            f"significantly ({nested})" + (f", and {course}" if course else "") + ": an out-of-plane swing turns "
+            f"the projected bend angles, and what that leaves of rank 1 a {bend.effect} term can take, while the "
+            f"segments' lengths show the swing itself. {own} is named; {bend.effect} is not excluded.")
 
 
 def both_tests_text(c) -> str:
