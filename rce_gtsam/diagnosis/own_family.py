@@ -8,7 +8,8 @@ false-alarm rate is alpha + that level. Such a candidate is *significant* when i
 error on its own channel falls, *supported* when
 besides its fit is plausible (the held-out change is reported, not required), and it is the
 verdict where no bend-residual candidate is supported, or where the bend verdict, refitted beside its term, no
-longer lowers the held-out error significantly (:func:`~rce_gtsam.diagnosis.verdict.choose_with_own_last`,
+longer lowers the held-out error significantly and its time course is this term's
+(:func:`~rce_gtsam.diagnosis.verdict.choose_with_own_last`,
 :func:`~rce_gtsam.diagnosis.verdict.weigh_beside_own`): it changes none of the bend candidates' tests, only which
 of two supported findings is named. This module runs the test (evidence); :func:`~rce_gtsam.diagnosis.decision.own_supported`
 and the verdict's order are the decision's.
