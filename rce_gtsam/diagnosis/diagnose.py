@@ -33,7 +33,7 @@ from ..model.row_sets import (edge_halves, edge_nodes_from_labels, node_disjoint
 from ..presets import DEFAULT, ComplianceConfig
 from . import decision
 from .budget import variance_budget
-from .evidence import candidate_evidence, drift_checks, form_asker, full_fits, heldout_setting, maxt_tests
+from .evidence import beside_asker, candidate_evidence, drift_checks, form_asker, full_fits, heldout_setting, maxt_tests
 from .explain import explain, render_diagnosis_report
 from .heldout import fold_blocks
 from .information import effective_ic, effective_sample  # noqa: F401 (re-exported)
@@ -131,7 +131,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         c.extra["supported_maxt"] = decision.supported_by_maxt(c, h.b_rmse, resolution)
     # 3. decision, between candidates: the lag's richer form, parsimony, the verdict
     results, verdict_effect, parsimony = decision.decide(results, form_asker(h, lv), lv, h.b_rmse, resolution,
-                                                         node_disjoint)
+                                                         node_disjoint, beside=beside_asker(h))
     named = None if verdict_effect is None else next(c for c in results if c.effect == verdict_effect)
     # 3. decision, last: a named bend effect must not rest on one tracked node (one_node.py)
     one_node = None

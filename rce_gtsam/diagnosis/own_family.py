@@ -7,9 +7,11 @@ alpha, so the other candidates' thresholds are what they were without it, and a 
 false-alarm rate is alpha + that level. Such a candidate is *significant* when its own test is and its held-out
 error on its own channel falls, *supported* when
 besides its fit is plausible (the held-out change is reported, not required), and it is the
-verdict only where no bend-residual candidate is supported
-(:func:`~rce_gtsam.diagnosis.verdict.choose_with_own_last`): it names what the bend candidates leave, and changes
-none of their decisions. This module runs the test (evidence); :func:`~rce_gtsam.diagnosis.decision.own_supported`
+verdict where no bend-residual candidate is supported, or where the bend verdict, refitted beside its term, no
+longer lowers the held-out error significantly and its time course is this term's
+(:func:`~rce_gtsam.diagnosis.verdict.choose_with_own_last`,
+:func:`~rce_gtsam.diagnosis.verdict.weigh_beside_own`): it changes none of the bend candidates' tests, only which
+of two supported findings is named. This module runs the test (evidence); :func:`~rce_gtsam.diagnosis.decision.own_supported`
 and the verdict's order are the decision's.
 """
 
