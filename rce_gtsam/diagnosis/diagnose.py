@@ -191,7 +191,9 @@ def _one_node_check(named, base, Y, W, s, labels, nodes, cands, config, n_folds,
                     resolution, frames):
     """:class:`~rce_gtsam.diagnosis.one_node.OneNodeCheck` of the named candidate: the diagnosis again, for it
     alone, without the bends of the node that carries most of its in-sample gain; None where it gains nothing
-    in-sample or too few bends are left."""
+    in-sample, too few bends are left, or the rows' nodes are not known."""
+    if nodes is None:
+        return None
     found = carrying_node(base.residuals, named.fit.residuals, nodes, W)
     if found is None:
         return None
