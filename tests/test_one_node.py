@@ -30,6 +30,17 @@ def test_the_rule_is_a_sign():
     assert holds(float("nan"), float("nan"))  # the check could not run: nothing is withheld
 
 
+def test_a_slow_course_per_segment_must_stay_significant_without_the_node():
+    from rce_gtsam.diagnosis.one_node import OneNodeCheck, one_node_text
+    lag = OneNodeCheck("delay", 5, 0.4, ("4->5",), fold_t=1.4, heldout_gain_pct=0.3, significant=False)
+    offset = OneNodeCheck("offset", 5, 0.4, ("4->5",), fold_t=1.4, heldout_gain_pct=0.3, significant=False,
+                          courses=True)
+    assert lag.holds and not offset.holds
+    assert OneNodeCheck("offset", 5, 0.4, ("4->5",), 2.9, 4.0, significant=True, courses=True).holds
+    assert "no longer significant" in one_node_text(offset) and "drift" in one_node_text(offset)
+    assert offset.as_dict()["per_segment_courses"] and offset.as_test().name == "one_node"
+
+
 def _tracker_second_mode(seed=2, E=16):
     """Effect-free bends plus two nodes' tracking errors that follow the motion (the same nonlinear course of the
     excitation), one node's much larger: the +1, -2, +1 pattern on the three bends each enters."""

@@ -212,4 +212,5 @@ def _one_node_check(named, base, Y, W, s, labels, nodes, cands, config, n_folds,
     return OneNodeCheck(effect=named.effect, node=node, share=share,
                         rows=tuple(str(l) for l, k in zip(labels, keep) if not k),
                         fold_t=float(c.evidence), heldout_gain_pct=float(gain),
-                        significant=bool(c.extra.get("significant", False)))
+                        significant=bool(c.extra.get("significant", False)),
+                        courses=eff.heldout_time_basis(Y.shape[1]) is not None)

@@ -19,7 +19,10 @@ other bends (:func:`rows_without`), and reads the candidate's fold t and held-ou
 
 **Rule (a sign, no tuned level).** The finding holds when, without the carrying node, the candidate still
 predicts the held-out bends better than the rank-1 model: fold t > 0 and held-out RMSE lower
-(:func:`holds`). A physical effect of the branch is in the other bends too and keeps a positive gain there (it
+(:func:`holds`). An effect that fits each segment a slow course of its own (offset, creep) is what a node's
+drift makes in the bends it enters; it is named only on evidence drift cannot give (the drift checks of
+:mod:`rce_gtsam.diagnosis.decision`), and must keep that evidence without the carrying node: significant again,
+by its own rule at the nominal level (it is the only candidate of the re-run). A physical effect of the branch is in the other bends too and keeps a positive gain there (it
 may lose its significance: fewer bends carry less evidence); one node's error is not, and a model with the
 effect's extra parameters then predicts *worse* (its fit takes noise). A finding that fails is not named: the
 report names the node and its bends as the tracker's.
@@ -54,7 +57,8 @@ class OneNodeCheck:
     in-sample gain its bends carry; ``rows`` the bends left out (labels); ``fold_t`` and ``heldout_gain_pct``
     the candidate's fold t and held-out RMSE gain (%) without them (NaN where the re-run could not score it);
     ``significant`` whether the re-run also found it significant (its own rule at the nominal level: it is the only
-    candidate there); ``holds`` the rule."""
+    candidate there); ``courses`` whether the effect fits each segment a slow course of its own (offset, creep: what
+    a node's drift makes), which must stay significant besides; ``holds`` the rule."""
 
     effect: str
     node: int
@@ -63,10 +67,11 @@ class OneNodeCheck:
     fold_t: float
     heldout_gain_pct: float
     significant: bool = False
+    courses: bool = False
 
     @property
     def holds(self) -> bool:
-        return holds(self.fold_t, self.heldout_gain_pct)
+        return holds(self.fold_t, self.heldout_gain_pct) and (self.significant or not self.courses)
 
     def as_test(self) -> TestResult:
         return TestResult("one_node", float(self.fold_t), None, 0.0, ONE_NODE_NULL, ONE_NODE_CALIBRATION)
@@ -74,7 +79,8 @@ class OneNodeCheck:
     def as_dict(self) -> dict:
         return {"effect": self.effect, "node": int(self.node), "share": float(self.share), "rows": list(self.rows),
                 "fold_t": float(self.fold_t), "heldout_gain_pct": float(self.heldout_gain_pct),
-                "significant_without_node": bool(self.significant), "holds": bool(self.holds)}
+                "significant_without_node": bool(self.significant), "per_segment_courses": bool(self.courses),
+                "holds": bool(self.holds)}
 
 
 def holds(fold_t: float, gain_pct: float) -> bool:
@@ -126,8 +132,14 @@ def one_node_text(check: OneNodeCheck | None, labels=()) -> str:
         return (f" It does not rest on one tracked node: without node {check.node}'s bends ({rows}; "
                 f"{100 * check.share:.0f}% of its in-sample gain) {check.effect} still predicts the held-out bends "
                 f"{check.heldout_gain_pct:.1f}% better (fold t {check.fold_t:.1f}).")
+    if holds(check.fold_t, check.heldout_gain_pct):  # the sign held; a per-segment course lost its significance
+        without = (f"without them {check.effect} is no longer significant by its own tests (held-out RMSE "
+                   f"{check.heldout_gain_pct:.1f}% lower, fold t {check.fold_t:.1f}), and a slow course per segment "
+                   f"is what a node's drift makes")
+    else:
+        without = (f"without them the model with {check.effect} predicts the held-out bends no better than the "
+                   f"rank-1 model (held-out RMSE {-check.heldout_gain_pct:+.1f}%, fold t {check.fold_t:.1f})")
     return (f" Not named: the tracker, not physics. {check.effect}'s gain rests on node {check.node}: its bends "
-            f"({rows}) carry {100 * check.share:.0f}% of it, and without them the model with {check.effect} "
-            f"predicts the held-out bends no better than the rank-1 model (held-out RMSE {-check.heldout_gain_pct:+.1f}%, "
-            f"fold t {check.fold_t:.1f}). One node's tracking error that follows the motion looks like this; look at "
-            f"node {check.node}'s track (rce review) before reading it as physics.")
+            f"({rows}) carry {100 * check.share:.0f}% of it, and {without}. One node's tracking error that follows "
+            f"the motion looks like this; look at node {check.node}'s track (rce review) before reading it as "
+            f"physics.")
