@@ -105,22 +105,32 @@ def summarise(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def record_rows(first: list[dict], now: list[dict]) -> list[list]:
-    """Rows of the validation record: per (hidden effect, render) the cases, the verdicts of the first diagnosis
-    (the code that ran ``rce run``) and of the current one, and how many name the hidden effect. A lag counts
-    as found whether it is named delay or dynamics (two forms of one lag)."""
+def seed_group(seed: int, size: int) -> str:
+    """The block of ``size`` seeds ``seed`` belongs to, as "a-b" (size 0: "all")."""
+    if size <= 0:
+        return "all"
+    lo = seed - seed % size
+    return f"{lo}-{lo + size - 1}"
+
+
+def record_rows(first: list[dict], now: list[dict], group: int = 0) -> list[list]:
+    """Rows of the validation record: per (hidden effect, render, block of ``group`` seeds) the cases, the verdicts
+    of the first diagnosis (the code that ran ``rce run``) and of the current one, and how many name the hidden
+    effect. A lag counts as found whether it is named delay or dynamics (two forms of one lag)."""
     lag = {"delay", "dynamics"}
     out = []
-    for eff, ren in sorted({(r["effect"], r["render"]) for r in now if "error" not in r}):
+    keys = {(r["effect"], r["render"], seed_group(r["seed"], group)) for r in now if "error" not in r}
+    for eff, ren, grp in sorted(keys):
         def pick(rows):
-            return [r for r in rows if r["effect"] == eff and r["render"] == ren and "error" not in r]
+            return [r for r in rows if r["effect"] == eff and r["render"] == ren and "error" not in r
+                    and seed_group(r["seed"], group) == grp]
         a, b = pick(first), pick(now)
         def named(rs):
             return sum(1 for r in rs if r.get("verdict"))
         def found(rs):
             return sum(1 for r in rs if r.get("verdict") == eff or (eff in lag and r.get("verdict") in lag))
         names = dict(Counter(r["verdict"] for r in b if r.get("verdict")))
-        out.append([eff, ren, len(b), f"{named(a)} of {len(a)}", f"{named(b)} of {len(b)}",
+        out.append([eff, ren, grp, len(b), f"{named(a)} of {len(a)}", f"{named(b)} of {len(b)}",
                     "-" if eff == "none" else f"{found(a)} / {found(b)}",
                     ", ".join(f"{k} {v}" for k, v in sorted(names.items())) or "-"])
     return out
@@ -143,6 +153,9 @@ def main() -> int:
                     help="save the verdicts as the docs' validation record docs/validation/NAME.json (with "
                          "--rediagnose: the first diagnosis and the current one side by side)")
     ap.add_argument("--note", action="append", default=[], help="a line under the record's table (repeatable)")
+    ap.add_argument("--seed-groups", type=int, default=0, metavar="N",
+                    help="with --record: one row per block of N seeds (the seeds a rule was written on apart from "
+                         "those it was not)")
     a = ap.parse_args()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     jobs = [(a.cache, e, r, s, a.frames) for s in range(a.first_seed, a.first_seed + a.seeds)
@@ -170,9 +183,9 @@ def main() -> int:
                                  "the current diagnosis on the same tracks (the same where there was no "
                                  "--rediagnose). For effect-free cases every name is a false verdict; for a hidden "
                                  "lag 'found' counts delay or dynamics (two forms of one lag)."),
-                    columns=["hidden effect", "render", "cases", "named (first)", "named (now)",
+                    columns=["hidden effect", "render", "seeds", "cases", "named (first)", "named (now)",
                              "found (first / now)", "names now"],
-                    rows=record_rows(first, rows), notes=a.note or None)
+                    rows=record_rows(first, rows, a.seed_groups), notes=a.note or None)
     if a.json:
         Path(a.json).write_text(json.dumps(rows, indent=1))
     return 0

@@ -72,29 +72,72 @@ def test_without_lengths_the_term_is_zero_and_never_named():
     np.testing.assert_allclose(ext.predict(), base.predict(), atol=1e-6)
 
 
+def _swing_and_second(rng, second: float):
+    """(Y (E, T) deg, the swing's length channel, z): bends carry kappa z, a swing course w with per-edge gains
+    (the lengths carry w too, growing toward the tip) and, with ``second`` > 0, a second excitation v independent
+    of w with its own mode shape."""
+    E, T = 12, 450
+    z, w, v = _smooth(rng, T), _smooth(rng, T), _smooth(rng, T)
+    kappa = np.exp(rng.normal(0, 0.4, E))
+    g, m = 0.6 * rng.standard_normal(E), second * rng.standard_normal(E)
+    Y = kappa[:, None] * z[None] + g[:, None] * w[None] + m[:, None] * v[None] + 0.2 * rng.standard_normal((E, T))
+    rel = 0.004 * np.arange(1, E + 2)[:, None] * w[None] + 0.01 * rng.standard_normal((E + 1, T))
+    return Y, _chain_channel(rel), z
+
+
 def test_with_lengths_the_term_predicts_the_bending_and_keeps_the_others_alpha():
     """Synthetic: bends carry a swing course w with per-edge gains; the lengths carry w too. The term lowers the
-    held-out error and is supported; the bend-residual candidates' Bonferroni count is what it is without it, and
-    where one of them is supported too (here the free second excitation, which fits the same course from the bends)
-    it keeps the verdict: an own-family candidate names only what the bend candidates leave."""
-    rng = np.random.default_rng(2)
-    E, T = 12, 450
-    z, w = _smooth(rng, T), _smooth(rng, T)
-    kappa = np.exp(rng.normal(0, 0.4, E))
-    g = 0.6 * rng.standard_normal(E)
-    Y = kappa[:, None] * z[None] + g[:, None] * w[None] + 0.2 * rng.standard_normal((E, T))
-    rel = 0.004 * np.arange(1, E + 2)[:, None] * w[None] + 0.01 * rng.standard_normal((E + 1, T))
-    eff = OutOfPlane(_chain_channel(rel), z)
+    held-out error and is supported; the bend-residual candidates' Bonferroni count is what it is without it. The
+    free second excitation, which fits the same course from the bends, is supported too, but refitted beside the
+    out_of_plane term it no longer lowers the held-out error (verdict.weigh_beside_own): out_of_plane is the
+    verdict and the explanation says why second_mode is not."""
+    Y, channel, z = _swing_and_second(np.random.default_rng(2), second=0.0)
+    eff = OutOfPlane(channel, z)
     with_it = diagnose(Y, effects=["offset", "second_mode", eff], n_folds=8)
     without = diagnose(Y, effects=["offset", "second_mode"], n_folds=8)
     assert with_it.settings["n_findings"] == without.settings["n_findings"] == 2
     assert with_it.settings["evidence_threshold_t"] == without.settings["evidence_threshold_t"]
     c = with_it.candidate("out_of_plane")
     assert c.extra["p"] <= ALPHA_OOP and c.extra["alpha"] == ALPHA_OOP
-    assert c.improvement_pct > 5 and c.supported
-    assert with_it.verdict == without.verdict == "second_mode"
+    assert c.improvement_pct > 5 and c.supported and with_it.candidate("second_mode").supported
+    assert without.verdict == "second_mode" and with_it.verdict == "out_of_plane"
+    rec = with_it.settings["parsimony"]["beside_own"]
+    assert rec["bend"] == "second_mode" and not rec["kept"] and rec["t"] <= rec["threshold_t"]
+    assert rec["course_p"] <= ALPHA_OOP and rec["course_r2"] > 0.5  # second_mode's course is the swing's
+    assert "also support second_mode" in with_it.explanation and "no longer lowers" in with_it.explanation
     alone = diagnose(Y, effects=["offset", eff], n_folds=8)
     assert alone.verdict == "out_of_plane" and "length" in alone.explanation
+    assert "beside_own" not in alone.settings["parsimony"]
+
+
+def test_a_second_excitation_beside_a_swing_keeps_the_verdict():
+    """The other side of the nested check: a second excitation whose course is not the swing's still lowers the
+    held-out error beside the out_of_plane term, so it stays the verdict and the swing is reported beside it."""
+    Y, channel, z = _swing_and_second(np.random.default_rng(3), second=0.6)
+    d = diagnose(Y, effects=["offset", "second_mode", OutOfPlane(channel, z)], n_folds=8)
+    assert d.candidate("out_of_plane").supported and d.verdict == "second_mode"
+    rec = d.settings["parsimony"]["beside_own"]
+    assert rec["kept"] and rec["t"] > rec["threshold_t"] and rec["improvement_over_own_pct"] > 0
+    # second_mode's course mixes v with the swing's w (the bends carry both), so the course test alone would rename
+    # it: the nested held-out test keeps it
+    assert "course_p" in rec
+    assert "out_of_plane is supported too" in d.explanation and "still lowers" in d.explanation
+
+
+@pytest.mark.parametrize("t, rmse, course_p, kept", [
+    (3.0, 0.9, 0.001, True),    # adds beside the swing's term: kept, whatever its course
+    (1.0, 0.9, 0.001, False),   # adds nothing and its course is the swing's: out_of_plane
+    (1.0, 0.9, 0.2, True),      # adds nothing, but its course is not the swing's: kept (a real second excitation)
+    (3.0, 1.1, 0.001, False),   # t above the threshold but a higher held-out RMSE: adds nothing
+    (1.0, 0.9, None, False),    # no per-frame course to compare: the nested held-out test alone decides
+])
+def test_weigh_beside_own_needs_both_conditions_to_rename(t, rmse, course_p, kept):
+    from types import SimpleNamespace
+    from rce_gtsam.diagnosis.verdict import weigh_beside_own
+    own = SimpleNamespace(heldout_rmse=1.0, extra={"alpha": ALPHA_OOP})
+    nested = {"t": t, "heldout_rmse": rmse, **({} if course_p is None else {"course_p": course_p})}
+    assert weigh_beside_own(None, own, nested, t_crit=2.6) is kept
+    assert weigh_beside_own(None, own, None, t_crit=2.6)  # the nested fit could not be scored: kept
 
 
 @pytest.fixture(scope="module")

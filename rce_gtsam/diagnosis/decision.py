@@ -23,8 +23,15 @@ effect share one share), with the folds' t quantiles on (folds - 1) dof (:func:`
 * An effect read from another channel than the bend residuals (``own_family``: out_of_plane, from segment
   lengths) is judged by its own test at its own level, outside the alpha above (family-wise alpha + its level),
   supported when that test holds, its held-out error on that channel falls and its fit is plausible, and the
-  verdict only where no other candidate is
+  verdict where no other candidate is, or where the bend verdict, refitted beside its term, no longer lowers the
+  held-out error significantly (fold t <= t(1 - alpha / n)) and its time course, where it has one, is the own
+  term's (phase-surrogate p <= the own level: :func:`~rce_gtsam.diagnosis.verdict.weigh_beside_own`)
   (:mod:`rce_gtsam.diagnosis.own_family`, :func:`own_supported`).
+
+* **one node** (last, in :func:`~rce_gtsam.diagnosis.diagnose.diagnose`): the verdict stands only if, without the
+  bends of the node that carries most of its in-sample gain, the effect still lowers the held-out error (fold t
+  > 0, :mod:`rce_gtsam.diagnosis.one_node`); an own-family effect's test and length gain must hold without that
+  node's segments (:func:`~rce_gtsam.diagnosis.own_family.own_test_significant`).
 
 Nothing here computes a statistic: the tests' results come in from :mod:`rce_gtsam.diagnosis.evidence`, which
 runs an encompassing test where :func:`support_richer_forms` asks for one (``ask``). Why each rule is there,
@@ -164,16 +171,18 @@ def support_richer_forms(results: list, ask, b_rmse: float, resolution: float, p
 
 
 
-def decide(results: list, ask, lv: Levels, b_rmse: float, resolution: float, node_disjoint: bool):
+def decide(results: list, ask, lv: Levels, b_rmse: float, resolution: float, node_disjoint: bool, beside=None):
     """The verdict among ``results`` (sorted by held-out RMSE, ``supported`` set): the lag's richer forms where
     the row sets share no node (the encompassing test needs that), the encompassing tests the parsimony rule
-    reads, then :func:`~rce_gtsam.diagnosis.verdict.choose_verdict`. Returns (results, verdict effect or None,
+    reads, then :func:`~rce_gtsam.diagnosis.verdict.choose_verdict` (``beside``: the nested test of a bend verdict
+    beside a supported own-family candidate, :func:`~rce_gtsam.diagnosis.verdict.choose_with_own_last`). Returns (results, verdict effect or None,
     the parsimony record)."""
     if node_disjoint:
         results = support_richer_forms(results, ask, b_rmse, resolution, lv.p_score)
         weigh_the_leading(results, ask, lv.t_crit, lv.p_score)
-    # an own-family candidate (read from another channel) is the verdict only where no bend candidate is
-    verdict_effect, parsimony = choose_with_own_last(results, lv.t_crit, p_pair=lv.p_score)
+    # an own-family candidate (read from another channel) is the verdict where no bend candidate is, or where the
+    # bend verdict does not earn its place beside it (verdict.weigh_beside_own)
+    verdict_effect, parsimony = choose_with_own_last(results, lv.t_crit, p_pair=lv.p_score, beside=beside)
     return results, verdict_effect, parsimony
 
 

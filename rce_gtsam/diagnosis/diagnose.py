@@ -33,25 +33,27 @@ from ..model.row_sets import (edge_halves, edge_nodes_from_labels, node_disjoint
 from ..presets import DEFAULT, ComplianceConfig
 from . import decision
 from .budget import variance_budget
-from .evidence import candidate_evidence, drift_checks, form_asker, full_fits, heldout_setting, maxt_tests
+from .evidence import beside_asker, candidate_evidence, drift_checks, form_asker, full_fits, heldout_setting, maxt_tests
 from .explain import explain, render_diagnosis_report
 from .heldout import fold_blocks
 from .information import effective_ic, effective_sample  # noqa: F401 (re-exported)
 from .misfit import resolve_effects, residual_statistics, worst_edges_and_frames  # noqa: F401 (re-exported)
 from .noise_floor import NoiseFloor
+from .one_node import OneNodeCheck, carrying_node, one_node_text, rows_without
 from .own_family import own_test_significant
 from .result import CandidateResult, Diagnosis  # noqa: F401 (re-exported)
 from .settings import BLOCK_LENGTH, N_FOLDS, RESOLUTION
 from .sysid import residual_analysis
 from .tracker_signature import near_gap_share, tracker_text
-from .verdict import finding_of
+from .verdict import finding_of, is_own_family
 
 
 def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | None = None, seed: int = 0,
              block_length: int = BLOCK_LENGTH, prior_strength: float | None = None, response: str | None = None,
              alpha: float = 0.05, edge_labels=None, frames=None, edge_nodes=None,
              config: ComplianceConfig | None = None, noise_floor: NoiseFloor | None = None,
-             resolution: float = RESOLUTION, outside_domain: tuple[str, ...] = ()) -> Diagnosis:
+             resolution: float = RESOLUTION, outside_domain: tuple[str, ...] = (),
+             check_one_node: bool = True) -> Diagnosis:
     """Diagnose which physical effect the rank-1 model misses.
 
     Y: (E, T) bend response in degrees (NaN = missing/outlier); weights: (E, T) >= 0 or None;
@@ -74,6 +76,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     (:func:`~rce_gtsam.diagnosis.domain.settings_outside_domain`, which :func:`~rce_gtsam.diagnosis.io.diagnose_result`
     passes): every test still runs, but no effect is named (``settings["verdict_outside_domain"]`` keeps
     the one that would have been) and the status reads ``"uncalibrated"``.
+    check_one_node: a named bend effect must hold without the node that carries most of its gain
+    (:mod:`rce_gtsam.diagnosis.one_node`; the check's own re-run passes False).
     """
     Y, W, s = validate_inputs(Y, weights, root_distance)
     E, T = Y.shape
@@ -127,8 +131,20 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
         c.extra["supported_maxt"] = decision.supported_by_maxt(c, h.b_rmse, resolution)
     # 3. decision, between candidates: the lag's richer form, parsimony, the verdict
     results, verdict_effect, parsimony = decision.decide(results, form_asker(h, lv), lv, h.b_rmse, resolution,
-                                                         node_disjoint)
+                                                         node_disjoint, beside=beside_asker(h))
     named = None if verdict_effect is None else next(c for c in results if c.effect == verdict_effect)
+    # 3. decision, last: a named bend effect must not rest on one tracked node (one_node.py)
+    one_node = None
+    if check_one_node and named is not None and not is_own_family(named):
+        one_node = _one_node_check(named, base, Y, W, s, labels, nodes, cands, config, n_folds, seed, block_length,
+                                   alpha, resolution, frames)
+        if one_node is not None:
+            named.tests["one_node"] = one_node.as_test()
+            named.extra["one_node"] = one_node.as_dict()
+            if not one_node.holds:  # not named; an effect read from another channel may still be
+                own = [c for c in results if c.supported and is_own_family(c)]
+                named = own[0] if own else None
+                verdict_effect = None if named is None else named.effect
     verdict = None if named is None else finding_of(named)  # another form of an effect reports that effect
     would_name = verdict
     if outside_domain:  # the tests' calibration does not hold here: nothing is named (domain.py)
@@ -148,7 +164,10 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                 "frames_eff": h.ess["t_eff"], "baseline_k_eff": h.base_ic["k_eff"], "parsimony": parsimony,
                 "encompassing_threshold_p": lv.p_score, "n_findings": lv.n_findings,
                 "outside_domain": list(outside_domain),
-                "verdict_outside_domain": would_name if outside_domain else None}
+                "verdict_outside_domain": would_name if outside_domain else None,
+                "one_node": None if one_node is None else one_node.as_dict(),
+                "verdict_withheld": (None if one_node is None or one_node.holds
+                                     else {"effect": one_node.effect, "rule": "one_node"})}
     budget = None
     if noise_floor is not None:
         added = {verdict_effect: (named.fit.residuals, named.fit.n_params)} if named is not None else {}
@@ -163,5 +182,35 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
                      worst_frames=worst_f, residual_summary=summary, settings=settings, edge_labels=labels,
                      budget=budget, baseline_frame_loss=h.b_loss, baseline_heldout_prediction=h.b_pred,
                      residual_analysis=analysis, noise_floor=noise_floor, outside_domain=tuple(outside_domain))
-    diag = replace(diag, explanation=explain(diag) + tracker_text(settings["residual_power_near_gaps"], labels))
+    diag = replace(diag, explanation=explain(diag) + tracker_text(settings["residual_power_near_gaps"], labels)
+                   + one_node_text(one_node, labels))
     return replace(diag, report_text=render_diagnosis_report(diag))
+
+
+def _one_node_check(named, base, Y, W, s, labels, nodes, cands, config, n_folds, seed, block_length, alpha,
+                    resolution, frames):
+    """:class:`~rce_gtsam.diagnosis.one_node.OneNodeCheck` of the named candidate: the diagnosis again, for it
+    alone, without the bends of the node that carries most of its in-sample gain; None where it gains nothing
+    in-sample, too few bends are left, or the rows' nodes are not known."""
+    if nodes is None:
+        return None
+    found = carrying_node(base.residuals, named.fit.residuals, nodes, W)
+    if found is None:
+        return None
+    node, share = found
+    keep = rows_without(node, nodes)
+    if keep.sum() < 4 or keep.all():
+        return None
+    eff = next(e for e in cands if e.name == named.effect)
+    again = diagnose(Y[keep], None if W is None else W[keep], s[keep], effects=[eff], n_folds=n_folds, seed=seed,
+                     block_length=block_length, alpha=alpha, edge_labels=[l for l, k in zip(labels, keep) if k],
+                     frames=frames, edge_nodes=[n for n, k in zip(nodes, keep) if k], config=config,
+                     resolution=resolution, check_one_node=False)
+    c = again.candidates[0]
+    gain = 100.0 * (1.0 - c.heldout_rmse / again.baseline_heldout_rmse) if again.baseline_heldout_rmse > 0 \
+        else float("nan")
+    return OneNodeCheck(effect=named.effect, node=node, share=share,
+                        rows=tuple(str(l) for l, k in zip(labels, keep) if not k),
+                        fold_t=float(c.evidence), heldout_gain_pct=float(gain),
+                        significant=bool(c.extra.get("significant", False)),
+                        courses=eff.heldout_time_basis(Y.shape[1]) is not None)

@@ -261,3 +261,63 @@ def form_asker(h: HeldoutSetting, levels):
                                                                                 levels.p_score)
         return test
     return ask
+
+
+def nested_heldout(h: HeldoutSetting, bend, own) -> dict | None:
+    """The held-out test of bend candidate ``bend`` beside an own-family candidate ``own``: the model with both
+    terms (``own``'s fitted state and ``bend``'s as starts, refitted on all frames from ``bend``'s kappa and z,
+    several starts as for every candidate: :func:`~rce_gtsam.model.starts.solve_from_starts`), scored on the same
+    folds and row sets as every candidate. Returns {"t": fold-paired t of ``own``'s fold MSE against the nested
+    model's (> 0: the bend term lowers the error beyond ``own``'s term), "heldout_rmse": the nested model's (deg),
+    "improvement_over_own_pct"; where ``bend`` has a per-frame course (a second excitation's w) and ``own`` a swing
+    course: "course_r2", "course_p" (:func:`course_explained` on the swing's courses w, w (z - mean z), w^2, the
+    baseline's z)} or None where a fold of ``own`` has no counterpart. Units: deg, t unitless."""
+    effs = list(own.fit.model.effects) + [e for e in bend.fit.model.effects if e.name != own.effect]
+    states = {e.name: st for e, st in zip(own.fit.model.effects, own.fit.states)}
+    states.update({e.name: st for e, st in zip(bend.fit.model.effects, bend.fit.states)})
+    model = h.base_model.with_effects(effs)
+    full, _ = solve_from_starts(model, h.Y, h.W, h.s, h.halves,
+                                start=(bend.fit.kappa.copy(), bend.fit.z.copy(), states), max_iter=FULL_ITER)
+    sse, cnt = heldout_errors(model, full, h.Y, h.W, h.s, h.blocks, h.halves, h.gap, cv_iter=CV_ITER)
+    mse = sse[h.used] / np.maximum(cnt[h.used], 1)
+    if len(mse) != len(own.fold_mse) or not (cnt[h.used] > 0).all():
+        return None
+    rmse = float(math.sqrt(sse[h.used].sum() / max(cnt[h.used].sum(), 1)))
+    out = {"t": paired_t(own.fold_mse, mse), "heldout_rmse": rmse,
+           "improvement_over_own_pct": 100.0 * (1.0 - rmse / own.heldout_rmse) if own.heldout_rmse > 0 else 0.0}
+    eff = next(e for e in own.fit.model.effects if e.name == own.effect)
+    course = next((np.asarray(v, float) for st in bend.fit.states for v in st.get("latents", {}).values()
+                   if np.ndim(v) == 1 and len(v) == h.Y.shape[1]), None)
+    if course is not None and hasattr(eff, "course"):
+        w, zc = eff.course(h.Y.shape[1]), h.base.z - np.mean(h.base.z)
+        if np.any(w):
+            out.update(course_explained(course, np.stack([w, w * zc, w * w]), seed=h.seed))
+    return out
+
+
+def course_explained(course: np.ndarray, C: np.ndarray, seed: int = 0, n_surrogates: int = 999) -> dict:
+    """How much of a bend candidate's per-frame ``course`` (T,) the own-family term's courses ``C`` (K, T) explain:
+    R^2 of its least-squares fit on them (with a constant), and the p-value against phase surrogates of the course
+    (its spectrum kept, so its autocorrelation is the null's: an independent course of the same colour),
+    p = (1 + #{surrogates >= observed}) / (1 + n). {"course_r2", "course_p"}; unitless."""
+    T = len(course)
+    A = np.column_stack([np.ones(T), (C - C.mean(axis=1, keepdims=True)).T])
+    Q = np.linalg.qr(A)[0][:, 1:]  # orthonormal columns of the centred courses
+    def r2(x):  # rows of x: courses
+        xc = x - x.mean(axis=-1, keepdims=True)
+        return np.sum((xc @ Q) ** 2, axis=-1) / np.maximum(np.sum(xc * xc, axis=-1), 1e-300)
+    X = np.fft.rfft(course - course.mean())
+    ph = np.random.default_rng(seed).uniform(0.0, 2 * np.pi, (n_surrogates, len(X)))
+    ph[:, 0] = 0.0
+    if T % 2 == 0:
+        ph[:, -1] = 0.0
+    null = r2(np.fft.irfft(X[None] * np.exp(1j * ph), n=T, axis=1))
+    obs = float(r2(course[None])[0])
+    return {"course_r2": obs, "course_p": float((1 + np.sum(null >= obs)) / (1 + n_surrogates))}
+
+
+def beside_asker(h: HeldoutSetting):
+    """The ``beside(bend, own)`` the decision calls where a bend candidate and an own-family one are both
+    supported (:func:`~rce_gtsam.diagnosis.verdict.weigh_beside_own`): :func:`nested_heldout` on the setting
+    ``h``."""
+    return lambda bend, own: nested_heldout(h, bend, own)

@@ -57,6 +57,39 @@ def out_of_plane_text(diag) -> str:
             + "; depth (a RealSense recording) would measure the swing.")
 
 
+def beside_own_text(diag: Diagnosis) -> str:
+    """The sentence on a bend candidate weighed beside a supported own-family one
+    (:func:`~rce_gtsam.diagnosis.verdict.weigh_beside_own`, the parsimony's ``"beside_own"``): why the verdict is
+    the one or the other, with the nested model's fold t. Empty where no such weighing ran."""
+    rec = (diag.settings.get("parsimony") or {}).get("beside_own")
+    if not rec:
+        return ""
+    bend, own = diag.candidate(rec["bend"]), rec["own"]
+    thr = rec.get("threshold_t", float("nan"))
+    if "t" not in rec:
+        return (f"{own} is supported too; the model with both {bend.effect} and {own} could not be scored on "
+                f"every fold, so {bend.effect}, supported on its own, stays the verdict.")
+    adds = rec["t"] > thr and rec["heldout_rmse"] < diag.candidate(own).heldout_rmse
+    nested = (f"fold t = {rec['t']:.2f} {'>' if rec['t'] > thr else '<='} {thr:.2f}; held-out RMSE "
+              f"{rec['heldout_rmse']:.3f} deg with both terms, {rec['improvement_over_own_pct']:+.1f}% against "
+              f"{own}'s alone")
+    level = diag.candidate(own).extra.get("alpha", float("nan"))
+    course = ("" if "course_p" not in rec else
+              f"the swing's courses explain {100 * rec['course_r2']:.0f}% of {bend.effect}'s time course (p = "
+              f"{rec['course_p']:.3g} against phase surrogates, level {level:g})")
+    if rec["kept"]:
+        why = (f"{bend.effect} still lowers the held-out error significantly ({nested})" if adds else
+               f"{bend.effect}'s time course is not the swing's ({course}; {nested})")
+        return (f"{own} is supported too (its own test on the segments' lengths): the branch also swings out of "
+                f"the image plane. Refitted beside the {own} term, {why}, so {bend.effect} is named; both are in "
+                f"these data.")
+    return (f"The bend angles also support {bend.effect} (held-out RMSE {bend.improvement_pct:.1f}% below the "
+            f"rank-1 model's), but refitted beside the {own} term it no longer lowers the held-out error "
+            f"significantly ({nested})" + (f", and {course}" if course else "") + ": an out-of-plane swing turns "
+            f"the projected bend angles, and what that leaves of rank 1 a {bend.effect} term can take, while the "
+            f"segments' lengths show the swing itself. {own} is named; {bend.effect} is not excluded.")
+
+
 def both_tests_text(c) -> str:
     """Why a candidate of an effect that needs both of its tests (a saturation) was not named though one passed."""
     from ..effects import CANDIDATES
@@ -269,7 +302,11 @@ def explain(diag: Diagnosis) -> str:
         lag = par["richer_form_of"]
         lines.append(f"{lag} and {c.effect} are two forms of one lag, and {c.effect} predicts what {lag} leaves in "
                      f"the residuals ({form_p_text(c, lag, thr)}): the richer form is named.")
-    others = [o.effect for o in diag.candidates if o.supported and o.effect != c.effect]
+    beside = beside_own_text(diag)
+    if beside:
+        lines.append(beside)
+    weighed = set((diag.settings.get("parsimony") or {}).get("beside_own", {}).values()) if beside else set()
+    others = [o.effect for o in diag.candidates if o.supported and o.effect != c.effect and o.effect not in weighed]
     if others:
         lines.append("Also supported (partly mimicking the same misfit, or further effects): " + ", ".join(others)
                      + "; refit with the verdict effect added and diagnose again to separate them.")

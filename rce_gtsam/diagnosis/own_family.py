@@ -7,9 +7,11 @@ alpha, so the other candidates' thresholds are what they were without it, and a 
 false-alarm rate is alpha + that level. Such a candidate is *significant* when its own test is and its held-out
 error on its own channel falls, *supported* when
 besides its fit is plausible (the held-out change is reported, not required), and it is the
-verdict only where no bend-residual candidate is supported
-(:func:`~rce_gtsam.diagnosis.verdict.choose_with_own_last`): it names what the bend candidates leave, and changes
-none of their decisions. This module runs the test (evidence); :func:`~rce_gtsam.diagnosis.decision.own_supported`
+verdict where no bend-residual candidate is supported, or where the bend verdict, refitted beside its term, no
+longer lowers the held-out error significantly and its time course is this term's
+(:func:`~rce_gtsam.diagnosis.verdict.choose_with_own_last`,
+:func:`~rce_gtsam.diagnosis.verdict.weigh_beside_own`): it changes none of the bend candidates' tests, only which
+of two supported findings is named. This module runs the test (evidence); :func:`~rce_gtsam.diagnosis.decision.own_supported`
 and the verdict's order are the decision's.
 """
 
@@ -28,4 +30,11 @@ def own_test_significant(eff, base, seed: int, extra: dict) -> bool:
     +82 %, on the simulator's swinging tracks a median +5 % (one of 19 named had -0.3 %)."""
     own = eff.own_family_test(base, seed=seed)
     extra.update(own or {})
-    return bool(own is not None and own["p"] <= own["alpha"] and own.get("heldout_gain_pct", 1.0) > 0.0)
+    # the one-node check (one_node.py) on its channel: without the node whose segments carry most of the course,
+    # the other segments must still show it, by the same test at the same level and with a held-out error that
+    # falls (NaN: it could not run, and holds)
+    own = own or {}
+    gain_wo = own.get("length_heldout_gain_without_node_pct", float("nan"))
+    p_wo = own.get("length_p_without_node", float("nan"))
+    holds = (not (gain_wo == gain_wo) or gain_wo > 0.0) and (not (p_wo == p_wo) or p_wo <= own.get("alpha", 1.0))
+    return bool(own and own["p"] <= own["alpha"] and own.get("heldout_gain_pct", 1.0) > 0.0 and holds)

@@ -157,10 +157,52 @@ def is_own_family(c) -> bool:
     return any(e.own_family for e in c.fit.model.effects if e.name == c.effect)
 
 
-def choose_with_own_last(results: list, t_crit: float, p_pair: float):
-    """:func:`~rce_gtsam.diagnosis.verdict.choose_verdict` among the bend-residual candidates; only where it names
-    none, among the own-family ones."""
+def weigh_beside_own(bend, own, nested: dict | None, t_crit: float) -> bool:
+    """Whether bend candidate ``bend`` keeps the verdict beside a supported own-family candidate ``own``
+    (``nested``: :func:`~rce_gtsam.diagnosis.evidence.nested_heldout`). ``own`` takes it only where both hold:
+
+    1. ``bend`` adds nothing beside ``own``'s term: the model with both does not predict the held-out bending
+       significantly better than ``own``'s alone (fold-paired t <= ``t_crit``, the bend candidates' threshold, or
+       no lower RMSE);
+    2. where ``bend`` fits a per-frame course (a second excitation's w), that course is the swing's: the swing's
+       courses explain it beyond phase surrogates at ``own``'s own level (``course_p`` <= ``own.extra["alpha"]``).
+
+    Why: a swing out of the image plane is read from the segments' lengths, but it also turns the projected bend
+    angles, and what that leaves of rank 1 a second excitation can take. Measured (bench_oop_beside.py): on the
+    user's path (23 swing renders through our tracker) second_mode came first on 3; on one its course was the
+    swing's (t 2.1, course p 0.009: out_of_plane named 20 -> 21 of 23), on the two others one node's tracking error
+    (mode shape -1, +2, -1 on one node's three bends; t 3.4 and 4.8, course p 0.10 and 0.76) kept it. Simulated
+    swings: 18 -> 19 of 20 (t 1.9, course p 0.001). A real second excitation beside a swing (3-D simulator, second
+    excitation at 2x and 4x its default, 20 seeds each): second_mode came first beside a supported out_of_plane on
+    1 and 9 and kept it on all 10 (course p 0.014-0.79); the fold t alone would have renamed 4 (t 1.7-2.6, the
+    swings' range), naming out_of_plane wherever supported all 10. Planar recordings did not reach the check
+    (out_of_plane supported on none of 20 simulated second excitations, 40 effect-free and 20 lag renders). The
+    margins are thin (course p 0.009 renamed, 0.014 kept). Where the nested fit cannot be scored (``nested``
+    None), ``bend`` keeps it."""
+    if nested is None:
+        return True
+    adds = nested["t"] > t_crit and nested["heldout_rmse"] < own.heldout_rmse
+    is_swing = "course_p" not in nested or nested["course_p"] <= own.extra.get("alpha", 0.01)
+    return bool(adds or not is_swing)
+
+
+def choose_with_own_last(results: list, t_crit: float, p_pair: float, beside=None):
+    """:func:`~rce_gtsam.diagnosis.verdict.choose_verdict` among the bend-residual candidates; where it names
+    none, among the own-family ones. Where it names one and an own-family candidate is supported too, ``beside``
+    (``beside(bend, own)`` -> :func:`~rce_gtsam.diagnosis.evidence.nested_heldout`'s record or None) weighs the
+    bend one against the model with the own-family term (:func:`weigh_beside_own`); the record goes into the
+    parsimony's ``"beside_own"`` ({"own", "bend", "t", "heldout_rmse", "improvement_over_own_pct", "course_r2",
+    "course_p" where the bend candidate has a course, "threshold_t", "kept"})."""
     verdict, parsimony = choose_verdict([c for c in results if not is_own_family(c)], t_crit, p_pair=p_pair)
+    own = sorted((c for c in results if is_own_family(c) and c.supported), key=lambda c: c.heldout_rmse)
     if verdict is None:
-        verdict, parsimony = choose_verdict([c for c in results if is_own_family(c)], t_crit)
-    return verdict, parsimony
+        return choose_verdict([c for c in results if is_own_family(c)], t_crit)
+    if not own or beside is None:
+        return verdict, parsimony
+    bend = next(c for c in results if c.effect == verdict)
+    nested = beside(bend, own[0])
+    kept = weigh_beside_own(bend, own[0], nested, t_crit)
+    record = {"own": own[0].effect, "bend": bend.effect, **(nested or {}), "threshold_t": t_crit, "kept": kept}
+    if kept:
+        return verdict, {**parsimony, "beside_own": record}
+    return own[0].effect, {**choose_verdict(own, t_crit)[1], "beside_own": record}
