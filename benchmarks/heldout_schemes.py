@@ -15,12 +15,13 @@ Measured here, per fold, on the same training refits (:func:`fold_refits`):
 * ``halves_gls``: same rows, z and w as one joint GLS posterior mean per frame (:func:`joint_posterior`: the
   rows' noise correlation C from the training residual's frame differences, N(0, var z) and N(0, 1) priors,
   the training residual variance as noise variance);
+* ``halves_signature``: the diagnosis' rank-1 held-out prediction plus the true signature on B (knows the
+  extra signal exactly): the ceiling of the diagnosis' held-out fold t on these rows and folds;
 * ``bcv_gls``: bi-cross-validation (Owen & Perry 2009) with the node rule: the rows are cut into runs of 3
   along the branch (:func:`rce_gtsam.model.row_sets.walk_order`); each run B is scored from the latents
   estimated on every row that shares no tracked node with B (about 11 of 18), so every row is scored and the
   estimate uses twice the rows, while no node's noise reaches both sides;
-* ``bcv_signature``: the rank-1 baseline's prediction plus the true signature on B (knows the extra signal
-  exactly): the held-out fold t's own ceiling.
+* ``bcv_signature``: the same ceiling on the bi-cross-validation rows.
 
 Each scheme's rank-1 baseline is scored on the same rows and frames (its z: the W-weighted ridge estimate of
 the diagnosis for ``halves``, the GLS posterior for ``bcv``) and the fold t is
@@ -36,7 +37,7 @@ from rce_gtsam.diagnosis.settings import CV_ITER
 from rce_gtsam.diagnosis.statistics import noise_correlation
 from rce_gtsam.model.row_sets import shared_node_matrix, walk_order
 
-SCHEMES = ("halves_code", "halves_gls", "bcv_gls", "bcv_signature")
+SCHEMES = ("halves_code", "halves_gls", "halves_signature", "bcv_gls", "bcv_signature")
 
 
 def bcv_sets(s: np.ndarray, edge_nodes=None, run: int = 3) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -94,7 +95,7 @@ def fold_refits(base_model, base, model, full, Y, W, s, blocks, gap: int):
 def scheme_fold_t(base_model, base, model, full, Y, W, s, blocks, gap: int, halves, edge_nodes=None,
                   signature: np.ndarray | None = None) -> dict:
     """{scheme: {"t": fold t against its own rank-1 baseline, "gain_pct": held-out RMSE reduction (%)}} for the
-    module's schemes (``bcv_signature`` only with the true ``signature``, E x T deg)."""
+    module's schemes (``*_signature`` only with the true ``signature``, E x T deg)."""
     E, T = Y.shape
     bcv = bcv_sets(s, edge_nodes)
     sse = {k: np.zeros((len(blocks), 4)) for k in SCHEMES}  # candidate sse, n, baseline sse, n
@@ -127,6 +128,8 @@ def scheme_fold_t(base_model, base, model, full, Y, W, s, blocks, gap: int, halv
             th = joint_posterior(np.stack([tr.kappa[A], mu[A]], 1), corr_c[np.ix_(A, A)], yA,
                                  np.array([var_c / zv_c, var_c]))
             _add(sse["halves_gls"], k, yB, tr.kappa[B, None] * th[0] + mu[B, None] * th[1], base_pred)
+            if signature is not None:
+                _add(sse["halves_signature"], k, yB, base_pred + signature[np.ix_(B, cols)], base_pred)
         for A, B in bcv:
             yA, yB = Y[np.ix_(A, cols)], Y[np.ix_(B, cols)]
             zb = joint_posterior(trb.kappa[A, None], corr_b[np.ix_(A, A)], yA, np.array([var_b / zv_b]))[0]
