@@ -22,7 +22,8 @@ second-mode fit on each, against the same thresholds: what each would give with 
 
 Usage: OMP_NUM_THREADS=1 python benchmarks/beam_ideal_oracle.py [--effect two_sources] [--mults 1,2,3,5]
        [--seeds 5] [--frames 450] [--cache /work/cache/beam4] [--null-cache /work/cache/beam6] [--null-seeds 40]
-       [--null-mult 3] [--no-heldout] [--record beam_ideal_oracle]
+       [--null-mult 3] [--no-heldout] [--own-sim-seeds 10 --own-sim-null 20 [--own-sim-mult 1]
+       [--own-sim-frames 900] [--own-sim-cache /work/cache/bd]] [--record beam_ideal_oracle]
 """
 
 from __future__ import annotations
@@ -42,22 +43,29 @@ def rate(flags) -> str:
     return f"{int(sum(flags))} of {len(flags)}"
 
 
-def effect_case(c: dict, effect: str, heldout: bool) -> dict:
-    """One effect case: the diagnosis, its oracle, the ideal oracle and (``heldout``) the held-out schemes."""
+def case_nodes(c: dict):
+    """The tracked nodes of each row (the diagnosis' own rule: given, else parsed from the edge labels)."""
+    from rce_gtsam.model.row_sets import edge_nodes_from_labels
+    nodes = c["inputs"].get("edge_nodes")
+    labels = c["inputs"].get("edge_labels")
+    return nodes if nodes is not None or labels is None else edge_nodes_from_labels(labels)
+
+
+def effect_case(c: dict, names: tuple[str, ...], heldout: bool) -> dict:
+    """One effect case whose verdict is right when it is one of ``names`` (the first is the oracle's candidate):
+    the diagnosis, its oracle, the ideal oracle and (``heldout``) the held-out schemes."""
     from heldout_schemes import scheme_fold_t
     from rce_gtsam.diagnosis.diagnose import diagnose
     from rce_gtsam.diagnosis.ideal_oracle import signature_test
     from rce_gtsam.diagnosis.oracle import oracle_test, true_signature
-    from rce_gtsam.sim.beam import DIAGNOSIS_NAME
-
     d = diagnose(**c["inputs"])
     st, base = d.settings, d.baseline
-    name = DIAGNOSIS_NAME[effect][0]
+    name = names[0]
     o = oracle_test(d, c["Y"], c["truth"], name)
     y = c["truth"] + np.nanmean(base.Y - c["truth"], axis=1, keepdims=True)
     sig = true_signature(y)
     ideal = signature_test(base.Y - base.predict(), sig, seed=st["seed"])
-    out = {"right": d.verdict in DIAGNOSIS_NAME[effect], "oracle": bool(o["supported"]), "oracle_t": o["t"],
+    out = {"right": d.verdict in names, "oracle": bool(o["supported"]), "oracle_t": o["t"],
            "ideal_p": ideal.p, "ideal_z": ideal.z, "level_p": st["score_threshold_p"],
            "t_split": st["evidence_threshold_t_split"], "t_support": st["support_threshold_t"],
            "effect_rms": float(np.sqrt(np.mean(sig ** 2))),
@@ -65,7 +73,7 @@ def effect_case(c: dict, effect: str, heldout: bool) -> dict:
     if heldout and name == "second_mode":
         from heldout_schemes import bcv_sets
         halves = [np.asarray(h, int) for h in st["edge_halves"]]
-        bcv = bcv_sets(base.root_distance, c["inputs"].get("edge_nodes"))
+        bcv = bcv_sets(base.root_distance, case_nodes(c))
         out["rows"] = {"E": len(base.Y), "halves": sorted(len(h) for h in halves),
                        "halves_unused": len(base.Y) - sum(len(h) for h in halves),
                        "bcv_estimate": float(np.median([len(A) for A, _ in bcv])),
@@ -75,7 +83,7 @@ def effect_case(c: dict, effect: str, heldout: bool) -> dict:
                                        base.root_distance, [tuple(b) for b in st["fold_blocks"]],
                                        int(st["buffer_frames"]),
                                        tuple(np.asarray(h, int) for h in st["edge_halves"]),
-                                       c["inputs"].get("edge_nodes"), sig)
+                                       case_nodes(c), sig)
     return out
 
 
@@ -97,7 +105,7 @@ def null_case(c: dict, sig: np.ndarray, heldout: bool, seed: int) -> dict:
                                        base.root_distance, [tuple(b) for b in st["fold_blocks"]],
                                        int(st["buffer_frames"]),
                                        tuple(np.asarray(h, int) for h in st["edge_halves"]),
-                                       c["inputs"].get("edge_nodes"))
+                                       case_nodes(c))
     return out
 
 
@@ -144,6 +152,59 @@ def curve_notes(per_mult: dict) -> list[str]:
     return notes
 
 
+def effect_row(label: str, cases: list[dict]) -> list:
+    """A table row of effect cases: counts of the diagnosis, oracle, ideal oracle; medians; the schemes' cells."""
+    from heldout_schemes import SCHEMES
+    row = [label, len(cases), rate([c["right"] for c in cases]), rate([c["oracle"] for c in cases]),
+           rate([c["ideal_p"] <= c["level_p"] for c in cases]),
+           round(float(np.median([c["ideal_z"] for c in cases])), 1),
+           round(float(np.median([c["effect_rms"] for c in cases])), 2),
+           round(float(np.median([c["noise_rms"] for c in cases])), 2)]
+    return row + [x for s in SCHEMES for x in scheme_cells(cases, s)]
+
+
+def null_row(label: str, null: list[dict]) -> list:
+    """A table row of effect-free cases: any verdict, the ideal oracle along a borrowed signature, the schemes."""
+    from heldout_schemes import SCHEMES
+    row = [label, len(null), rate([c["verdict"] is not None for c in null]), "-",
+           rate([c["ideal_p"] <= c["level_p"] for c in null]), "-", "-", "-"]
+    return row + [x for s in SCHEMES for x in scheme_cells(null, s)]
+
+
+def own_sim(a, heldout: bool, t0: float) -> tuple[list[dict], list[dict]]:
+    """``--own-sim-seeds``: the project's own simulator (benchmarks/bench_diagnose.py's cases, its cache), its
+    ``second_mode`` at ``--own-sim-mult`` and effect-free seeds with a signature borrowed from those cases."""
+    from bench_diagnose import cached_case
+    from rce_gtsam.diagnosis.oracle import true_signature
+
+    def inputs(Y, W, s, labels):
+        return {"inputs": {"Y": Y, "weights": W, "root_distance": s, "seed": 0, "edge_labels": labels}, "Y": Y}
+
+    eff, sigs = [], []
+    for sd in range(a.own_sim_seeds):
+        Y, W, s, _, y, _, labels = cached_case(a.own_sim_cache, "second_mode", sd, a.own_sim_frames, False,
+                                               a.own_sim_mult)
+        r = effect_case({**inputs(Y, W, s, labels), "truth": y}, ("second_mode",), heldout)
+        eff.append(r)
+        sigs.append(true_signature(y + np.nanmean(Y - y, axis=1, keepdims=True)))
+        print(f"  own second_mode x{a.own_sim_mult:g} seed {sd}: right {r['right']} oracle {r['oracle']} ideal p "
+              f"{r['ideal_p']:.4f}; " + " ".join(f"{k} t={v['t']:.2f} ({v['gain_pct']:+.1f}%)"
+                                                 for k, v in r.get("schemes", {}).items())
+              + f" [{time.perf_counter() - t0:.0f} s]", flush=True)
+    null = []
+    for sd in range(a.own_sim_null if sigs else 0):
+        Y, W, s, _, _, _, labels = cached_case(a.own_sim_cache, None, sd, a.own_sim_frames, False)
+        sig = sigs[sd % len(sigs)]
+        if sig.shape != Y.shape:
+            continue
+        r = null_case(inputs(Y, W, s, labels), sig, heldout, seed=sd)
+        null.append(r)
+        print(f"  own none seed {sd}: verdict {r['verdict']} ideal p {r['ideal_p']:.4f}; "
+              + " ".join(f"{k} t={v['t']:.2f}" for k, v in r.get("schemes", {}).items())
+              + f" [{time.perf_counter() - t0:.0f} s]", flush=True)
+    return eff, null
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--effect", default="two_sources")
@@ -155,9 +216,15 @@ def main() -> int:
     ap.add_argument("--null-seeds", type=int, default=40)
     ap.add_argument("--null-mult", type=float, default=3.0)
     ap.add_argument("--no-heldout", action="store_true", help="skip the held-out schemes (the slow part)")
+    ap.add_argument("--own-sim-seeds", type=int, default=0,
+                    help="also the project's own simulator: second_mode seeds (0: skip)")
+    ap.add_argument("--own-sim-null", type=int, default=0, help="own simulator effect-free seeds")
+    ap.add_argument("--own-sim-mult", type=float, default=1.0)
+    ap.add_argument("--own-sim-frames", type=int, default=900)
+    ap.add_argument("--own-sim-cache", default="/work/cache/bd")
     ap.add_argument("--record", default=None, metavar="NAME")
     a = ap.parse_args()
-    from rce_gtsam.sim.beam import BEAM_EFFECTS
+    from rce_gtsam.sim.beam import BEAM_EFFECTS, DIAGNOSIS_NAME
     if a.effect not in BEAM_EFFECTS:
         print(f"beam_ideal_oracle: --effect {a.effect}: unknown; choose from {', '.join(BEAM_EFFECTS)}",
               file=sys.stderr)
@@ -180,7 +247,7 @@ def main() -> int:
         cases = []
         for sd in range(a.seeds):
             c = cached_case(a.cache, a.effect, sd, a.frames, m, None)
-            r = effect_case(c, a.effect, heldout)
+            r = effect_case(c, DIAGNOSIS_NAME[a.effect], heldout)
             cases.append(r)
             if m == a.null_mult:
                 y = c["truth"] + np.nanmean(c["Y"] - c["truth"], axis=1, keepdims=True)
@@ -209,25 +276,17 @@ def main() -> int:
             sch = " ".join(f"{k} t={v['t']:.2f}" for k, v in r.get("schemes", {}).items())
             print(f"  none seed {sd}: verdict {r['verdict']} ideal p {r['ideal_p']:.4f}; {sch} "
                   f"[{time.perf_counter() - t0:.0f} s]", flush=True)
+    own_eff, own_null = own_sim(a, heldout, t0) if a.own_sim_seeds > 0 else ([], [])
     from heldout_schemes import SCHEMES as schemes
     cols = ["strength", "seeds", "diagnosis", "oracle", "ideal oracle", "ideal z (median)", "effect RMS (deg)",
             "noise RMS (deg)"] + [f"{s} {k}" for s in schemes for k in ("t>split", "t>support", "t median")]
-    rows = []
-    for m, cases in per_mult.items():
-        row = [f"x{m:g}", len(cases), rate([c["right"] for c in cases]), rate([c["oracle"] for c in cases]),
-               rate([c["ideal_p"] <= c["level_p"] for c in cases]),
-               round(float(np.median([c["ideal_z"] for c in cases])), 1),
-               round(float(np.median([c["effect_rms"] for c in cases])), 2),
-               round(float(np.median([c["noise_rms"] for c in cases])), 2)]
-        for s in schemes:
-            row += list(scheme_cells(cases, s))
-        rows.append(row)
+    rows = [effect_row(f"x{m:g}", cases) for m, cases in per_mult.items()]
     if null:
-        row = ["none", len(null), rate([c["verdict"] is not None for c in null]), "-",
-               rate([c["ideal_p"] <= c["level_p"] for c in null]), "-", "-", "-"]
-        for s in schemes:
-            row += list(scheme_cells(null, s))
-        rows.append(row)
+        rows.append(null_row("none", null))
+    if own_eff:
+        rows.append(effect_row(f"own simulator second_mode x{a.own_sim_mult:g} ({a.own_sim_frames} frames)", own_eff))
+    if own_null:
+        rows.append(null_row(f"own simulator none ({a.own_sim_frames} frames)", own_null))
     print("\n" + " | ".join(cols))
     for r in rows:
         print(" | ".join(str(x) for x in r))
@@ -244,7 +303,10 @@ def main() -> int:
                     command=(f"OMP_NUM_THREADS=1 python benchmarks/beam_ideal_oracle.py --effect {a.effect} --mults "
                              f"{a.mults} --seeds {a.seeds} --frames {a.frames} --cache {a.cache} --null-cache "
                              f"{a.null_cache} --null-seeds {a.null_seeds} --null-mult {a.null_mult:g}"
-                             + (" --no-heldout" if a.no_heldout else "") + f" --record {a.record}"),
+                             + (" --no-heldout" if a.no_heldout else "")
+                             + (f" --own-sim-seeds {a.own_sim_seeds} --own-sim-null {a.own_sim_null} --own-sim-mult "
+                                f"{a.own_sim_mult:g} --own-sim-frames {a.own_sim_frames} --own-sim-cache "
+                                f"{a.own_sim_cache}" if a.own_sim_seeds > 0 else "") + f" --record {a.record}"),
                     description=("Per strength (multiple of the beam default), the share of seeds on which the "
                                  "diagnosis names the effect, its oracle (the verdict's own tests, true form and "
                                  "shared parameters) passes, and the ideal oracle (GLS projection of the rank-1 "
@@ -259,7 +321,8 @@ def main() -> int:
                                  "over runs of 3 rows, latents from every row sharing no node with the run, "
                                  "bcv_signature = the same ceiling on those rows; counts of t above the split threshold (fold t alone names it) and above "
                                  "the support t (what a passing full-data test needs beside it). 'none': effect-"
-                                 "free beam cases, each tested along a signature borrowed from an effect case."),
+                                 "free beam cases, each tested along a signature borrowed from an effect case. 'own "
+                                 "simulator' rows: the same on the project's own simulator (bench_diagnose.py cases)."),
                     columns=cols, rows=rows, notes=notes)
     return 0
 
