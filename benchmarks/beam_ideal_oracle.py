@@ -234,6 +234,10 @@ def main() -> int:
     except ValueError:
         print(f"beam_ideal_oracle: --mults {a.mults!r}: not a comma-separated list of numbers", file=sys.stderr)
         return 2
+    if a.null_cache and a.null_seeds > 0 and a.null_mult not in mults:
+        print(f"beam_ideal_oracle: --null-mult {a.null_mult:g} is not among --mults {a.mults}: no signature to "
+              "borrow", file=sys.stderr)
+        return 2
     for opt, path in (("--cache", a.cache), ("--null-cache", a.null_cache)):
         if path and not Path(path).is_dir():
             print(f"beam_ideal_oracle: {opt} {path}: no such directory", file=sys.stderr)
@@ -259,10 +263,6 @@ def main() -> int:
         per_mult[m] = cases
     null = []
     if a.null_cache and a.null_seeds > 0:
-        if not sigs:
-            print(f"beam_ideal_oracle: --null-mult {a.null_mult:g} is not among --mults {a.mults}: no signature to "
-                  "borrow", file=sys.stderr)
-            return 2
         for sd in range(a.null_seeds):
             path = case_path(a.null_cache, None, sd, a.frames, 1.0, None)
             if not path.exists():

@@ -84,3 +84,13 @@ def test_joint_posterior_recovers_the_latents_without_noise_or_prior():
     corr = 0.5 * np.eye(6) + 0.5 * np.exp(-np.abs(np.subtract.outer(np.arange(6), np.arange(6))))
     got = heldout_schemes.joint_posterior(K, corr, y, np.zeros(2))
     assert np.allclose(got, theta, atol=1e-8)
+
+
+def test_the_benchmark_names_a_bad_option_before_any_work():
+    """A null strength with no effect case to borrow its signature from is refused before the (minutes of) cases."""
+    import subprocess
+    args, named = ["--mults", "1,2", "--null-mult", "3"], "--null-mult 3"
+    r = subprocess.run([sys.executable, str(REPO / "benchmarks" / "beam_ideal_oracle.py"), *args],
+                       capture_output=True, text=True, timeout=60, env={"PYTHONPATH": str(REPO), "PATH": ""})
+    assert r.returncode == 2 and named in r.stderr and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
