@@ -129,7 +129,8 @@ def curve_notes(per_mult: dict) -> list[str]:
     tests = {"diagnosis": lambda c: c["right"], "oracle": lambda c: c["oracle"],
              "ideal oracle": lambda c: c["ideal_p"] <= c["level_p"]}
     for s in SCHEMES:
-        tests[f"{s} (fold t > split t)"] = lambda c, s=s: s in c.get("schemes", {}) and c["schemes"][s]["t"] > c["t_split"]
+        tests[f"{s} (fold t > split t)"] = (lambda c, s=s: s in c.get("schemes", {})
+                                             and c["schemes"][s]["t"] > c["t_split"])
     notes = []
     for name, ok in tests.items():
         rates = [float(np.mean([ok(c) for c in per_mult[m]])) for m in mults]
@@ -315,12 +316,12 @@ def main() -> int:
                                  "its median z (null SDs). Held-out schemes (benchmarks/heldout_schemes.py): the "
                                  "second-mode fit's fold t against the rank-1 baseline scored alike: halves_code = "
                                  "the diagnosis' own prediction (node-disjoint halves, alternating z/w), halves_gls "
-                                 "= same rows with a joint GLS posterior of z and w, halves_signature = the "
-                                 "diagnosis' rank-1 prediction plus the true signature (its held-out test's ceiling), "
-                                 "bcv_gls = bi-cross-validation "
-                                 "over runs of 3 rows, latents from every row sharing no node with the run, "
-                                 "bcv_signature = the same ceiling on those rows; counts of t above the split threshold (fold t alone names it) and above "
-                                 "the support t (what a passing full-data test needs beside it). 'none': effect-"
+                                 "= same rows with a joint GLS posterior of z and w (against a GLS rank-1 "
+                                 "baseline), halves_signature = the diagnosis' rank-1 prediction plus the true "
+                                 "signature (its held-out test's ceiling), bcv_gls = bi-cross-validation over runs of "
+                                 "3 rows, latents from every row sharing no node with the run, bcv_signature = the "
+                                 "same ceiling on those rows; counts of t above the split threshold (fold t alone "
+                                 "names it) and above the support t (what a passing full-data test needs beside it). 'none': effect-"
                                  "free beam cases, each tested along a signature borrowed from an effect case. 'own "
                                  "simulator' rows: the same on the project's own simulator (bench_diagnose.py cases)."),
                     columns=cols, rows=rows, notes=notes)

@@ -121,7 +121,8 @@ def scheme_fold_t(base_model, base, model, full, Y, W, s, blocks, gap: int, halv
         for A, B in (tuple(halves), tuple(halves)[::-1]):
             yA, yB = Y[np.ix_(A, cols)], Y[np.ix_(B, cols)]
             Wa = W[np.ix_(A, cols)]
-            zb = (Wa * trb.kappa[A, None] * np.nan_to_num(yA)).sum(0) / ((Wa * trb.kappa[A, None] ** 2).sum(0) + lam_ols)
+            zb = ((Wa * trb.kappa[A, None] * np.nan_to_num(yA)).sum(0)
+                  / ((Wa * trb.kappa[A, None] ** 2).sum(0) + lam_ols))
             base_pred = trb.kappa[B, None] * zb[None]
             Yte = np.full_like(Y, np.nan)
             Yte[np.ix_(A, window)] = Y[np.ix_(A, window)]
