@@ -322,8 +322,8 @@ def main() -> int:
                                  "3 rows, latents from every row sharing no node with the run, bcv_signature = the "
                                  "same ceiling on those rows; counts of t above the split threshold (fold t alone "
                                  "names it) and above the support t (what a passing full-data test needs beside "
-                                 "it). 'none': effect-free beam cases, each tested along a signature borrowed from an effect case. 'own "
-                                 "simulator' rows: the same on the project's own simulator (bench_diagnose.py cases)."),
+                                 "it). 'none': effect-free beam cases, each tested along a signature borrowed from "
+                                 "an effect case. 'own simulator' rows: the same on the project's own simulator (bench_diagnose.py cases)."),
                     columns=cols, rows=rows, notes=notes)
     return 0
 
