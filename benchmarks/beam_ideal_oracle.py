@@ -323,7 +323,8 @@ def main() -> int:
                                  "same ceiling on those rows; counts of t above the split threshold (fold t alone "
                                  "names it) and above the support t (what a passing full-data test needs beside "
                                  "it). 'none': effect-free beam cases, each tested along a signature borrowed from "
-                                 "an effect case. 'own simulator' rows: the same on the project's own simulator (bench_diagnose.py cases)."),
+                                 "an effect case. 'own simulator' rows: the same on the project's own simulator "
+                                 "(bench_diagnose.py cases)."),
                     columns=cols, rows=rows, notes=notes)
     return 0
 
