@@ -307,7 +307,7 @@ def main() -> int:
         from record import save_record
         save_record(a.record, title=f"Beam {a.effect}: the diagnosis, its oracle, the ideal oracle and held-out "
                                     "schemes against strength",
-                    command=(f"OMP_NUM_THREADS=1 python benchmarks/beam_ideal_oracle.py --effect {a.effect} --mults "
+                    command=(f"python benchmarks/beam_ideal_oracle.py --effect {a.effect} --mults "
                              f"{a.mults} --seeds {a.seeds} --frames {a.frames} --cache {a.cache} --null-cache "
                              f"{a.null_cache} --null-seeds {a.null_seeds} --null-mult {a.null_mult:g}"
                              + (" --no-heldout" if a.no_heldout else "")
