@@ -128,7 +128,8 @@ def curve_notes(per_mult: dict) -> list[str]:
     mults = sorted(per_mult)
     tests = {"diagnosis": lambda c: c["right"], "oracle": lambda c: c["oracle"],
              "ideal oracle": lambda c: c["ideal_p"] <= c["level_p"]}
-    for s in SCHEMES:
+    ran = {s for cs in per_mult.values() for c in cs for s in c.get("schemes", {})}
+    for s in [s for s in SCHEMES if s in ran]:
         tests[f"{s} (fold t > split t)"] = (lambda c, s=s: s in c.get("schemes", {})
                                              and c["schemes"][s]["t"] > c["t_split"])
     notes = []
@@ -288,6 +289,8 @@ def main() -> int:
         rows.append(effect_row(f"own simulator second_mode x{a.own_sim_mult:g} ({a.own_sim_frames} frames)", own_eff))
     if own_null:
         rows.append(null_row(f"own simulator none ({a.own_sim_frames} frames)", own_null))
+    if not any("schemes" in c for cs in [*per_mult.values(), null, own_eff, own_null] for c in cs):
+        cols, rows = cols[:8], [r[:8] for r in rows]  # no held-out scheme ran (--no-heldout, or not a second mode)
     print("\n" + " | ".join(cols))
     for r in rows:
         print(" | ".join(str(x) for x in r))
@@ -314,23 +317,24 @@ def main() -> int:
                              + (f" --own-sim-seeds {a.own_sim_seeds} --own-sim-null {a.own_sim_null} --own-sim-mult "
                                 f"{a.own_sim_mult:g} --own-sim-frames {a.own_sim_frames} --own-sim-cache "
                                 f"{a.own_sim_cache}" if a.own_sim_seeds > 0 else "") + f" --record {a.record}"),
-                    description=("Per strength (multiple of the beam default), the share of seeds on which the "
-                                 "diagnosis names the effect, its oracle (the verdict's own tests, true form and "
-                                 "shared parameters) passes, and the ideal oracle (GLS projection of the rank-1 "
-                                 "residual on the known true signature, phase-surrogate null, "
-                                 "rce_gtsam.diagnosis.ideal_oracle) has p <= the verdict's full-data level 0.005; "
-                                 "its median z (null SDs). Held-out schemes (benchmarks/heldout_schemes.py): the "
-                                 "second-mode fit's fold t against the rank-1 baseline scored alike: halves_code = "
-                                 "the diagnosis' own prediction (node-disjoint halves, alternating z/w), halves_gls "
-                                 "= same rows with a joint GLS posterior of z and w (against a GLS rank-1 "
-                                 "baseline), halves_signature = the diagnosis' rank-1 prediction plus the true "
-                                 "signature (its held-out test's ceiling), bcv_gls = bi-cross-validation over runs of "
-                                 "3 rows, latents from every row sharing no node with the run, bcv_signature = the "
-                                 "same ceiling on those rows; counts of t above the split threshold (fold t alone "
-                                 "names it) and above the support t (what a passing full-data test needs beside "
-                                 "it). 'none': effect-free beam cases, each tested along a signature borrowed from "
-                                 "an effect case. 'own simulator' rows: the same on the project's own simulator "
-                                 "(bench_diagnose.py cases)."),
+                    description=(
+                        "Per strength (multiple of the beam default), the share of seeds on which the diagnosis names "
+                        "the effect, its oracle (the verdict's own tests, true form and shared parameters) passes, and "
+                        "the ideal oracle (GLS projection of the rank-1 residual on the known true signature, "
+                        "phase-surrogate null, rce_gtsam.diagnosis.ideal_oracle) has p <= the verdict's full-data "
+                        "level 0.005; its median z (null SDs). "
+                        + ("Held-out schemes (benchmarks/heldout_schemes.py): the second-mode fit's fold t against "
+                           "the rank-1 baseline scored alike: halves_code = the diagnosis' own prediction (node-"
+                           "disjoint halves, alternating z/w), halves_gls = same rows with a joint GLS posterior of z "
+                           "and w (against a GLS rank-1 baseline), halves_signature = the diagnosis' rank-1 "
+                           "prediction plus the true signature (its held-out test's ceiling), bcv_gls = "
+                           "bi-cross-validation over runs of 3 rows, latents from every row sharing no node with the "
+                           "run, bcv_signature = the same ceiling on those rows; counts of t above the split "
+                           "threshold (fold t alone names it) and above the support t (what a passing full-data test "
+                           "needs beside it). " if len(cols) > 8 else "")
+                        + "'none': effect-free beam cases, each tested along a signature borrowed from an effect "
+                        "case." + (" 'own simulator' rows: the same on the project's own simulator (bench_diagnose.py "
+                                   "cases)." if own_eff else "")),
                     columns=cols, rows=rows, notes=notes)
     return 0
 
