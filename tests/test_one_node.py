@@ -25,6 +25,16 @@ def test_the_carrying_node_is_the_one_whose_bends_hold_the_gain():
     assert rows_without(3, nodes).tolist() == [True, False, False, False, True]
 
 
+def test_the_window_where_the_nodes_bends_gain_most():
+    from rce_gtsam.diagnosis.one_node import gain_window
+    rb = np.ones((3, 100))
+    rc = rb.copy()
+    rc[1, 40:70] = 0.0
+    rows = np.array([False, True, False])
+    assert gain_window(rb, rc, rows, frames=np.arange(100) + 1000, width=30) == (1040, 1069)
+    assert gain_window(rb, rb, rows) == ()
+
+
 def test_the_rule_is_a_sign():
     assert holds(0.4, 0.2) and not holds(-0.1, 0.5) and not holds(1.5, -0.3)
     assert holds(float("nan"), float("nan"))  # the check could not run: nothing is withheld
@@ -64,6 +74,8 @@ def test_a_second_mode_that_rests_on_one_node_is_not_named():
     assert check["node"] == 11 and not check["holds"] and check["heldout_gain_pct"] <= 0
     assert d.settings["verdict_withheld"] == {"effect": "second_mode", "rule": "one_node"}
     assert "node 11" in d.explanation and "the tracker, not physics" in d.explanation
+    lo, hi = check["frames"]
+    assert hi - lo == 29 and f"frames {lo}-{hi}" in d.explanation
     assert d.candidate("second_mode").tests["one_node"].name == "one_node"
 
 

@@ -39,7 +39,7 @@ from .heldout import fold_blocks
 from .information import effective_ic, effective_sample  # noqa: F401 (re-exported)
 from .misfit import resolve_effects, residual_statistics, worst_edges_and_frames  # noqa: F401 (re-exported)
 from .noise_floor import NoiseFloor
-from .one_node import OneNodeCheck, carrying_node, one_node_text, rows_without
+from .one_node import OneNodeCheck, carrying_node, gain_window, one_node_text, rows_without
 from .own_family import own_test_significant
 from .result import CandidateResult, Diagnosis  # noqa: F401 (re-exported)
 from .settings import BLOCK_LENGTH, N_FOLDS, RESOLUTION
@@ -213,4 +213,5 @@ def _one_node_check(named, base, Y, W, s, labels, nodes, cands, config, n_folds,
                         rows=tuple(str(l) for l, k in zip(labels, keep) if not k),
                         fold_t=float(c.evidence), heldout_gain_pct=float(gain),
                         significant=bool(c.extra.get("significant", False)),
-                        courses=eff.heldout_time_basis(Y.shape[1]) is not None)
+                        courses=eff.heldout_time_basis(Y.shape[1]) is not None,
+                        frames=gain_window(base.residuals, named.fit.residuals, ~keep, W, frames))

@@ -58,7 +58,8 @@ class OneNodeCheck:
     the candidate's fold t and held-out RMSE gain (%) without them (NaN where the re-run could not score it);
     ``significant`` whether the re-run also found it significant (its own rule at the nominal level: it is the only
     candidate there); ``courses`` whether the effect fits each segment a slow course of its own (offset, creep: what
-    a node's drift makes), which must stay significant besides; ``holds`` the rule."""
+    a node's drift makes), which must stay significant besides; ``frames`` (first, last) video frames of the
+    :data:`WINDOW_FRAMES` window in which the node's bends gain most (where to look); ``holds`` the rule."""
 
     effect: str
     node: int
@@ -68,6 +69,7 @@ class OneNodeCheck:
     heldout_gain_pct: float
     significant: bool = False
     courses: bool = False
+    frames: tuple = ()
 
     @property
     def holds(self) -> bool:
@@ -80,6 +82,7 @@ class OneNodeCheck:
         return {"effect": self.effect, "node": int(self.node), "share": float(self.share), "rows": list(self.rows),
                 "fold_t": float(self.fold_t), "heldout_gain_pct": float(self.heldout_gain_pct),
                 "significant_without_node": bool(self.significant), "per_segment_courses": bool(self.courses),
+                "frames": [int(f) for f in self.frames],
                 "holds": bool(self.holds)}
 
 
@@ -117,6 +120,28 @@ def carrying_node(base_residuals: np.ndarray, cand_residuals: np.ndarray, edge_n
     return n, shares[n]
 
 
+#: the length (frames) of the window :func:`gain_window` reports
+WINDOW_FRAMES = 30
+
+
+def gain_window(base_residuals, cand_residuals, rows: np.ndarray, weights=None, frames=None,
+                width: int = WINDOW_FRAMES) -> tuple:
+    """(first, last) video frame of the ``width``-frame window in which bends ``rows`` (bool (E,)) gain most from
+    the candidate (weighted baseline residual^2 - candidate residual^2 summed over them); () where nothing gains."""
+    rb, rc = np.asarray(base_residuals, float)[rows], np.asarray(cand_residuals, float)[rows]
+    w = np.ones_like(rb) if weights is None else np.asarray(weights, float)[rows]
+    ok = np.isfinite(rb) & np.isfinite(rc) & np.isfinite(w)
+    g = np.where(ok, w * (rb * rb - rc * rc), 0.0).sum(axis=0)
+    T = g.size
+    if T == 0 or not np.any(g > 0):
+        return ()
+    width = max(1, min(int(width), T))
+    sums = np.convolve(g, np.ones(width), "valid")
+    lo = int(np.argmax(sums))
+    fr = np.arange(T) if frames is None else np.asarray(frames)
+    return int(fr[lo]), int(fr[lo + width - 1])
+
+
 def rows_without(node: int, edge_nodes) -> np.ndarray:
     """(E,) bool: the bends ``node`` does not enter."""
     return np.array([int(node) not in {int(n) for n in ns} for ns in edge_nodes], bool)
@@ -139,7 +164,8 @@ def one_node_text(check: OneNodeCheck | None, labels=()) -> str:
     else:
         without = (f"without them the model with {check.effect} predicts the held-out bends no better than the "
                    f"rank-1 model (held-out RMSE {-check.heldout_gain_pct:+.1f}%, fold t {check.fold_t:.1f})")
+    where = f" (most in frames {check.frames[0]}-{check.frames[1]})" if len(check.frames) == 2 else ""
     return (f" Not named: the tracker, not physics. {check.effect}'s gain rests on node {check.node}: its bends "
-            f"({rows}) carry {100 * check.share:.0f}% of it, and {without}. One node's tracking error that follows "
-            f"the motion looks like this; look at node {check.node}'s track (rce review) before reading it as "
-            f"physics.")
+            f"({rows}) carry {100 * check.share:.0f}% of it{where}, and {without}. One node's tracking error that "
+            f"follows the motion looks like this; look at node {check.node}'s track (rce review) there before "
+            f"reading it as physics.")
