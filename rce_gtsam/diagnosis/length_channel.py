@@ -215,7 +215,8 @@ def out_of_plane_test(channel: LengthChannel, z: np.ndarray, seed: int = 0,
     growth = _spearman(channel.root_distance[fin], np.abs(load[fin])) if fin.sum() >= 3 else 0.0
     seg = [channel.segments[i] for i in kept]
     gain = heldout_length_gain(channel, z, R, kept, halves)
-    node, share, gain_wo, p_wo = gain_without_carrying_node(channel, z, R, kept, load, seed)
+    node, share, gain_wo, p_wo = gain_without_carrying_node(channel, z, R, kept, load, seed,
+                                                            tested=list(halves[0]) + list(halves[1]))
     return LengthTest(heldout_gain_pct=gain, carrying_node=node, carrying_share=share,
                       heldout_gain_without_node_pct=gain_wo, p_without_node=p_wo, p=p, statistic=q, null_median=float(np.median(qs)),
                       rows_a=tuple(f"{a}->{b}" for a, b in (seg[i] for i in halves[0])),
@@ -280,17 +281,22 @@ def heldout_length_gain(channel: LengthChannel, z: np.ndarray, R: np.ndarray, ke
 
 
 def gain_without_carrying_node(channel: LengthChannel, z: np.ndarray, R: np.ndarray, kept: np.ndarray,
-                               loadings: np.ndarray, seed: int = 0) -> tuple[int | None, float, float, float]:
+                               loadings: np.ndarray, seed: int = 0,
+                               tested=None) -> tuple[int | None, float, float, float]:
     """The one-node check on the length channel (:mod:`rce_gtsam.diagnosis.one_node`): (the node whose segments
     carry the largest share of the swing course's squared loadings, that share, :func:`heldout_length_gain` of the
-    other segments in two new node-disjoint sets (%), and the shared-course test's p on those sets). A swing is in every segment; a node the tracker lost and
-    re-found off its place, or slid along the stem, changes only its two segments' lengths (measured: the one
+    other segments in two new node-disjoint sets (%), and the shared-course test's p on those sets). A swing is in
+    every segment; a node the tracker lost and re-found off its place, or slid along the stem, changes only its two segments' lengths (measured: the one
     effect-free user-path render named out_of_plane on seeds 120-139 had a held-out gain of +0.3 %, carried by a
-    node the tracker had lost on 48 % of the frames). (None, NaN, NaN) where nothing loads; the gain NaN where
-    fewer than 4 segments are left."""
+    node the tracker had lost on 48 % of the frames). ``tested``: positions in ``kept`` of the segments the test
+    reads (its two node-disjoint sets; None = all): the carrying node is sought among them, since a node whose
+    segments the split left out changes neither the test nor its gain. (None, NaN, NaN, NaN) where nothing loads;
+    the gain and p NaN where fewer than 4 segments are left."""
     nodes = [tuple(channel.nodes[int(i)]) for i in kept]
     load = np.asarray(loadings, float)[kept]
     l2 = np.where(np.isfinite(load), load * load, 0.0)
+    if tested is not None:
+        l2 = np.where(np.isin(np.arange(len(kept)), np.asarray(list(tested), int)), l2, 0.0)
     total = float(l2.sum())
     if total <= 0 or not nodes:
         return None, float("nan"), float("nan"), float("nan")
