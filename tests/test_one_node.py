@@ -22,6 +22,10 @@ def test_the_carrying_node_is_the_one_whose_bends_hold_the_gain():
     assert shares[2] == shares[3] == shares[4] == 1.0 and shares[0] == 0.0
     assert carrying_node(rb, rc, nodes) == (2, 1.0)  # ties: the lowest id
     assert carrying_node(rb, rb, nodes) is None  # no gain, no node
+    worse = rb.copy()
+    worse[0] = 2.0  # the candidate loses on bend 0 more than it gains on bend 2: the gaining bends still locate it
+    worse[2] = 0.0
+    assert carrying_node(rb, worse, nodes) == (2, 1.0)
     assert rows_without(3, nodes).tolist() == [True, False, False, False, True]
 
 

@@ -97,13 +97,18 @@ def node_shares(base_residuals: np.ndarray, cand_residuals: np.ndarray, edge_nod
     """{node: share of the candidate's in-sample gain in the bends that node enters} (shares of one total; a bend
     counts for each of its nodes, so they sum to more than 1). Gain per bend = sum over its observed frames of
     weight x (baseline residual^2 - candidate residual^2) (deg^2; ``weights`` (E, T) the fit's, as both fits
-    minimise the weighted sum; None = 1)."""
+    minimise the weighted sum; None = 1). Where the gains sum to 0 or less (a candidate fitted with priors, which the
+    held-out error supports, can gain less in-sample than the rank-1 fit: dynamics on one effect-free render), the
+    bends' positive gains are shared instead."""
     rb, rc = np.asarray(base_residuals, float), np.asarray(cand_residuals, float)
     w = np.ones_like(rb) if weights is None else np.asarray(weights, float)
     ok = np.isfinite(rb) & np.isfinite(rc) & np.isfinite(w)
     gain = np.where(ok, w * (rb * rb - rc * rc), 0.0).sum(axis=1)
     total = float(gain.sum())
     nodes = sorted({int(n) for ns in edge_nodes for n in ns})
+    if total <= 0:  # a fit with priors can gain less in-sample than the rank-1 fit and still predict held-out
+        gain = np.clip(gain, 0.0, None)  # data better: then the bends that do gain locate the node
+        total = float(gain.sum())
     if total <= 0:
         return {n: float("nan") for n in nodes}
     return {n: float(sum(gain[i] for i, ns in enumerate(edge_nodes) if n in ns) / total) for n in nodes}
