@@ -11,7 +11,8 @@ verdict where no bend-residual candidate is supported, or where the bend verdict
 longer lowers the held-out error significantly and its time course is this term's
 (:func:`~rce_gtsam.diagnosis.verdict.choose_with_own_last`,
 :func:`~rce_gtsam.diagnosis.verdict.weigh_beside_own`): it changes none of the bend candidates' tests, only which
-of two supported findings is named. This module runs the test (evidence); :func:`~rce_gtsam.diagnosis.decision.own_supported`
+of two supported findings is named. This module runs the test (evidence);
+:func:`~rce_gtsam.diagnosis.decision.own_supported`
 and the verdict's order are the decision's.
 """
 
