@@ -126,6 +126,7 @@ def real(a) -> None:
     from rce_gtsam.pipeline import analyze
 
     print("\n3. real plants (default preset; budget in deg^2, mean over scored segment-frames)")
+    rows = []
     for plant in ("plant_1", "plant_2"):
         d0 = Path(a.real) / plant
         if not (d0 / "tapir_tracks.csv").exists():
@@ -152,6 +153,37 @@ def real(a) -> None:
         if after is not None:
             print(f"    budget with out_of_plane's residuals: unexplained {after['unexplained']:.2f} +- "
                   f"{after['unexplained_se']:.2f} ({after['status']}); {time.perf_counter() - t:.0f} s")
+        without = (f"; without the segments of node {x.get('length_carrying_node')} (which carries "
+                   f"{100 * x.get('length_carrying_share', float('nan')):.0f} % of the length course): p "
+                   f"{x.get('length_p_without_node', float('nan')):.3g}, held-out length error "
+                   f"{-x.get('length_heldout_gain_without_node_pct', float('nan')):+.1f} %")
+        print("   " + without[2:])
+        nf = d.noise_floor.as_dict() if d.noise_floor is not None else {}
+        rows.append([f"{plant.replace('_', ' ')} (TAPIR tracks)", f"length test p {x.get('p')}",
+                     d.verdict if d.verdict is not None and d.verdict == OutOfPlane.name else "not named",
+                     f"held-out length error {-x.get('length_heldout_gain_pct', float('nan')):+.1f} %{without}"
+                     + (f"; unexplained {b['unexplained']:.2f} +/- {b['unexplained_se']:.2f} deg^2 before, "
+                        f"{after['unexplained']:.2f} with the term ({b['status']}); noise floor "
+                        f"{b['noise_floor']:.2f} of {b['total']:.2f} deg^2"
+                        + (f" (node error {nf['nodewise_sigma_px']:.2f} px)" if nf.get('nodewise_sigma_px') else "")
+                        if b and after is not None else "")])
+    if getattr(a, "record_real", False) and rows:
+        update_plant_rows(rows)
+
+
+def update_plant_rows(rows: list[list]) -> None:
+    """Replace the real plants' rows of the out_of_plane record (docs/validation/out_of_plane.json), the rest kept,
+    through record.save_record (schema check, atomic write)."""
+    import json
+    import os
+
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from record import RECORD_DIR, save_record
+    path = Path(os.environ.get("RCE_RECORD_DIR") or RECORD_DIR) / "out_of_plane.json"
+    rec = json.loads(path.read_text())
+    kept = [r for r in rec["rows"] if not str(r[0]).startswith("plant ")]
+    save_record("out_of_plane", title=rec["title"], command=rec["command"], columns=rec["columns"],
+                rows=kept + rows, description=rec["description"], notes=rec.get("notes"))
 
 
 def budget_after(d, c) -> dict:
@@ -172,6 +204,8 @@ def main(argv=None) -> None:
     p.add_argument("--scales", default="1,2")
     p.add_argument("--real", default=None, help="folder with plant_1/ and plant_2/ (tapir_tracks.csv, branch_graph.json)")
     p.add_argument("--skip", default="", help="comma list of parts to skip: calibration, diagnosis")
+    p.add_argument("--record-real", action="store_true", help="with --real: write the plants' rows into the "
+                                                              "out_of_plane record (the other rows kept)")
     p.add_argument("--conditions", default="", help="comma list of swing shares the diagnosis part runs (0 = planar; "
                                                     "default: 0.5, 1 and planar)")
     a = p.parse_args(argv)
