@@ -31,11 +31,12 @@ def own_test_significant(eff, base, seed: int, extra: dict) -> bool:
     +82 %, on the simulator's swinging tracks a median +5 % (one of 19 named had -0.3 %)."""
     own = eff.own_family_test(base, seed=seed)
     extra.update(own or {})
-    # the one-node check (one_node.py) on its channel: without the node whose segments carry most of the course,
-    # the other segments must still show it, by the same test at the same level and with a held-out error that
-    # falls (NaN: it could not run, and holds)
+    # the one-node check (one_node.py) on its channel: without the segments of the node that carries most of the
+    # course, its test must still hold at its level (NaN: it could not run, and holds). Its sign is the test's, not
+    # the held-out length gain's: a swing's length change grows toward the tip, so without the tip node's segments
+    # the gain left is small and noisy (3-D simulator: 7 of 20 swings <= 0 there, their test still at p 0.001),
+    # whereas one node's artifact loses the test itself (4 of 5 effect-free user-path renders)
     own = own or {}
-    gain_wo = own.get("length_heldout_gain_without_node_pct", float("nan"))
     p_wo = own.get("length_p_without_node", float("nan"))
-    holds = (not (gain_wo == gain_wo) or gain_wo > 0.0) and (not (p_wo == p_wo) or p_wo <= own.get("alpha", 1.0))
+    holds = not (p_wo == p_wo) or p_wo <= own.get("alpha", 1.0)
     return bool(own and own["p"] <= own["alpha"] and own.get("heldout_gain_pct", 1.0) > 0.0 and holds)
