@@ -33,7 +33,7 @@ centred at or below 0, so the sign rule withholds about half or more of such ver
 only where the effect itself lives in one node's bends, which 2-D tracks cannot tell from that node's tracking
 error. Measured (``benchmarks/bench_one_node.py``, record ``one_node``; ``benchmarks/bench_user_path.py``,
 records ``user_path``, ``user_path_lag``, ``user_path_out_of_plane``): effect-free false verdicts on the user's
-path 14 -> 2 of 120, no hidden lag lost (21 of 35 found before and after), swings named 53 -> 54 of 60; on the
+path 14 -> 2 of 120, no hidden lag lost (21 of 35 found before and after), swings named 53 -> 56 of 60; on the
 simulator, lags 11 -> 11 of 12, a second excitation 6 -> 6 of 8, an offset 5 -> 4 of 8.
 
 Units: degrees (residuals), t unitless, % (gain).
