@@ -27,6 +27,10 @@ def test_the_carrying_node_is_the_one_whose_bends_hold_the_gain():
     worse[2] = 0.0
     assert carrying_node(rb, worse, nodes) == (2, 1.0)
     assert rows_without(3, nodes).tolist() == [True, False, False, False, True]
+    labelled = [{"\x00root?", 0, 1}, {0, 1, 2}]  # a node id need not be a number (the root's placeholder)
+    rc2 = np.ones((2, 10))
+    rc2[0] = 0.0
+    assert carrying_node(np.ones((2, 10)), rc2, labelled) == (0, 1.0)  # tie with 1 and the label: numbers first
 
 
 def test_the_window_where_the_nodes_bends_gain_most():

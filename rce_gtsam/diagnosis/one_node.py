@@ -65,7 +65,7 @@ class OneNodeCheck:
     :data:`WINDOW_FRAMES` window in which the node's bends gain most (where to look); ``holds`` the rule."""
 
     effect: str
-    node: int
+    node: object
     share: float
     rows: tuple
     fold_t: float
@@ -82,7 +82,7 @@ class OneNodeCheck:
         return TestResult("one_node", float(self.fold_t), None, 0.0, ONE_NODE_NULL, ONE_NODE_CALIBRATION)
 
     def as_dict(self) -> dict:
-        return {"effect": self.effect, "node": int(self.node), "share": float(self.share), "rows": list(self.rows),
+        return {"effect": self.effect, "node": node_id(self.node), "share": float(self.share), "rows": list(self.rows),
                 "fold_t": float(self.fold_t), "heldout_gain_pct": float(self.heldout_gain_pct),
                 "significant_without_node": bool(self.significant), "per_segment_courses": bool(self.courses),
                 "frames": [int(f) for f in self.frames],
@@ -108,7 +108,7 @@ def node_shares(base_residuals: np.ndarray, cand_residuals: np.ndarray, edge_nod
     ok = np.isfinite(rb) & np.isfinite(rc) & np.isfinite(w)
     gain = np.where(ok, w * (rb * rb - rc * rc), 0.0).sum(axis=1)
     total = float(gain.sum())
-    nodes = sorted({int(n) for ns in edge_nodes for n in ns})
+    nodes = sorted({n for ns in edge_nodes for n in ns}, key=_order)
     if total <= 0:  # a fit with priors can gain less in-sample than the rank-1 fit and still predict held-out
         gain = np.clip(gain, 0.0, None)  # data better: then the bends that do gain locate the node
         total = float(gain.sum())
@@ -124,7 +124,8 @@ def carrying_node(base_residuals: np.ndarray, cand_residuals: np.ndarray, edge_n
               if np.isfinite(v)}
     if not shares:
         return None
-    n = max(shares, key=lambda k: (shares[k], -k))
+    order = sorted(shares, key=_order)
+    n = max(order, key=lambda k: (shares[k], -order.index(k)))  # ties: the first in node order
     return n, shares[n]
 
 
@@ -152,7 +153,17 @@ def gain_window(base_residuals, cand_residuals, rows: np.ndarray, weights=None, 
 
 def rows_without(node: int, edge_nodes) -> np.ndarray:
     """(E,) bool: the bends ``node`` does not enter."""
-    return np.array([int(node) not in {int(n) for n in ns} for ns in edge_nodes], bool)
+    return np.array([node not in set(ns) for ns in edge_nodes], bool)
+
+
+def _order(node):
+    """Sort key of node ids: numbers by value, before any other id (a label), those by text."""
+    return (0, float(node), "") if isinstance(node, (int, float, np.integer, np.floating)) else (1, 0.0, str(node))
+
+
+def node_id(node):
+    """A node id as JSON takes it: an int where it is one, else its text."""
+    return int(node) if isinstance(node, (int, np.integer)) else str(node)
 
 
 def one_node_text(check: OneNodeCheck | None, labels=()) -> str:
