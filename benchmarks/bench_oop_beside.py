@@ -201,7 +201,9 @@ def record_rows(rows: list[dict], table: list[list]) -> None:
     note = ("Nested check (bench_oop_beside.py): where a bend candidate is the verdict and out_of_plane is supported, "
             "the model with both terms is scored on the same folds; the bend candidate yields to out_of_plane only "
             "where its fold-paired t against out_of_plane's model is at most the bend candidates' threshold AND its "
-            "time course is the swing's (phase-surrogate p of the swing courses' R^2 <= 0.01) (verdict.weigh_beside_own).")
+            "time course is the swing's (phase-surrogate p of the swing courses' R^2 <= 0.01) (verdict.weigh_beside_own). "
+            "The user's-path rows of this check were measured before the one-node check (rce_gtsam.diagnosis.one_node) "
+            "existed; the user_path_out_of_plane record has the user's path with both.")
     save_record("out_of_plane", title=rec["title"],
                 command=rec["command"].split("; python benchmarks/bench_oop_beside.py")[0]
                 + "; python benchmarks/bench_oop_beside.py --rows R.jsonl --user-path DIR --cases GLOBS "
