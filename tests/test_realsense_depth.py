@@ -69,8 +69,9 @@ def test_writer_plays_back_with_pyrealsense2(recording):
             seen.append(n)
     finally:
         pipe.stop()
-    # rs.pipeline may drop a first or last frame of a short recording (RealSenseDepthSource reads all, below)
-    assert len(seen) >= T - 2 and seen == sorted(seen)
+    # rs.pipeline drops frames of a short recording when the machine is busy (9 of 12 seen once, in a CI run beside
+    # other work); every frame it does deliver must round-trip exactly. RealSenseDepthSource reads all (below).
+    assert len(seen) >= T // 2 and seen == sorted(seen)
 
 
 def test_depth_source_yields_depth_with_each_colour_frame(recording):
