@@ -42,8 +42,9 @@ def refusal(d, names: tuple[str, ...]) -> dict:
 
     The candidate looked at is the supported one of those findings if any, else the one with the lowest held-out
     RMSE. ``rule``: ``named`` (the verdict is right), ``other_verdict`` (supported, but the verdict picks another
-    candidate: lower held-out RMSE or simpler, :mod:`rce_gtsam.diagnosis.verdict`), ``outside_domain``,
-    ``drift_checks`` (significant by its fold t, refused as tracker drift), ``significance`` (fold t / score p short
+    candidate: lower held-out RMSE or simpler, :mod:`rce_gtsam.diagnosis.verdict`), ``outside_domain``, ``one_node``
+    (supported and leading, withheld by :mod:`rce_gtsam.diagnosis.one_node`), ``drift_checks`` (significant by its
+    fold t, refused as tracker drift), ``significance`` (fold t / score p short
     of their thresholds), ``fold_support`` (the score test fires, the fold t is below the support t a full-data test
     needs beside it, :func:`~rce_gtsam.diagnosis.decision.is_significant`), ``plausibility`` (its fit's reasons),
     ``heldout_rmse`` (no lower held-out error), ``aic`` (effective-sample AIC not lower and no significant score
@@ -69,6 +70,12 @@ def refusal(d, names: tuple[str, ...]) -> dict:
     if c.supported:
         if d.outside_domain:
             return {**out, "rule": "outside_domain", "text": f"{c.effect}: supported, outside {d.outside_domain}"}
+        held = (d.settings or {}).get("one_node") or {}
+        if held.get("effect") == c.effect and not held.get("holds", True):
+            return {**out, "rule": "one_node",
+                    "text": f"{c.effect}: supported, withheld: without node {held.get('node')}'s bends its held-out "
+                            f"gain is {held.get('heldout_gain_pct', float('nan')):.1f} % (fold t "
+                            f"{held.get('fold_t', float('nan')):.2f})"}
         return {**out, "rule": "other_verdict", "text": f"{c.effect}: supported, verdict {d.verdict} ({stat})"}
     if x.get("significant_by_fold_t") and not x.get("significant"):
         parts = [f"held-out null p {x.get('heldout_null_p', float('nan')):.3f} vs "
