@@ -202,16 +202,14 @@ def _one_node_check(named, base, Y, W, s, labels, nodes, cands, config, n_folds,
     if keep.sum() < 4 or keep.all():
         return None
     eff = next(e for e in cands if e.name == named.effect)
-    again = diagnose(Y[keep], None if W is None else W[keep], s[keep], effects=[eff], n_folds=n_folds, seed=seed,
+    again = diagnose(Y[keep], W[keep], s[keep], effects=[eff], n_folds=n_folds, seed=seed,
                      block_length=block_length, alpha=alpha, edge_labels=[l for l, k in zip(labels, keep) if k],
                      frames=frames, edge_nodes=[n for n, k in zip(nodes, keep) if k], config=config,
                      resolution=resolution, check_one_node=False)
     c = again.candidates[0]
-    gain = 100.0 * (1.0 - c.heldout_rmse / again.baseline_heldout_rmse) if again.baseline_heldout_rmse > 0 \
-        else float("nan")
     return OneNodeCheck(effect=named.effect, node=node, share=share,
                         rows=tuple(str(l) for l, k in zip(labels, keep) if not k),
-                        fold_t=float(c.evidence), heldout_gain_pct=float(gain),
+                        fold_t=float(c.evidence), heldout_gain_pct=float(c.improvement_pct),
                         significant=bool(c.extra.get("significant", False)),
                         courses=eff.heldout_time_basis(Y.shape[1]) is not None,
                         frames=gain_window(base.residuals, named.fit.residuals, ~keep, W, frames))

@@ -36,6 +36,7 @@ import numpy as np
 
 from ..model.compliance import draw_phases, residual_spectrum, surrogate_slice
 from ..model.row_sets import node_disjoint_split, shared_node_matrix
+from .one_node import heaviest, rows_without, shares_by_node
 
 #: phase surrogates of the null (p resolution 1/1000)
 N_SURROGATES = 999
@@ -299,23 +300,20 @@ def gain_without_carrying_node(channel: LengthChannel, z: np.ndarray, R: np.ndar
     l2 = np.where(np.isfinite(load), load * load, 0.0)
     if tested is not None:
         l2 = np.where(np.isin(np.arange(len(kept)), np.asarray(list(tested), int)), l2, 0.0)
-    total = float(l2.sum())
-    if total <= 0 or not nodes:
+    found = heaviest(shares_by_node(l2, nodes)) if nodes else None
+    if found is None:
         return None, float("nan"), float("nan"), float("nan")
-    order = sorted({n for ns in nodes for n in ns},
-                   key=lambda n: (0, int(n), "") if isinstance(n, (int, np.integer)) else (1, 0, str(n)))
-    shares = {n: float(sum(l2[j] for j, ns in enumerate(nodes) if n in ns) / total) for n in order}
-    node = max(order, key=lambda k: (shares[k], -order.index(k)))  # ties: the first in node order
-    keep = np.array([node not in ns for ns in nodes], bool)
+    node, share = found
+    keep = rows_without(node, nodes)
     if keep.sum() < 4:
-        return node, shares[node], float("nan"), float("nan")
+        return node, share, float("nan"), float("nan")
     kept2 = np.asarray(kept)[keep]
     nodes2 = [nodes[j] for j in np.flatnonzero(keep)]
     s2 = channel.root_distance[kept2]
     halves2 = node_disjoint_split(s2, shared_node_matrix(s2, nodes2), seed, edge_nodes=nodes2)
     if halves2 is None or len(halves2[0]) < 2 or len(halves2[1]) < 2:
-        return node, shares[node], float("nan"), float("nan")
-    return (node, shares[node], heldout_length_gain(channel, z, R[keep], kept2, halves2),
+        return node, share, float("nan"), float("nan")
+    return (node, share, heldout_length_gain(channel, z, R[keep], kept2, halves2),
             _shared_course_p(R[keep], halves2, seed)[0])
 
 

@@ -96,37 +96,51 @@ def holds(fold_t: float, gain_pct: float) -> bool:
     return bool(fold_t > 0.0 and gain_pct > 0.0)
 
 
-def node_shares(base_residuals: np.ndarray, cand_residuals: np.ndarray, edge_nodes, weights=None) -> dict:
-    """{node: share of the candidate's in-sample gain in the bends that node enters} (shares of one total; a bend
-    counts for each of its nodes, so they sum to more than 1). Gain per bend = sum over its observed frames of
-    weight x (baseline residual^2 - candidate residual^2) (deg^2; ``weights`` (E, T) the fit's, as both fits
-    minimise the weighted sum; None = 1). Where the gains sum to 0 or less (a candidate fitted with priors, which the
-    held-out error supports, can gain less in-sample than the rank-1 fit: dynamics on one effect-free render), the
-    bends' positive gains are shared instead."""
+def row_gains(base_residuals: np.ndarray, cand_residuals: np.ndarray, weights=None) -> np.ndarray:
+    """(E, T) the candidate's in-sample gain per bend and frame: weight x (baseline residual^2 - candidate
+    residual^2) (deg^2; ``weights`` (E, T) the fit's, as both fits minimise the weighted sum; None = 1), 0 where
+    either residual is missing."""
     rb, rc = np.asarray(base_residuals, float), np.asarray(cand_residuals, float)
     w = np.ones_like(rb) if weights is None else np.asarray(weights, float)
     ok = np.isfinite(rb) & np.isfinite(rc) & np.isfinite(w)
-    gain = np.where(ok, w * (rb * rb - rc * rc), 0.0).sum(axis=1)
-    total = float(gain.sum())
+    return np.where(ok, w * (rb * rb - rc * rc), 0.0)
+
+
+def shares_by_node(values: np.ndarray, edge_nodes) -> dict:
+    """{node: share of the rows' ``values`` (E,) in the rows that node enters}, nodes in :func:`_order` (shares of one
+    total; a row counts for each of its nodes, so they sum to more than 1); NaN for every node where the values sum
+    to 0 or less. The length channel shares its segments' squared loadings the same way."""
+    values = np.asarray(values, float)
     nodes = sorted({n for ns in edge_nodes for n in ns}, key=_order)
-    if total <= 0:  # a fit with priors can gain less in-sample than the rank-1 fit and still predict held-out
-        gain = np.clip(gain, 0.0, None)  # data better: then the bends that do gain locate the node
-        total = float(gain.sum())
+    total = float(values.sum())
     if total <= 0:
         return {n: float("nan") for n in nodes}
-    return {n: float(sum(gain[i] for i, ns in enumerate(edge_nodes) if n in ns) / total) for n in nodes}
+    return {n: float(sum(values[i] for i, ns in enumerate(edge_nodes) if n in ns) / total) for n in nodes}
+
+
+def heaviest(shares: dict) -> tuple | None:
+    """(node, share) with the largest finite share (ties: the first in node order), or None where there is none."""
+    finite = [n for n in sorted(shares, key=_order) if np.isfinite(shares[n])]
+    if not finite:
+        return None
+    n = max(finite, key=shares.__getitem__)  # max keeps the first of equal keys
+    return n, shares[n]
+
+
+def node_shares(base_residuals: np.ndarray, cand_residuals: np.ndarray, edge_nodes, weights=None) -> dict:
+    """:func:`shares_by_node` of each bend's in-sample gain (:func:`row_gains` summed over frames). Where the gains
+    sum to 0 or less (a candidate fitted with priors, which the held-out error supports, can gain less in-sample
+    than the rank-1 fit: dynamics on one effect-free render), the bends' positive gains are shared instead."""
+    gain = row_gains(base_residuals, cand_residuals, weights).sum(axis=1)
+    if gain.sum() <= 0:
+        gain = np.clip(gain, 0.0, None)  # then the bends that do gain locate the node
+    return shares_by_node(gain, edge_nodes)
 
 
 def carrying_node(base_residuals: np.ndarray, cand_residuals: np.ndarray, edge_nodes,
-                  weights=None) -> tuple[int, float] | None:
+                  weights=None) -> tuple | None:
     """(node, share) of :func:`node_shares`' largest share, or None where the candidate gains nothing in-sample."""
-    shares = {n: v for n, v in node_shares(base_residuals, cand_residuals, edge_nodes, weights).items()
-              if np.isfinite(v)}
-    if not shares:
-        return None
-    order = sorted(shares, key=_order)
-    n = max(order, key=lambda k: (shares[k], -order.index(k)))  # ties: the first in node order
-    return n, shares[n]
+    return heaviest(node_shares(base_residuals, cand_residuals, edge_nodes, weights))
 
 
 #: the length (frames) of the window :func:`gain_window` reports
@@ -136,11 +150,8 @@ WINDOW_FRAMES = 30
 def gain_window(base_residuals, cand_residuals, rows: np.ndarray, weights=None, frames=None,
                 width: int = WINDOW_FRAMES) -> tuple:
     """(first, last) video frame of the ``width``-frame window in which bends ``rows`` (bool (E,)) gain most from
-    the candidate (weighted baseline residual^2 - candidate residual^2 summed over them); () where nothing gains."""
-    rb, rc = np.asarray(base_residuals, float)[rows], np.asarray(cand_residuals, float)[rows]
-    w = np.ones_like(rb) if weights is None else np.asarray(weights, float)[rows]
-    ok = np.isfinite(rb) & np.isfinite(rc) & np.isfinite(w)
-    g = np.where(ok, w * (rb * rb - rc * rc), 0.0).sum(axis=0)
+    the candidate (:func:`row_gains` summed over them); () where nothing gains."""
+    g = row_gains(base_residuals, cand_residuals, weights)[np.asarray(rows, bool)].sum(axis=0)
     T = g.size
     if T == 0 or not np.any(g > 0):
         return ()
@@ -151,7 +162,7 @@ def gain_window(base_residuals, cand_residuals, rows: np.ndarray, weights=None, 
     return int(fr[lo]), int(fr[lo + width - 1])
 
 
-def rows_without(node: int, edge_nodes) -> np.ndarray:
+def rows_without(node, edge_nodes) -> np.ndarray:
     """(E,) bool: the bends ``node`` does not enter."""
     return np.array([node not in set(ns) for ns in edge_nodes], bool)
 
