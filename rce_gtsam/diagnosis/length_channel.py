@@ -292,8 +292,9 @@ def gain_without_carrying_node(channel: LengthChannel, z: np.ndarray, R: np.ndar
     segments' lengths. Measured on 120 effect-free user-path renders (seeds 100-159): 5 passed the length test
     with a positive held-out gain, and without their carrying node's segments the test failed on 4 of them
     (p 0.026-0.63); on 60 rendered swings it failed on 1 (record ``user_path_out_of_plane``). ``tested``:
-    positions in ``kept`` of the segments the test reads (its two node-disjoint sets; None = all): the carrying node is sought among them, since a node whose
-    segments the split left out changes neither the test nor its gain. (None, NaN, NaN, NaN) where nothing loads;
+    positions in ``kept`` of the segments the test reads (its two node-disjoint sets; None = all): the carrying
+    node is sought among them, since a node whose segments the split left out changes neither the test nor its
+    gain. (None, NaN, NaN, NaN) where nothing loads;
     the gain and p NaN where fewer than 4 segments are left."""
     nodes = [tuple(channel.nodes[int(i)]) for i in kept]
     load = np.asarray(loadings, float)[kept]
