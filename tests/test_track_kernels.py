@@ -14,6 +14,8 @@ import pytest
 
 from rce_gtsam.track import LKTracker, match_kernels as mk
 
+from track_fixtures import rendered_simulation
+
 
 @pytest.fixture
 def rng():
@@ -109,14 +111,10 @@ def test_tracker_accuracy_on_a_rendered_clip(tmp_path):
     of visible points 0.0505 px, 90th percentile 0.173 px, 93.25 % of point-frames visible -- the 7f3b223 tracker
     (before the compiled kernels) on this clip: median 0.0506 px, 93.25 %. A kernel off by a pixel or a wrong
     weighting moves the median to tenths of a pixel."""
-    simulate = pytest.importorskip("rce_gtsam.sim.simulate")
-    render = pytest.importorskip("rce_gtsam.sim.render")
+    from rce_gtsam.sim.simulate import SimulationConfig
     from rce_gtsam.track import open_video
 
-    sim = simulate.simulate(simulate.SimulationConfig(n_nodes=20, n_frames=60, seed=0))
-    video = render.render_video(sim, tmp_path / "v.mp4")
-    truth = np.zeros_like(sim.true_xy)
-    truth[list(sim.tracks.node_ids)] = sim.true_xy
+    sim, video, truth = rendered_simulation(tmp_path, SimulationConfig(n_nodes=20, n_frames=60, seed=0))
     with open_video(video) as src:
         res = LKTracker().track(src, truth[:, 0], sim.graph)
     err = np.hypot(*(res.xy - truth).transpose(2, 0, 1))[res.visible]

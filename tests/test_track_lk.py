@@ -11,7 +11,7 @@ from rce_gtsam.errors import InputError
 from rce_gtsam.graph import BranchGraph
 from rce_gtsam.track import ArraySource, LKConfig, LKTracker
 
-from track_fixtures import branch_video
+from track_fixtures import branch_video, rendered_simulation, truth_by_node_id
 
 
 @pytest.fixture(scope="module")
@@ -103,15 +103,10 @@ def test_bad_inputs(scene):
 
 def test_default_tracker_on_simulator_render(tmp_path):
     """The simulator's rendered video (thin textured stem, fluttering leaves, H.264): default config."""
-    simulate = pytest.importorskip("rce_gtsam.sim.simulate")
-    render = pytest.importorskip("rce_gtsam.sim.render")
+    from rce_gtsam.sim.simulate import SimulationConfig
     from rce_gtsam.track import open_video
 
-    sim = simulate.simulate(simulate.SimulationConfig(n_nodes=12, n_frames=150, seed=1))
-    video = render.render_video(sim, tmp_path / "v.mp4")
-    ids = list(sim.tracks.node_ids)
-    truth = np.zeros_like(sim.true_xy)
-    truth[ids] = sim.true_xy
+    sim, video, truth = rendered_simulation(tmp_path, SimulationConfig(n_nodes=12, n_frames=150, seed=1))
     with open_video(video) as src:
         res = LKTracker().track(src, truth[:, 0], sim.graph)
     err = np.hypot(*(res.xy - truth).transpose(2, 0, 1))
@@ -200,19 +195,13 @@ def test_lost_node_is_not_reacquired_while_its_parent_is_lost():
 def _track_simulator_render(tmp_path, config):
     """Render ``simulate(config)`` to H.264 and track it with the default tracker from the true first-frame
     positions: (simulation, video path, TrackResult, (N, F) error in px against the true positions)."""
-    simulate = pytest.importorskip("rce_gtsam.sim.simulate")
-    render = pytest.importorskip("rce_gtsam.sim.render")
-
-    sim = simulate.simulate(config)
-    video = render.render_video(sim, tmp_path / "v.mp4")
-    return (sim, video, *_track_video(sim, video))
+    sim, video, truth = rendered_simulation(tmp_path, config)
+    return (sim, video, *_track_video(sim, video, truth))
 
 
-def _track_video(sim, video):
+def _track_video(sim, video, truth):
     from rce_gtsam.track import open_video
 
-    truth = np.zeros_like(sim.true_xy)
-    truth[list(sim.tracks.node_ids)] = sim.true_xy
     with open_video(video) as src:
         res = LKTracker().track(src, truth[:, 0], sim.graph)
     return res, np.hypot(*(res.xy - truth).transpose(2, 0, 1))
@@ -239,7 +228,7 @@ def test_tip_is_not_visible_beside_the_stem_on_simulator_seed0(tmp_path, monkeyp
     from rce_gtsam.track import lk_frame0
 
     monkeypatch.setattr(lk_frame0, "_TIP_MIN_BAND_PX", math.inf)  # the tip matched with its full patch
-    res, err = _track_video(sim, video)
+    res, err = _track_video(sim, video, truth_by_node_id(sim))
     assert err[res.visible].max() < 3.0
     assert res.visible[11].mean() > 0.4
     assert res.info["rejected_refine"] > 0
@@ -274,8 +263,7 @@ def test_refinement_thread_gives_bit_identical_tracks(tmp_path):
     sim = simulate.simulate(simulate.SimulationConfig(n_nodes=20, n_frames=30, seed=3))
     with open_video(render.render_video(sim, tmp_path / "v.mp4")) as src:
         frames = np.stack([fr.image for fr in src])
-    q0 = np.zeros_like(sim.true_xy[:, 0])
-    q0[list(sim.tracks.node_ids)] = sim.true_xy[:, 0]
+    q0 = truth_by_node_id(sim)[:, 0]
     runs = [LKTracker(LKConfig(threads=t)).track(ArraySource(frames), q0, sim.graph) for t in (1, 2, 2)]
     assert runs[0].info["anchored"] > 0
     for r in runs[1:]:

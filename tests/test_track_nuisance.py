@@ -16,12 +16,13 @@ from rce_gtsam.sim.render import iter_frames
 from rce_gtsam.sim.simulate import SimulationConfig, simulate
 from rce_gtsam.track import ArraySource, LKTracker
 
+from track_fixtures import truth_by_node_id
+
 
 def _track(cfg: RenderConfig, seed: int = 0):
     sim = simulate(SimulationConfig(n_frames=150, n_nodes=12, seed=seed))
     frames = [cv2.cvtColor(f, cv2.COLOR_BGR2RGB) for f in iter_frames(sim, config=cfg)]
-    truth = np.zeros_like(sim.true_xy)
-    truth[list(sim.tracks.node_ids)] = image_xy(sim, cfg)
+    truth = truth_by_node_id(sim, image_xy(sim, cfg))
     res = LKTracker().track(ArraySource(frames), truth[:, 0], sim.graph)
     return sim, res, np.hypot(*(res.xy - truth).transpose(2, 0, 1))
 

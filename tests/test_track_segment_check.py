@@ -8,6 +8,8 @@ import pytest
 
 from rce_gtsam.track import LKConfig, LKTracker
 
+from track_fixtures import rendered_simulation
+
 
 def _checker(parent):
     t = LKTracker()
@@ -65,14 +67,10 @@ def test_segment_check_on_a_simulator_render(tmp_path):
     """Simulator seed 0, 150 frames, 12 nodes (clean H.264): the check changes no position and no visibility, only
     widens sigma, and where it does the error is larger than elsewhere; the median sigma of a clean render stays
     where it was (~0.06 px: the sigma is the smoother's weight)."""
-    simulate = pytest.importorskip("rce_gtsam.sim.simulate")
-    render = pytest.importorskip("rce_gtsam.sim.render")
+    from rce_gtsam.sim.simulate import SimulationConfig
     from rce_gtsam.track import open_video
 
-    sim = simulate.simulate(simulate.SimulationConfig(n_nodes=12, n_frames=150, seed=0))
-    video = render.render_video(sim, tmp_path / "v.mp4")
-    truth = np.zeros_like(sim.true_xy)
-    truth[list(sim.tracks.node_ids)] = sim.true_xy
+    sim, video, truth = rendered_simulation(tmp_path, SimulationConfig(n_nodes=12, n_frames=150, seed=0))
     runs = {}
     for on in (False, True):
         with open_video(video) as src:

@@ -1,4 +1,5 @@
-"""Test fixtures for the tracking code: synthetic videos, a fake TAPIR ONNX pair, RealSense recordings.
+"""Test fixtures for the tracking code: synthetic videos, a fake TAPIR ONNX pair, RealSense recordings, a simulation
+rendered to H.264 with its true positions by node id.
 
 Imported by tests/test_track_*.py (not a conftest: the lead owns tests/conftest.py).
 """
@@ -12,6 +13,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import pytest
 
 # ---------------------------------------------------------------------------------------------
 # Moving Gaussian blob (for the fake TAPIR model)
@@ -300,3 +302,26 @@ def record_realsense(path: Path, frames, fps: int = 30) -> Path:
     rec.pause()
     del rec
     return Path(path)
+
+
+# ---------------------------------------------------------------------------------------------
+# A simulation rendered to H.264, with its true positions by node id
+
+
+def truth_by_node_id(sim, xy=None) -> np.ndarray:
+    """(N, F, 2) px: ``xy`` (default the simulation's true positions, rows in ``sim.tracks.node_ids`` order) placed at
+    each node's id, which is the row a tracker started from annotations writes it to."""
+    xy = sim.true_xy if xy is None else xy
+    truth = np.zeros_like(xy)
+    truth[list(sim.tracks.node_ids)] = xy
+    return truth
+
+
+def rendered_simulation(tmp_path, config):
+    """(simulation, video path, true positions by node id) of ``simulate(config)`` rendered to ``tmp_path/v.mp4``;
+    skipped where the simulator or its renderer cannot be imported."""
+    simulate = pytest.importorskip("rce_gtsam.sim.simulate")
+    render = pytest.importorskip("rce_gtsam.sim.render")
+    sim = simulate.simulate(config)
+    video = render.render_video(sim, tmp_path / "v.mp4")
+    return sim, video, truth_by_node_id(sim)
