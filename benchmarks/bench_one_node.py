@@ -40,10 +40,9 @@ def per_segment_courses(effect: str) -> bool:
 def holds(check: dict) -> bool:
     """The current rule on a recorded check (a check recorded before the per-segment-course field existed takes
     it from the effect)."""
-    from rce_gtsam.diagnosis.one_node import holds as sign
-    ok = sign(check["fold_t"], check["heldout_gain_pct"])
+    from rce_gtsam.diagnosis.one_node import OneNodeCheck
     courses = check.get("per_segment_courses", per_segment_courses(check["effect"]))
-    return bool(ok and (check.get("significant_without_node", False) or not courses))
+    return OneNodeCheck.from_dict({**check, "per_segment_courses": courses}).holds
 
 
 def user_path_rows(cache: Path) -> list[dict]:

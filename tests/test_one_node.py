@@ -57,6 +57,7 @@ def test_a_slow_course_per_segment_must_stay_significant_without_the_node():
     assert OneNodeCheck("offset", 5, 0.4, ("4->5",), 2.9, 4.0, significant=True, courses=True).holds
     assert "no longer significant" in one_node_text(offset) and "drift" in one_node_text(offset)
     assert offset.as_dict()["per_segment_courses"] and offset.as_test().name == "one_node"
+    assert OneNodeCheck.from_dict(offset.as_dict()) == offset
 
 
 def _tracker_second_mode(seed=2, E=16):

@@ -81,6 +81,13 @@ class OneNodeCheck:
     def as_test(self) -> TestResult:
         return TestResult("one_node", float(self.fold_t), None, 0.0, ONE_NODE_NULL, ONE_NODE_CALIBRATION)
 
+    @classmethod
+    def from_dict(cls, d: dict) -> "OneNodeCheck":
+        """The check back from :meth:`as_dict` (``diagnosis.json``'s ``settings["one_node"]``)."""
+        return cls(effect=d["effect"], node=d["node"], share=d["share"], rows=tuple(d["rows"]), fold_t=d["fold_t"],
+                   heldout_gain_pct=d["heldout_gain_pct"], significant=d.get("significant_without_node", False),
+                   courses=d.get("per_segment_courses", False), frames=tuple(d.get("frames", ())))
+
     def as_dict(self) -> dict:
         return {"effect": self.effect, "node": node_id(self.node), "share": float(self.share), "rows": list(self.rows),
                 "fold_t": float(self.fold_t), "heldout_gain_pct": float(self.heldout_gain_pct),
