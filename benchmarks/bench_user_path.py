@@ -94,7 +94,8 @@ def summarise(rows: list[dict]) -> str:
         rs = [r for r in rows if r["effect"] == eff and r["render"] == ren and "error" not in r]
         named = [r["verdict"] for r in rs if r["verdict"]]
         right = sum(1 for r in rs if r["verdict"] == eff)
-        withheld = Counter(w for r in rs for w in (r.get("withheld") or []))
+        # settings["verdict_withheld"]: {"effect", "rule"} where a verdict was withheld (one_node.py)
+        withheld = Counter(r["withheld"]["effect"] for r in rs if isinstance(r.get("withheld"), dict))
         wall = np.nanmedian([r["wall_s"] for r in rs]) if rs else float("nan")
         lines.append(f"{eff:<10} {ren:<8} {len(rs):>3} {len(named):>6} {right if eff != 'none' else '-':>6}  "
                      f"{dict(Counter(named))} ({dict(withheld)})  {wall:.0f}")
