@@ -191,13 +191,11 @@ def update_floor_columns(name: str, rows: list, a) -> None:
     verdict columns stay: the diagnosis reads no noise floor here), and say so in its notes; written back through
     ``record.save_record`` (its schema check, directory and atomic write), keeping the record's date."""
     import datetime
-    import json
-    import os
 
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from record import RECORD_DIR, save_record
-    path = Path(os.environ.get("RCE_RECORD_DIR") or RECORD_DIR) / f"{name}.json"
-    rec = json.loads(path.read_text())
+    from record import load_record, record_dir, save_record
+    path = record_dir() / f"{name}.json"
+    rec = load_record(name)
     cols = rec["columns"]
     i_med, i_rng, i_25 = (cols.index(c) for c in ("noise floor / true (median)", "range", "within 25 %"))
     done = []

@@ -175,8 +175,8 @@ def record_rows(rows: list[dict], table: list[list]) -> None:
     """Put the measurements into docs/validation/out_of_plane.json: the rows "diagnosis names out_of_plane" of
     :data:`NAMED_ROWS` get the count now (and before the nested check), and one row per group ("verdict before ->
     after the nested check") replaces the rows of that name."""
-    from record import RECORD_DIR, save_record
-    rec = json.loads((Path(RECORD_DIR) / "out_of_plane.json").read_text())
+    from record import load_record, save_record
+    rec = load_record("out_of_plane")
     out = []
     for r in rec["rows"]:
         m = next((x for x in NAMED_ROWS if r[0] == "diagnosis names out_of_plane" and r[1] == x[0]), None)

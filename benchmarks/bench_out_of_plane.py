@@ -174,13 +174,9 @@ def real(a) -> None:
 def update_plant_rows(rows: list[list]) -> None:
     """Replace the real plants' rows of the out_of_plane record (docs/validation/out_of_plane.json), the rest kept,
     through record.save_record (schema check, atomic write)."""
-    import json
-    import os
-
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from record import RECORD_DIR, save_record
-    path = Path(os.environ.get("RCE_RECORD_DIR") or RECORD_DIR) / "out_of_plane.json"
-    rec = json.loads(path.read_text())
+    from record import load_record, save_record
+    rec = load_record("out_of_plane")
     kept = [r for r in rec["rows"] if not str(r[0]).startswith("plant ")]
     save_record("out_of_plane", title=rec["title"], command=rec["command"], columns=rec["columns"],
                 rows=kept + rows, description=rec["description"], notes=rec.get("notes"))

@@ -87,13 +87,27 @@ def save_record(name: str, *, title: str, command: str, columns: list[str], rows
               "description": description, "columns": list(columns), "rows": [list(r) for r in rows],
               "notes": list(notes or [])}
     validate_record(record, name)
-    out_dir = Path(directory or os.environ.get("RCE_RECORD_DIR") or RECORD_DIR)
+    out_dir = Path(directory) if directory else record_dir()
     out_dir.mkdir(parents=True, exist_ok=True)
     path = out_dir / f"{name}.json"
     tmp = path.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(record, indent=1, ensure_ascii=False) + "\n")
     os.replace(tmp, path)
     return path
+
+
+def record_dir() -> Path:
+    """The folder :func:`save_record` writes to by default: ``$RCE_RECORD_DIR``, else :data:`RECORD_DIR`."""
+    return Path(os.environ.get("RCE_RECORD_DIR") or RECORD_DIR)
+
+
+def load_record(name: str) -> dict:
+    """Record ``name`` as saved (in :func:`record_dir`), validated: for a benchmark that re-measures some of its rows
+    and writes it back through :func:`save_record`."""
+    path = record_dir() / f"{name}.json"
+    record = json.loads(path.read_text())
+    validate_record(record, str(path))
+    return record
 
 
 def load_records(directory: str | Path = RECORD_DIR) -> list[tuple[str, dict]]:
