@@ -197,20 +197,24 @@ def test_oracle_is_a_ceiling_that_does_not_fire_without_an_effect():
     assert o["knows_z"]["improvement_pct"] > 0  # knowing z beats estimating it, effect or not
 
 
-def test_the_oracle_obeys_the_verdicts_intersection_rule():
+def test_the_oracle_obeys_the_verdicts_intersection_rule(monkeypatch):
     """The oracle is the verdict's own test with the true parameters, so its full-data score test names nothing
-    without the fold t's support either (the rule of :func:`~rce_gtsam.diagnosis.score_test.is_significant`).
-    Without that the beam's modal oracle counted 4/5 at x2 on score p alone, fold t -2.7 to 3.1."""
-    from rce_gtsam.diagnosis.oracle import oracle_test
+    without the fold t's support either (the rule of :func:`~rce_gtsam.diagnosis.decision.is_significant`).
+    Without that the beam's modal oracle counted 4/5 at x2 on score p alone, fold t -2.7 to 3.1. Beside a score
+    test calibrated on the tracker-artifact test bed (the delay's: decision.ARTIFACT_CALIBRATED) the support is a
+    fold t > 0, whatever the settings' nominal one."""
+    from rce_gtsam.diagnosis import oracle
     Y, s, _, _, y = synth("delay", seed=0, E=16)
     d = diagnose(Y, root_distance=s, effects=FAST, edge_nodes=[{i} for i in range(16)])
-    o = oracle_test(d, Y, y, "delay")
-    assert o["score_p"] is not None and o["score_p"] <= d.settings["score_threshold_p"]
+    o = oracle.oracle_test(d, Y, y, "delay")
+    assert o["score_p"] is not None and o["score_p"] <= d.settings["score_threshold_p"] and o["t"] > 0
     d.settings["evidence_threshold_t"] = d.settings["evidence_threshold_t_split"] = o["t"] + 1.0  # fold t: no
-    d.settings["support_threshold_t"] = o["t"] + 0.5  # nor does it support the score test
-    assert not oracle_test(d, Y, y, "delay")["supported"]
-    d.settings["support_threshold_t"] = o["t"] - 0.5  # now it does
-    assert oracle_test(d, Y, y, "delay")["supported"]
+    d.settings["support_threshold_t"] = o["t"] + 0.5  # the nominal support: no
+    assert oracle.oracle_test(d, Y, y, "delay")["supported"]  # the delay's calibrated test needs only t > 0
+    monkeypatch.setattr(oracle, "ARTIFACT_CALIBRATED", frozenset())  # as an uncalibrated test
+    assert not oracle.oracle_test(d, Y, y, "delay")["supported"]
+    d.settings["support_threshold_t"] = o["t"] - 0.5  # now the nominal support holds
+    assert oracle.oracle_test(d, Y, y, "delay")["supported"]
 
 
 def test_the_oracle_scores_along_the_effects_signature_not_the_whole_truth():
@@ -295,6 +299,23 @@ def test_a_significant_score_test_waives_the_aic_hurdle_but_not_the_held_out_err
     assert earns_its_place(0.99, 1.0, +30.0, 0.01, 0.001, calibrated=True)
     assert not earns_its_place(1.01, 1.0, -30.0, 0.01, 0.001, calibrated=True)   # held-out error must fall
     assert not earns_its_place(0.99, 1.0, -30.0, 1e-4, 0.001, calibrated=True)   # and by the resolution
+
+
+def test_a_score_test_calibrated_on_the_artifact_bed_needs_only_held_out_agreement_in_sign():
+    """Issue 37's condition: where the held-out t is below its threshold, a full-data test may name an effect only
+    where the tracker-artifact test bed shows that test calibrated. The delay's test ("own_whitened") is (record
+    delay_test), so beside it a fold t > 0 suffices; every other version keeps the nominal t(1 - alpha)."""
+    from rce_gtsam.diagnosis import decision
+    from rce_gtsam.diagnosis.result import TestResult
+    lv = decision.levels(0.05, 5, 16)
+    tests = {"fold_t": TestResult("fold_t", 0.4, float("nan"), lv.t_crit_split, "", ""),
+             "score": TestResult("score", 3.5, 0.001, lv.p_score, "", "")}
+    assert decision.support_t(lv, "own_whitened") == 0.0 and decision.support_t(lv, "other_rows") == lv.t_support
+    assert decision.significant(tests, lv, excitation="own_whitened")
+    assert not decision.significant(tests, lv, excitation="other_rows")
+    assert not decision.significant(tests, lv)  # no version named: the nominal support
+    tests["fold_t"] = TestResult("fold_t", -0.1, float("nan"), lv.t_crit_split, "", "")
+    assert not decision.significant(tests, lv, excitation="own_whitened")  # the held-out frames disagree
 
 
 def test_a_form_that_is_not_significantly_better_than_its_plain_effect_lets_the_plain_effect_lead():

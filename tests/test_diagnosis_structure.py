@@ -99,7 +99,7 @@ def test_every_test_reports_in_the_common_shape():
         assert fold.statistic == c.evidence and c.tests["maxt"].p == c.extra["maxt_p"]
         sig = is_significant(fold.statistic, fold.threshold, None if score is None else score.p,
                              d.settings["score_threshold_p"],
-                             d.settings["support_threshold_t"] if score is not None else -np.inf)
+                             c.extra["support_threshold_t"] if score is not None else -np.inf)
         if "heldout_null" in c.tests:
             sig = drift_rescued(c.tests)
         assert sig == c.extra["significant"]

@@ -192,13 +192,14 @@ def test_shifted_is_the_delay_operator_with_one_lag_per_row():
 
 @pytest.mark.parametrize("name", effects.names())
 def test_an_effect_says_where_its_score_test_gets_z(name):
-    """Conformance: score_excitation is "other_rows" (cross-fitted) or "own" (refitted null), "own" only for an
-    effect that has directions; or "between_rows" (do two node-disjoint row sets share a time course?), only for
-    an effect without directions whose per-frame latent series is common to the segments."""
+    """Conformance: score_excitation is "other_rows" (cross-fitted) or "own_whitened" (the fit's own z, GLS), the
+    latter only for an effect that has directions; or "between_rows" (do two node-disjoint row sets share a time
+    course?), only for an effect without directions whose per-frame latent series is common to the segments."""
+    from rce_gtsam.diagnosis.score_dispatch import VERSIONS
     eff = effects.make(name)
-    assert eff.score_excitation in ("own", "other_rows", "between_rows")
+    assert eff.score_excitation in VERSIONS
     Y, s, kappa, z, _ = synth(None, seed=1, E=6, T=50)
-    if eff.score_excitation == "own":
+    if eff.score_excitation == "own_whitened":
         assert eff.test_directions(kappa, z, s) is not None
     if eff.score_excitation == "between_rows":
         assert eff.test_directions(kappa, z, s) is None and eff.latent_names()
@@ -238,29 +239,53 @@ def test_the_shared_time_course_test_does_not_take_a_lag_for_a_second_excitation
     assert all(_p_shared(Y, s) <= 0.005 for Y, s in lagged)
 
 
-def test_the_refitted_test_is_calibrated_and_finds_a_small_delay_the_cross_fitted_one_misses():
-    """The delay's test with the full fit's own excitation and a refitted null (refitted_score_test): on effect-
-    free matrices with white + low-pass noise p < 0.05 in at most 2 of 10 seeds (measured 0/20 over seeds 0-19,
-    smallest 0.147; P(>= 3 of 10) = 1.2 % for a calibrated test). At a quarter of the default delay it finds
-    what the cross-fitted test, whose directions come from the other row set's z, misses: measured on seeds
-    0-5, refitted p = 1/401 on all six, cross-fitted 0.022-0.75 (seed 2: 0.75)."""
-    from rce_gtsam.diagnosis.score_test import refitted_score_test
+def test_the_whitened_test_is_calibrated_and_finds_a_small_delay_the_cross_fitted_one_misses():
+    """The delay's test (whitened_score_test: its lag scan from the full fit's own excitation, scored by GLS
+    across segments against phase surrogates): on effect-free matrices with white + low-pass noise p < 0.05 in
+    at most 2 of 10 seeds (measured 0/20 over seeds 0-19, smallest 0.111; P(>= 3 of 10) = 1.2 % for a
+    calibrated test). At a quarter of the default delay it finds what the cross-fitted test, whose directions
+    come from the other row set's z, misses: measured on seeds 0-5, p = 1/2001 on all six, cross-fitted
+    0.063-0.71 (seed 2: 0.71)."""
+    from rce_gtsam.diagnosis.score_dispatch import effect_score_test
     from rce_gtsam.sim.simulate import EFFECT_DEFAULTS
 
     delay, model = effects.make("delay"), ResponseModel()
 
-    def refitted(Y, s):
+    def whitened(Y, s):
         W = np.where(np.isfinite(Y), 1.0, 0.0)
         halves = node_disjoint_split(s, shared_node_matrix(s), 0)
-        fits = half_fits(model, Y, W, s, halves)
-        return refitted_score_test(model, model.solve(Y, W, s), Y, W, s, delay.test_directions, fits, halves)
+        return effect_score_test(delay.score_excitation, model, model.solve(Y, W, s), Y, W, s,
+                                 half_fits(model, Y, W, s, halves), halves,
+                                 lambda rows, kappa, z, s_: delay.test_directions(kappa, z, s_))
 
-    null = [refitted(*synth(None, seed=sd, E=12, T=600)[:2]).p for sd in range(10)]
+    null = [whitened(*synth(None, seed=sd, E=12, T=600)[:2]).p for sd in range(10)]
     assert sum(p < 0.05 for p in null) <= 2, null
     Y, s, *_ = synth("delay", seed=2, E=12, T=600, strength=0.25 * EFFECT_DEFAULTS["delay"])
-    found = refitted(Y, s)
+    found = whitened(Y, s)
     assert found.p <= 0.005 < 0.05 < _p(Y, s, "delay"), (found.p, _p(Y, s, "delay"))
-    assert found.statistic == "max" and found.n_surrogates == 400
+    assert found.statistic == "max" and found.n_surrogates == 2000
+
+
+def test_the_whitened_directions_are_the_tangent_free_directions_times_the_inverse_noise_correlation(monkeypatch):
+    """D = C^-1 sqrt(W) G~ (G~: the rank-1 tangent removed), 0 where the residual is missing: with C the identity D
+    is sqrt(W) G~ itself, and the residual noise's correlation between bends that share a tracked node changes
+    it (that is the GLS the test scores with)."""
+    from rce_gtsam.diagnosis import whitened_score_test as ws
+    from rce_gtsam.sim.simulate import EFFECT_DEFAULTS
+
+    delay, model = effects.make("delay"), ResponseModel()
+    Y, s, *_ = synth("delay", seed=2, E=12, T=600, strength=0.25 * EFFECT_DEFAULTS["delay"])
+    Y[3, 100:140] = np.nan
+    W = np.where(np.isfinite(Y), 1.0, 0.0)
+    fit = model.solve(Y, W, s)
+    X = ws.whitened_residuals(fit)
+    G, _ = delay.test_directions(fit.kappa, fit.z, fit.root_distance - ws.excitation_clock(fit))
+    D = ws.whitened_directions(fit, G, X)
+    assert D.shape == G.shape and np.all(D[:, 3, 100:140] == 0)
+    plain = np.where(np.isfinite(X)[None], remove_rank1_tangent(G, fit.kappa, fit.z, W), 0.0)
+    assert not np.allclose(D, plain)
+    monkeypatch.setattr(ws, "noise_correlation", lambda R: np.eye(len(R)))
+    np.testing.assert_allclose(ws.whitened_directions(fit, G, X), plain, atol=1e-12)
 
 
 def _glitched(seed, n_pairs=2, amp=25.0, width=3.0):

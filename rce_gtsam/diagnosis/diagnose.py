@@ -105,7 +105,10 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     for eff, model, full, starts in fulls:
         ev = candidate_evidence(h, eff, model, full, starts, lv)
         # 3. decision, per candidate: significant (with the drift checks where it asks for them), supported
-        extra, sig = ev.numbers, decision.significant(ev.tests, lv, both=eff.needs_both_tests)
+        extra, sig = ev.numbers, decision.significant(ev.tests, lv, both=eff.needs_both_tests,
+                                                      excitation=eff.score_excitation)
+        if "score" in ev.tests:
+            extra["support_threshold_t"] = decision.support_t(lv, eff.score_excitation)
         if decision.asks_drift_checks(ev.basis, sig, ev.score is not None):
             extra.update({**drift_checks(h, ev, lv), "significant_by_fold_t": sig})
             sig = decision.drift_rescued(ev.tests)
@@ -128,7 +131,9 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     mt = maxt_tests(h, results, alpha)
     for c in results:
         c.extra["maxt_p"] = c.tests["maxt"].p
-        c.extra["supported_maxt"] = decision.supported_by_maxt(c, h.b_rmse, resolution)
+        # the same support with the family-wise max-T test (maxt.py) in place of significance: reported, not used
+        c.extra["supported_maxt"] = bool(c.tests["maxt"].fires and decision.earns_its_place(
+            c.heldout_rmse, h.b_rmse, c.delta_aic, c.extra["heldout_gain_share"], resolution))
     # 3. decision, between candidates: the lag's richer form, parsimony, the verdict
     results, verdict_effect, parsimony = decision.decide(results, form_asker(h, lv), lv, h.b_rmse, resolution,
                                                          node_disjoint, beside=beside_asker(h))

@@ -30,7 +30,8 @@ from .heldout_null import heldout_gain_null_test, heldout_null_result
 from .information import effective_ic, effective_sample
 from .maxt import maxt_result, sign_flip_max_t
 from .plausibility import PlausibilityContext, implausibility, implausibility_result
-from .score_test import ScoreTest, effect_score_test, half_fits, score_result, shared_time_course_test
+from .score_dispatch import effect_score_test, score_result
+from .score_test import ScoreTest, half_fits, shared_time_course_test
 from .settings import CV_ITER, FULL_ITER
 from .tracker_signature import away_from_gaps, shared_course_away_result
 

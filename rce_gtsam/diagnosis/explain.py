@@ -14,6 +14,16 @@ from ..model import render_fit_report
 from .result import Diagnosis, complexity, score_is_significant
 
 
+def calibrated_note(diag) -> str:
+    """Which candidates' score tests need only a held-out t > 0 beside them (a test measured calibrated on the
+    tracker-artifact test bed and the user's path: ``extra["support_threshold_t"]`` 0), as a clause."""
+    names = [c.effect for c in diag.candidates if c.extra.get("support_threshold_t") == 0.0]
+    if not names:
+        return "the held-out frames must agree"
+    return (f"for {', '.join(names)}, whose test is calibrated on the tracker-artifact test bed, t > 0: the held-out "
+            f"frames must agree in sign")
+
+
 def significant_but_not_named(diag: Diagnosis) -> str:
     """A sentence for a diagnosis without a verdict whose candidates include significant ones (fold t or full-
     data score test) that were not supported, each with what it lacked (a held-out error that falls, an AIC that
@@ -311,9 +321,12 @@ def explain(diag: Diagnosis) -> str:
         lines.append("Also supported (partly mimicking the same misfit, or further effects): " + ", ".join(others)
                      + "; refit with the verdict effect added and diagnose again to separate them.")
     if diag.budget is not None:
+        by_score = (not own and c.evidence <= diag.settings.get("evidence_threshold_t_split", np.inf)
+                    and score_is_significant(c.extra.get("score_p"), c.extra.get("score_threshold_p", 0.0)))
+        which = "its own" if own else ("the full-data" if by_score else "the held-out")
         lines.append(f"The variance budget is scored after adding {c.effect}: "
                      f"{remainder_text(diag.budget, c.effect).split(': ', 1)[1]}. That is about the rest, not "
-                     f"about {c.effect}, which {'its own' if own else 'the held-out'} test above names.")
+                     f"about {c.effect}, which {which} test above names.")
     return " ".join(lines)
 
 
@@ -394,7 +407,7 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
                    f"{-c.improvement_pct:+7.1f}% {c.evidence:11.2f} {'-' if sp is None else f'{sp:.4f}':>9} "
                    f"{c.delta_aic:10.1f} {c.delta_bic:10.1f}  {_support_label(c)}")
     if any(c.extra.get("score_p") is not None for c in diag.candidates):
-        how = {"own": "its directions from the fit's own excitation, null from refitted surrogates",
+        how = {"own_whitened": "its directions from the fit's own excitation, scored across segments by GLS",
                "other_rows": "its directions from the other node-disjoint segments' excitation",
                "between_rows": "do two node-disjoint sets of segments' residuals move together"}
         methods = "; ".join(f"{c.effect}: {how.get(c.extra.get('score_excitation'), 'phase-randomised null')}"
@@ -402,8 +415,8 @@ def render_diagnosis_report(diag: Diagnosis) -> str:
         out.append(f"    score p: full-data score test where an effect has one ({methods}); "
                    f"such an effect is significant when t > {st['evidence_threshold_t_split']:.2f}, or p <= "
                    f"{st['score_threshold_p']:.3g} with t > {st.get('support_threshold_t', float('-inf')):.2f} "
-                   f"(a full-data test alone names nothing), and supported only if the held-out RMSE also falls "
-                   f"and the fit is plausible physics")
+                   f"(a full-data test alone names nothing; {calibrated_note(diag)}), and supported only if the "
+                   f"held-out RMSE also falls and the fit is plausible physics")
     enc = (st.get("parsimony") or {}).get("encompassing_p") or {}
     if enc:
         lo = st["parsimony"].get("leading", st["parsimony"]["lowest_heldout"])

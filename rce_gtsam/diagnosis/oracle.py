@@ -12,9 +12,10 @@ import numpy as np
 
 from .. import effects as effects_mod
 from .heldout import frame_loss, heldout_errors, paired_t
-from .decision import is_significant
+from .decision import ARTIFACT_CALIBRATED, is_significant
 from .result import Diagnosis
-from .score_test import effect_score_test, half_fits
+from .score_dispatch import effect_score_test
+from .score_test import half_fits
 from .settings import CV_ITER, FULL_ITER
 from ..model.series import loss_difference_test
 
@@ -95,7 +96,8 @@ def oracle_test(diag: Diagnosis, Y: np.ndarray, truth: np.ndarray, effect: str |
     else:
         out = _scored_test(diag, Y, pred, threshold_t=st["evidence_threshold_t_split"],
                            score_p=score.p, score_threshold_p=st["score_threshold_p"],
-                           effect_needs_both=eff.needs_both_tests)
+                           effect_needs_both=eff.needs_both_tests,
+                           support_t=0.0 if excitation in ARTIFACT_CALIBRATED else None)
     # an effect of per-segment courses of time also needs what tracker drift cannot give (its held-out gain
     # beyond phase surrogates, a course common to two node-disjoint row sets, or courses not laid out as a node's
     # drift turns its bends; rce_gtsam.diagnosis.diagnose); all three tests read the baseline's residuals only,
@@ -128,12 +130,13 @@ def true_signature(truth: np.ndarray) -> np.ndarray:
 
 
 def _scored_test(diag: Diagnosis, Y: np.ndarray, prediction: np.ndarray, threshold_t: float | None = None,
-                 score_p: float | None = None, score_threshold_p: float = 0.0, effect_needs_both: bool = False) -> dict:
+                 score_p: float | None = None, score_threshold_p: float = 0.0, effect_needs_both: bool = False,
+                 support_t: float | None = None) -> dict:
     """The verdict's fold-paired t (and the Diebold-Mariano t) of a held-out ``prediction`` (E, T, degrees;
     NaN = not scored) against the baseline's held-out error, over the frames of the folds. ``threshold_t``:
     the fold t threshold (default: the verdict's single-test one); ``score_p``: a full-data score test's p
     that also makes it significant when <= ``score_threshold_p`` (an effect with both tests, each at half the
-    level)."""
+    level); ``support_t``: the fold t it needs beside it (default: the settings' ``support_threshold_t``)."""
     st = diag.settings
     sq = (Y - prediction) ** 2
     T = Y.shape[1]
@@ -154,7 +157,7 @@ def _scored_test(diag: Diagnosis, Y: np.ndarray, prediction: np.ndarray, thresho
     tv = st.get("heldout_total_variance", 0.0)
     share = float(np.mean(base[both]) - np.mean(loss[both])) / tv if both.any() and tv > 0 else 0.0
     # the verdict's own rule, its intersection included: a full-data test names nothing without the fold t's support
-    support = st.get("support_threshold_t", -np.inf)
+    support = st.get("support_threshold_t", -np.inf) if support_t is None else support_t
     ok = bool(is_significant(t, crit, score_p, score_threshold_p, support, both=effect_needs_both)
               and imp > 0 and share >= st.get("resolution", 0.0))
     # per fold, pooled over the fold's scored entries as the candidates' fold_mse are (to pair with theirs)

@@ -72,9 +72,10 @@ class Effect:
     #: What a verdict for this effect means physically and what to check (plain text, no API names).
     physics: ClassVar[str] = ""
     #: Where the score test's directions get their excitation z (:mod:`rce_gtsam.diagnosis.score_test`):
-    #: "other_rows" (cross-fitted: each node-disjoint row set's directions from the other set's z) or "own"
-    #: (the full fit's z, the null from refitted surrogates). "own" only where effect-free data measured it
-    #: calibrated: the pipeline's smoother leaves a signature of its own along some directions (see Dynamics).
+    #: "other_rows" (cross-fitted: each node-disjoint row set's directions from the other set's z) or
+    #: "own_whitened" (the full fit's z, held fixed, GLS across segments, phase surrogates of the residuals).
+    #: "own_whitened" only where effect-free data measured it calibrated: the pipeline's smoother leaves a
+    #: signature of its own along some directions (see Dynamics).
     #: "between_rows": no directions; the test asks whether two node-disjoint row sets' residuals share a time
     #: course (an effect with a latent series common to all segments, see SecondMode).
     score_excitation: ClassVar[str] = "other_rows"

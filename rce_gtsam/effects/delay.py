@@ -57,9 +57,9 @@ class Delay(Effect):
                "wave) travels along the branch, so one instantaneous excitation cannot describe every joint at once. "
                "Kappa from the delayed model no longer mixes amplitude with phase. Check the camera/tracker timing "
                "only if the lag is implausibly large.")
-    # a shift is not what a symmetric smoother does to a signal: with the full fit's own z and a refitted null
-    # the lag scan measured 0/40 effect-free pipeline seeds below p = 0.05 (score_test.refitted_score_test)
-    score_excitation = "own"
+    # a shift is not what a symmetric smoother does to a signal: the lag scan from the full fit's own z, scored by
+    # GLS against phase surrogates, is calibrated (diagnosis.whitened_score_test's record)
+    score_excitation = "own_whitened"
 
     def __init__(self, max_lag: float = 60.0):
         self.max_lag = float(max_lag)
@@ -167,13 +167,15 @@ class Delay(Effect):
 
     def test_directions(self, kappa, z, s):
         """A scan over the tip lag: kappa_e z(t - tau s_e) for every tau of :meth:`scan_lags`, combined by the
-        largest standardised score. The first-order direction (:meth:`score_directions`) is the Taylor
-        expansion of the delay at tau = 0 and holds while omega tau << 1: once the tip lag is a sizeable part of
-        the sway's period (45 frames of a ~200-frame sway in tests/test_score_test.py) it points elsewhere. ``s`` is measured from the excitation's clock, so that z is moved by
-        the lag relative to where it was estimated (a rank-1 excitation is a blend of the segments' lagged
-        loads, in phase near their weighted centroid). Measured through the pipeline (20 seeds per strength,
-        p <= 0.005, cross-fitted): 13/15/14/13 -> 13/15/16/17 of 20 at 0.5/1/2/3x default, effect-free 0/40
-        both; with the full fit's z and a refitted null (the delay's ``score_excitation``) 18/19/18/15."""
+        largest standardised score. The first-order direction (:meth:`score_directions`) is the Taylor expansion
+        of the delay at tau = 0 and holds while omega tau << 1: once the tip lag is a sizeable part of the sway's
+        period (45 frames of a ~200-frame sway in tests/test_score_test.py) it points elsewhere. ``s`` is measured
+        from the excitation's clock, so that z is moved by the lag relative to where it was estimated (a rank-1
+        excitation is a blend of the segments' lagged loads, in phase near their weighted centroid). Measured
+        through the pipeline (20 seeds per strength, p <= 0.005, cross-fitted): 13/15/14/13 -> 13/15/16/17 of 20
+        at 0.5/1/2/3x default, effect-free 0/40 both; with the full fit's z and a refitted null 18/19/18/15. Its
+        test now (``score_excitation`` ``"own_whitened"``) is measured in
+        :mod:`rce_gtsam.diagnosis.whitened_score_test`."""
         return kappa[None, :, None] * shifted(np.asarray(z, float), np.outer(self.scan_lags(), s)), "max"
 
     def align(self, X, state, s):
