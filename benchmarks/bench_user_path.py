@@ -28,6 +28,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 BIN = Path(sys.executable).parent
+#: ``--before NAME``: the file in each case folder that holds the diagnosis to compare with (set by main)
+BEFORE: dict = {}
 
 
 def case_dir(cache: Path, effect: str, render: str, seed: int, frames: int) -> Path:
@@ -76,7 +78,11 @@ def rediagnose(cache: str, effect: str, render: str, seed: int, frames: int, eve
 
 
 def row_of(d: Path, effect, render, seed, name=None) -> dict:
+    """The case's verdict row from ``d/name`` (default: the diagnosis ``rce run`` wrote, ``run/diagnosis.json``;
+    a ``name`` the case lacks falls back to that too where ``name`` is the ``--before`` file)."""
     path = d / name if name else d / "run" / "diagnosis.json"
+    if name and name == BEFORE.get("name") and not path.exists():
+        path = d / "run" / "diagnosis.json"
     if not path.exists():
         return {"effect": effect, "render": render, "seed": seed, "error": "no diagnosis"}
     diag = json.loads(path.read_text())
@@ -154,10 +160,15 @@ def main() -> int:
                     help="save the verdicts as the docs' validation record docs/validation/NAME.json (with "
                          "--rediagnose: the first diagnosis and the current one side by side)")
     ap.add_argument("--note", action="append", default=[], help="a line under the record's table (repeatable)")
+    ap.add_argument("--before", default=None, metavar="NAME",
+                    help="with --record: the 'first' column from this file in each case folder (e.g. the previous "
+                         "rediagnosis kept as rediagnosis_before.json), where present, instead of run/diagnosis.json")
     ap.add_argument("--seed-groups", type=int, default=0, metavar="N",
                     help="with --record: one row per block of N seeds (the seeds a rule was written on apart from "
                          "those it was not)")
     a = ap.parse_args()
+    if a.before:
+        BEFORE["name"] = a.before
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     jobs = [(a.cache, e, r, s, a.frames) for s in range(a.first_seed, a.first_seed + a.seeds)
             for e in a.effects.split(",") for r in a.renders.split(",")]
@@ -169,7 +180,8 @@ def main() -> int:
     print(summarise(rows))
     if a.record:
         from record import save_record
-        first = [row_of(case_dir(Path(a.cache), e, r, s_, a.frames), e, r, s_) for _, e, r, s_, _f, *_ in jobs]
+        first = [row_of(case_dir(Path(a.cache), e, r, s_, a.frames), e, r, s_, name=a.before)
+                 for _, e, r, s_, _f, *_ in jobs]
         cmd = (f"python benchmarks/bench_user_path.py --cache DIR --seeds {a.seeds} --first-seed {a.first_seed} "
                f"--frames {a.frames} --effects {a.effects} --renders {a.renders}"
                + (" (then the same with --rediagnose)" if a.rediagnose else ""))
