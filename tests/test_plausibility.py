@@ -65,6 +65,16 @@ def test_a_lag_longer_than_the_excitations_memory_is_implausible():
     assert any("bound" in r for r in implausibility(d, _state(d, tau=60.0), 6, CTX))
 
 
+def test_a_lag_under_one_frame_is_implausible():
+    """A tip lag under one frame interval is what a rolling shutter (rows read out over up to a frame) puts between
+    root and tip; the one effect-free user-path render named delay had -0.96 frames, the lags found 8-17."""
+    d = effects.make("delay")
+    for tau in (-0.96, 0.5):
+        assert any("rolling shutter" in r for r in implausibility(d, _state(d, tau=tau), 6, CTX)), tau
+    assert implausibility(d, _state(d, tau=1.5), 6, CTX) == ()
+    assert implausibility(d, _state(d, tau=-8.0), 6, CTX) == ()
+
+
 def test_a_full_data_test_alone_names_nothing():
     # the case measured on the user's path: score p 0.0005, fold t 0.8 (a 0.2 % held-out gain)
     assert not is_significant(0.8, 2.95, 0.0005, 0.005, support_t=1.75)
@@ -106,9 +116,9 @@ def test_the_diagnosis_asks_a_saturation_for_both_tests(monkeypatch):
     seen = []
     real = decision.significant
 
-    def spy(tests, lv, both=False):
+    def spy(tests, lv, both=False, excitation=None):
         seen.append(both)
-        return real(tests, lv, both=both)
+        return real(tests, lv, both=both, excitation=excitation)
 
     monkeypatch.setattr(decision, "significant", spy)
     sim = simulate(SimulationConfig(seed=1, n_frames=200, n_nodes=10))

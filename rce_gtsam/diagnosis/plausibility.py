@@ -21,7 +21,7 @@ A fit is *implausible* when any of these holds (the reason is recorded in the ca
 * whatever the effect itself declares in :meth:`~rce_gtsam.effects.Effect.implausible`, against the
   recording's own scales in :class:`PlausibilityContext`: a saturation beyond twice the largest deflection
   seen, a natural period under :data:`SHORTEST_PERIOD_FRAMES`, a lag longer than the excitation's
-  correlation time.
+  correlation time or shorter than :data:`SHORTEST_LAG_FRAMES`.
 
 These are statements about physics and sampling, not thresholds fitted to a simulator: each is a scale the
 recording itself sets (its deflections, its frame rate, its excitation's memory).
@@ -39,6 +39,12 @@ from .result import TestResult
 #: A natural period shorter than this many frames (a frequency above a quarter of the frame rate, half the
 #: Nyquist frequency) is not resolved by the video: an oscillator there fits frame-to-frame tracker jitter.
 SHORTEST_PERIOD_FRAMES = 4.0
+#: A tip lag shorter than this many frames (one frame interval) is what the camera's own timing puts between root
+#: and tip: a rolling shutter (the D435i's colour sensor, like most) reads the image's rows out over up to one frame
+#: interval, so a branch spanning the image is sampled up to a frame later at one end than at the other. Measured on
+#: the user's path (record ``user_path``): the one effect-free render named delay had a tip lag of -0.96 frames; the
+#: hidden lags found were 8-17 frames.
+SHORTEST_LAG_FRAMES = 1.0
 #: A saturation angle beyond this multiple of the largest deflection seen (99th percentile of |kappa z|) bends
 #: the largest deflection by less than (1/2)^2 / 3 = 8 %: a curve never reached is not observed.
 SATURATION_REACH = 2.0
@@ -54,14 +60,15 @@ class PlausibilityContext:
     q99_deflection_deg: 99th percentile of the rank-1 model's |kappa_e z_t| (deg), the largest deflection
     seen; correlation_time_frames: the excitation's memory (frames; the first lag where the autocorrelation of z
     is no longer positive), the longest lag the record can tell from another signal;
-    n_frames: frames in the record; shortest_period_frames, saturation_reach: the limits an effect checks
-    against (:data:`SHORTEST_PERIOD_FRAMES`, :data:`SATURATION_REACH`), carried here so that effects need not
-    import the diagnosis."""
+    n_frames: frames in the record; shortest_period_frames, shortest_lag_frames, saturation_reach: the limits an
+    effect checks against (:data:`SHORTEST_PERIOD_FRAMES`, :data:`SHORTEST_LAG_FRAMES`, :data:`SATURATION_REACH`),
+    carried here so that effects need not import the diagnosis."""
 
     q99_deflection_deg: float
     correlation_time_frames: float
     n_frames: int
     shortest_period_frames: float = SHORTEST_PERIOD_FRAMES
+    shortest_lag_frames: float = SHORTEST_LAG_FRAMES
     saturation_reach: float = SATURATION_REACH
 
     @classmethod

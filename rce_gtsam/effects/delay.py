@@ -217,11 +217,16 @@ class Delay(Effect):
 
     def implausible(self, state, ctx):
         """A tip lag longer than the excitation's correlation time: the lagged excitation is then another signal,
-        not the same one later, and a lag fitted there matches noise."""
+        not the same one later, and a lag fitted there matches noise. A tip lag shorter than
+        ``ctx.shortest_lag_frames`` (one frame interval): a rolling shutter puts that much between root and tip."""
         tau = abs(scalar(state["params"]["tau"]))
         if np.isfinite(ctx.correlation_time_frames) and tau > ctx.correlation_time_frames:
             return [f"its tip lag {tau:.3g} frames is longer than the excitation's correlation time "
                     f"({ctx.correlation_time_frames:.3g} frames)"]
+        if tau < getattr(ctx, "shortest_lag_frames", 0.0):
+            return [f"its tip lag {tau:.2g} frames is under {ctx.shortest_lag_frames:g} frame: a rolling shutter "
+                    f"(image rows read out over up to one frame) or the tracker's timing puts lags that size "
+                    f"between root and tip"]
         return []
 
     def explain(self, summary: dict, statistics: dict) -> str:
