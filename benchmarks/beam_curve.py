@@ -87,7 +87,7 @@ def refusal(d, names: tuple[str, ...]) -> dict:
         return {**out, "rule": "drift_checks", "text": f"{c.effect}: {stat}, refused as drift ({'; '.join(parts)})"}
     if not x.get("significant"):
         if sc is not None and sc.fires:
-            sup = d.settings.get("support_threshold_t", float("nan"))
+            sup = x.get("support_threshold_t", d.settings.get("support_threshold_t", float("nan")))
             return {**out, "rule": "fold_support", "text": f"{c.effect}: score test fires but the fold t does not "
                                                            f"support it ({stat}; support t {sup:.2f})"}
         return {**out, "rule": "significance", "text": f"{c.effect}: not significant ({stat})"}
