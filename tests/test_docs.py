@@ -245,7 +245,48 @@ def test_the_quality_flags_and_plausibility_rules_the_pages_describe_are_the_cod
     diagnosis = (DOCS / "diagnosis.md").read_text()
     assert plausibility.SATURATION_REACH == 2.0 and "beyond twice the largest\n   deflection seen" in diagnosis
     assert plausibility.SHORTEST_PERIOD_FRAMES == 4.0 and "under 4 frames" in diagnosis
+    assert plausibility.SHORTEST_LAG_FRAMES == 1.0 and "shorter than one frame" in diagnosis
+    assert "the held-out frames need only agree in sign (fold t > 0)" in diagnosis.replace("\n   ", " ")
     assert "`no (implausible fit)`" in diagnosis
     from rce_gtsam import effects
     named_by_both = [n for n, c in effects.CANDIDATES.items() if c.needs_both_tests]
     assert named_by_both == ["nonlinear"] and "is named only where **both** its\ntests pass" in diagnosis
+
+
+def _record(name: str) -> dict:
+    return json.loads((DOCS / "validation" / f"{name}.json").read_text())
+
+
+def test_the_delay_numbers_the_pages_quote_are_the_records():
+    """The changelog's lag-detection and false-alarm counts, and the calibration the decision cites for the delay's
+    test, are those of the records ``user_path_lag``, ``user_path`` and ``delay_test``."""
+    from rce_gtsam.diagnosis import decision
+
+    text = (DOCS / "changelog.md").read_text()
+    lag = _record("user_path_lag")["rows"]  # [effect, render, seeds, cases, first, now, "found first / now", names]
+    first = sum(int(r[6].split(" / ")[0]) for r in lag)
+    now = sum(int(r[6].split(" / ")[1]) for r in lag)
+    cases = sum(r[3] for r in lag)
+    out = [r for r in lag if r[1] == "outdoor"]
+    out_first = sum(int(r[6].split(" / ")[0]) for r in out)
+    out_now = sum(int(r[6].split(" / ")[1]) for r in out)
+    quoted = (f"in {now} of {cases} renders (was {first}), {out_now} of {sum(r[3] for r in out)} `outdoor` ones "
+              f"(was {out_first})")
+    assert quoted.replace(" ", "") in text.replace("\n", "").replace(" ", ""), quoted
+    free = _record("user_path")["rows"]
+    named = sum(int(r[5].split(" of ")[0]) for r in free)
+    assert f"at {named} of {sum(r[3] for r in free)} effect-free renders named" in text.replace("\n  ", " ")
+    rows = {(r[0], r[1]): r for r in _record("delay_test")["rows"]}  # [bed, group, cases, baseline, now, oracle]
+
+    def fired(keys):  # cases at p <= 0.005 under the current test, and cases
+        return sum(int(rows[k][4].split(" / ")[0]) for k in keys), sum(rows[k][2] for k in keys)
+    art = [k for k in rows if k[0] == "artifacts" and k[1].split(" x")[-1] in ("1", "2")]
+    up = [k for k in rows if k[0] == "user path" and k[1].startswith("none")]
+    beam = [("beam", "none x1")]
+    said = ("p ≤ 0.005 on {} of {} tracker-artifact recordings, {} of {} effect-free renders on the user's path, "
+            "{} of {} beam")
+    assert said.format(*fired(art), *fired(up), *fired(beam)) in text.replace("\n  ", " ")
+    assert decision.ARTIFACT_CALIBRATED == {"own_whitened"}
+    code = (REPO / "rce_gtsam" / "diagnosis" / "decision.py").read_text()
+    assert "0 of 440 artifact and 1 of 120 effect-free user-path" in code
+    assert fired(art) == (0, 440) and fired(up) == (1, 120)
