@@ -220,8 +220,8 @@ def main() -> int:
         from record import save_record
         save_record(a.record, title="The delay's full-data test: false alarms and power, against the refitted test "
                                     "it replaced",
-                    command="OMP_NUM_THREADS=1 python benchmarks/bench_delay_test.py --user-path DIR --artifacts DIR "
-                            f"--beam DIR [--beam DIR] --baseline {a.baseline}",
+                    command="python benchmarks/bench_delay_test.py --user-path DIR --artifacts DIR --beam DIR "
+                            f"[--beam DIR] --baseline {a.baseline}",
                     description=("Counts of cases whose delay score test reaches p <= 0.005 (the level a score test "
                                  "is read at), 0.01 and 0.05: the test the delay has now (its lag scan from the fit's "
                                  "own excitation, GLS across segments, phase-surrogate null) and the refitted test of "

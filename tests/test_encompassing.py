@@ -109,23 +109,31 @@ def test_diagnose_runs_it_when_dynamics_is_lowest_and_delay_also_supported():
     assert "encompassing test p" in d.explanation
 
 
-def test_weak_inertia_found_by_a_full_data_test_alone_is_not_named():
+def test_weak_inertia_found_by_the_calibrated_full_data_test_is_named_as_the_lags_richer_form(monkeypatch):
     """Simulated dynamics at 0.75x the default strength through the whole pipeline (seed 21): the delay's full-data
-    test finds the lag (p = 0.0025) but the held-out frames do not agree (fold t below the nominal one-sided
-    quantile), and a full-data test alone names nothing (on the user's path such tests fired on effect-free
-    video at p 0.0005 with a 0.2 % held-out gain). Until that rule, dynamics was named here as the richer form of
-    the lag the delay test found: this recording is the rule's cost in power."""
+    test finds the lag (p = 1/2001) while the held-out frames agree only in sign (fold t 0.39, below the nominal
+    one-sided quantile 1.75). That test is calibrated on the tracker-artifact test bed (decision.ARTIFACT_CALIBRATED),
+    so the delay is significant, and dynamics, whose encompassing test against it has p 0.001, is named as the lag's
+    richer form: the hidden inertia. With the nominal support (a full-data test alone names nothing) this recording
+    got no verdict: that rule's cost in power, which the calibrated test has taken back."""
+    from rce_gtsam.diagnosis import decision
     from rce_gtsam.pipeline import analyze
     from rce_gtsam.presets import get_preset
     from rce_gtsam.sim.simulate import EFFECT_DEFAULTS, SimulationConfig, simulate
     sim = simulate(SimulationConfig(effects=("dynamics",), seed=21, n_frames=900,
                                     effect_strength={"dynamics": 0.75 * EFFECT_DEFAULTS["dynamics"]}))
     r = analyze(sim.tracks, sim.graph, preset="default", n_boot=0).response
-    d = diagnose(r.Y, weights=r.weights, root_distance=r.root_distance, seed=0,
-                 edge_labels=[f"{j}->{c}" for j, c in r.edges], config=get_preset("default").compliance)
+
+    def run():
+        return diagnose(r.Y, weights=r.weights, root_distance=r.root_distance, seed=0,
+                        edge_labels=[f"{j}->{c}" for j, c in r.edges], config=get_preset("default").compliance)
+    d = run()
     dly = d.candidate("delay")
-    assert dly.extra["score_p"] <= 0.005 and dly.evidence <= d.settings["support_threshold_t"]
-    assert not dly.extra["significant"] and d.verdict is None
+    assert dly.extra["score_p"] <= 0.005 and 0 < dly.evidence <= d.settings["support_threshold_t"]
+    assert dly.extra["significant"] and d.verdict == "dynamics"
+    monkeypatch.setattr(decision, "ARTIFACT_CALIBRATED", frozenset())
+    d = run()
+    assert not d.candidate("delay").extra["significant"] and d.verdict is None
 
 
 def _lag(name, rmse, k_eff, fold, form_p=None, supported=True):

@@ -197,7 +197,9 @@ def combine_scores(S: np.ndarray, Ss: np.ndarray, statistic: str):
     raise ValueError(f"score test statistic {statistic!r}: expected 'quadratic' or 'max'")
 
 
-def _score_test(q: float, qs: np.ndarray, n_directions: int, statistic: str, peak) -> ScoreTest:
+def score_test_of(q: float, qs: np.ndarray, n_directions: int, statistic: str, peak) -> ScoreTest:
+    """The :class:`ScoreTest` of an observed statistic ``q`` against its null draws ``qs`` (one-sided, the observed
+    counted among them)."""
     n = len(qs)
     p = float((1 + np.sum(qs >= q)) / (n + 1))
     return ScoreTest(p=p, q=q, n_directions=n_directions, n_surrogates=n, z_equivalent=float(stats.norm.isf(p)),
@@ -212,7 +214,7 @@ def weighted_directions(fit, G) -> np.ndarray:
     return W[None] * remove_rank1_tangent(np.asarray(G, float), fit.kappa, fit.z, W)
 
 
-def _with_statistic(G):
+def with_statistic(G):
     """(G, statistic) from what a directions function returned: a bare G combines quadratically."""
     return G if isinstance(G, tuple) else (G, "quadratic")
 
@@ -234,14 +236,14 @@ def cross_fitted_score_test(halves, fits, directions, n_surrogates: int = N_SURR
         G = directions(i, f.kappa, z_other, f.root_distance - excitation_clock(o))
         if G is None:
             return None
-        G, statistic = _with_statistic(G)
+        G, statistic = with_statistic(G)
         parts.append(weighted_directions(f, G))
         Rs.append(f.residuals)
     H = np.concatenate(parts, axis=1)            # (J, E_A + E_B, T)
     R = np.vstack(Rs)
     S, Ss = scores_with_null(R, H, n_surrogates, seed)
     q, qs, peak = combine_scores(S, Ss, statistic)
-    return _score_test(q, qs, H.shape[0], statistic, peak)
+    return score_test_of(q, qs, H.shape[0], statistic, peak)
 
 
 def remove_row_lag(X: np.ndarray, W: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -316,4 +318,4 @@ def shared_time_course_test(fit, halves, n_surrogates: int = N_SURROGATES, seed:
     qs = np.concatenate([np.linalg.svd((surrogate_slice(spectrum, T, draws, slice(i, i + SURROGATE_BATCH))
                                         * observed) @ XB.T, compute_uv=False)[:, 0]
                          for i in range(0, n_surrogates, SURROGATE_BATCH)])
-    return _score_test(q, qs, 1, "shared", None)
+    return score_test_of(q, qs, 1, "shared", None)

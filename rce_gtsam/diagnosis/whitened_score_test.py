@@ -42,8 +42,8 @@ import numpy as np
 
 from ..model.surrogates import centred_observed, draw_phases, residual_spectrum, surrogate_slice
 from ..model.tangent import remove_rank1_tangent
-from .score_test import (N_SURROGATES, SURROGATE_BATCH, ScoreTest, _score_test, _with_statistic, combine_scores,
-                         excitation_clock, robust_residuals)
+from .score_test import (N_SURROGATES, SURROGATE_BATCH, ScoreTest, combine_scores, excitation_clock, robust_residuals,
+                         score_test_of, with_statistic)
 from .statistics import noise_correlation
 
 NULL = ("multivariate phase surrogates of the baseline's residuals, the directions from the fit's own excitation "
@@ -75,7 +75,7 @@ def whitened_score_test(fit, directions, n_surrogates: int = N_SURROGATES, seed:
     G = directions(fit.kappa, fit.z, fit.root_distance - excitation_clock(fit))
     if G is None:
         return None
-    G, statistic = _with_statistic(G)
+    G, statistic = with_statistic(G)
     X = whitened_residuals(fit)
     D = whitened_directions(fit, G, X).reshape(len(G), -1)
     S = D @ centred_observed(X).ravel()
@@ -89,4 +89,4 @@ def whitened_score_test(fit, directions, n_surrogates: int = N_SURROGATES, seed:
         sur = np.where(observed[None], surrogate_slice(spectrum, T, draws, sl), 0.0)
         Ss[sl] = sur.reshape(len(sur), -1) @ D.T
     q, qs, peak = combine_scores(S, Ss, statistic)
-    return _score_test(q, qs, len(S), statistic, peak)
+    return score_test_of(q, qs, len(S), statistic, peak)
