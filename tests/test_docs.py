@@ -290,3 +290,8 @@ def test_the_delay_numbers_the_pages_quote_are_the_records():
     code = (REPO / "rce_gtsam" / "diagnosis" / "decision.py").read_text()
     assert "0 of 440 artifact and 1 of 120 effect-free user-path" in code
     assert fired(art) == (0, 440) and fired(up) == (1, 120)
+    # limits.md: the outdoor lags found, and the ideal oracle's count on the same recordings
+    oracle = sum(int(rows[("user path", f"{e} outdoor")][5].split(" / ")[0]) for e in ("delay", "dynamics"))
+    limits = (DOCS / "limits.md").read_text().replace("\n", " ")
+    assert (f"is found in {out_now} of {sum(r[3] for r in out)} recordings, where a test that knew the true lag "
+            f"would find it in {oracle}") in limits.replace("  ", " ")
