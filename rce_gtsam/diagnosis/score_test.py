@@ -14,7 +14,8 @@ set by their number, whatever the length of the recording. This test uses every 
 * **Clock.** A rank-1 excitation is a blend of the segments' responses, in phase near their weighted
   centroid of root distance (:func:`excitation_clock`); directions get the root distances measured from there.
 * **Where z comes from: three versions** (an effect picks one, :attr:`~rce_gtsam.effects.Effect.score_excitation`;
-  :func:`effect_score_test` runs it). Tracking noise in z enters both R and G when G is built from the fit's own z.
+  :func:`~rce_gtsam.diagnosis.score_dispatch.effect_score_test` runs it). Tracking noise in z enters both R and G
+  when G is built from the fit's own z.
 
   - ``"own_whitened"`` (the delay; :mod:`rce_gtsam.diagnosis.whitened_score_test`): G from the full fit's z, held
     fixed, scored by generalised least squares across segments against phase surrogates of the residuals. It

@@ -1,7 +1,7 @@
 """The delay's full-data test: its lag scan scored by generalised least squares, against phase surrogates.
 
 One test in the shape of :mod:`rce_gtsam.diagnosis.score_test` (statistic, null, calibration record); it is the
-``"own_whitened"`` version of :func:`~rce_gtsam.diagnosis.score_test.effect_score_test`.
+``"own_whitened"`` version of :func:`~rce_gtsam.diagnosis.score_dispatch.effect_score_test`.
 
 * **Statistic.** The effect's directions G_j (J, E, T) are built from the full baseline fit's own kappa and
   excitation z (:meth:`~rce_gtsam.effects.Effect.test_directions`; the delay: kappa_e z(t - tau_j s_e) over its
@@ -18,9 +18,10 @@ One test in the shape of :mod:`rce_gtsam.diagnosis.score_test` (statistic, null,
   kept, only *when* the noise happens is new; missing entries stay missing). sd_j and the null of the combined
   statistic come from the same surrogates; p = (1 + #{null >= observed}) / (1 + n). It is the ideal oracle's
   test (:mod:`rce_gtsam.diagnosis.ideal_oracle`) with the known signature replaced by the effect's scan.
-* **Why not the refitted null** (:func:`~rce_gtsam.diagnosis.score_test.refitted_score_test`, the delay's test
-  before): on the user's path (``rce simulate --video`` then ``rce run``, 450 frames) the refitted test found a
-  hidden lag at p <= 0.005 in 6 of 15 ``outdoor`` renders, where the ideal oracle, which knows the true
+* **Why not the refitted null** (``refitted_score_test`` of revision 3d9e6b3, the delay's test before, which
+  ``benchmarks/bench_delay_test.py`` loads from git as its baseline): on the user's path (``rce simulate
+  --video`` then ``rce run``, 450 frames) the refitted test found a hidden lag at p <= 0.005 in 6 of 15 ``outdoor``
+  renders, where the ideal oracle, which knows the true
   signature, finds 14 (tracking error twice the clean renders'); this test finds 10, and gust fronts on the beam
   simulator 14/15 (refitted 9/15). The refitted null adds the noise z carries to every surrogate's directions,
   which widens it; held fixed, directions from the fit's own z could in principle score that noise against
