@@ -29,12 +29,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..model.surrogates import centred_observed, draw_phases, residual_spectrum, surrogate_slice
+from .score_test import scores_with_null
 from .statistics import noise_correlation
 
 #: surrogates of the null by default: p resolves 1/2000, well below the verdict's full-data level (0.005)
 N_SURROGATES = 1999
-_BATCH = 100
 
 
 @dataclass(frozen=True)
@@ -73,13 +72,7 @@ def signature_test(R: np.ndarray, signature: np.ndarray, seed: int = 0,
     S = S - S.mean(axis=1, keepdims=True)
     D = Pinv @ S  # (E, T) the whitened direction: stat = <D, R>
     norm = float(np.sqrt(max(np.sum(D * np.where(observed, S, 0.0)), 1e-300)))
-    stat = float(np.sum(D * centred_observed(R))) / norm
-    F = residual_spectrum(R)
-    draws = draw_phases(np.random.default_rng(seed), n_surrogates, R.shape[1])
-    null = np.empty(n_surrogates)
-    for i in range(0, n_surrogates, _BATCH):
-        sl = slice(i, min(i + _BATCH, n_surrogates))
-        sur = np.where(observed[None], surrogate_slice(F, R.shape[1], draws, sl), 0.0)
-        null[sl] = np.einsum("et,net->n", D, sur) / norm
+    score, null_scores = scores_with_null(R, D[None], n_surrogates, seed, robust=False, centre=True)
+    stat, null = float(score[0]) / norm, null_scores[:, 0] / norm
     p = float((1 + np.sum(null >= stat)) / (1 + n_surrogates))
     return SignatureTest(statistic=stat, p=p, n_surrogates=int(n_surrogates), null_sd=float(np.std(null)))

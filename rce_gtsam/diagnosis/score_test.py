@@ -74,6 +74,7 @@ import numpy as np
 from scipy import stats
 
 from ..model.compliance import draw_phases, residual_spectrum, surrogate_slice
+from ..model.surrogates import centred_observed
 from ..model.tangent import remove_rank1_tangent
 from .result import score_is_significant  # noqa: F401 (re-exported)
 from .statistics import noise_correlation
@@ -161,16 +162,20 @@ def robust_residuals(R: np.ndarray, c: float | None = None) -> np.ndarray:
     return np.where(ok, np.clip(R, -c * sigma, c * sigma), np.nan)
 
 
-def scores_with_null(R: np.ndarray, H: np.ndarray, n_surrogates: int = N_SURROGATES, seed: int = 0):
+def scores_with_null(R: np.ndarray, H: np.ndarray, n_surrogates: int = N_SURROGATES, seed: int = 0,
+                     robust: bool = True, centre: bool = False):
     """The scores S_j = sum H_j psi(R) of residuals R (E, T; NaN = missing, degrees) along weighted directions
     H (J, E, T), and the same scores of ``n_surrogates`` multivariate phase surrogates of psi(R) (every segment's
     spectrum and cross-spectrum kept; missing entries stay missing), directions held fixed: (S (J,),
-    S_null (n_surrogates, J)). psi: :func:`robust_residuals`."""
-    R = robust_residuals(R)
+    S_null (n_surrogates, J)). psi: :func:`robust_residuals` (``robust``), else R as given. ``centre``: the
+    observed scores from each row less its mean over its observed frames, as the surrogates are
+    (:func:`~rce_gtsam.model.surrogates.centred_observed`)."""
+    if robust:
+        R = robust_residuals(R)
     mask = np.isfinite(R)
     J, T = H.shape[0], R.shape[1]
     Hf = H.reshape(J, -1)
-    S = Hf @ np.where(mask, R, 0.0).ravel()
+    S = Hf @ (centred_observed(R) if centre else np.where(mask, R, 0.0)).ravel()
     spectrum = residual_spectrum(R)
     rng = np.random.default_rng(seed)
     draws = draw_phases(rng, n_surrogates, T)

@@ -41,10 +41,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..model.surrogates import centred_observed, draw_phases, residual_spectrum, surrogate_slice
 from ..model.tangent import remove_rank1_tangent
-from .score_test import (N_SURROGATES, SURROGATE_BATCH, ScoreTest, combine_scores, excitation_clock, robust_residuals,
-                         score_test_of, with_statistic)
+from .score_test import (N_SURROGATES, ScoreTest, combine_scores, excitation_clock, robust_residuals, score_test_of,
+                         scores_with_null, with_statistic)
 from .statistics import noise_correlation
 
 NULL = ("multivariate phase surrogates of the baseline's residuals, the directions from the fit's own excitation "
@@ -77,17 +76,7 @@ def whitened_score_test(fit, directions, n_surrogates: int = N_SURROGATES, seed:
     if G is None:
         return None
     G, statistic = with_statistic(G)
-    X = whitened_residuals(fit)
-    D = whitened_directions(fit, G, X).reshape(len(G), -1)
-    S = D @ centred_observed(X).ravel()
-    T = X.shape[1]
-    observed = np.isfinite(X)
-    spectrum = residual_spectrum(X)
-    draws = draw_phases(np.random.default_rng(seed), n_surrogates, T)
-    Ss = np.empty((n_surrogates, len(S)))
-    for i in range(0, n_surrogates, SURROGATE_BATCH):
-        sl = slice(i, min(i + SURROGATE_BATCH, n_surrogates))
-        sur = np.where(observed[None], surrogate_slice(spectrum, T, draws, sl), 0.0)
-        Ss[sl] = sur.reshape(len(sur), -1) @ D.T
+    X = whitened_residuals(fit)  # already robust
+    S, Ss = scores_with_null(X, whitened_directions(fit, G, X), n_surrogates, seed, robust=False, centre=True)
     q, qs, peak = combine_scores(S, Ss, statistic)
     return score_test_of(q, qs, len(S), statistic, peak)
