@@ -65,8 +65,8 @@ def case(family: str | None, scale: float, seed: int, frames: int) -> dict:
 
 
 #: the noise floor's version in the cache's file names: a case cached before the floor changed is run again
-#: (the node-wise estimate joined the floor in v2)
-FLOOR_TAG = "_nf2"
+#: (the node-wise estimate joined the floor in v2; its kappa-step correction in v3)
+FLOOR_TAG = "_nf3"
 
 
 def preset_tag(family: str | None) -> str:

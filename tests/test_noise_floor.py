@@ -193,7 +193,7 @@ def test_real_plant_budgets_are_what_the_readme_says(shared_data):
     deg^2): shares of the bending variance, the noise floor raised by the node-wise signature of the residual
     (from 19 % and 18 % before it)."""
     from rce_gtsam.diagnosis.budget import budget_of
-    quoted = {"plant_1": (19, 53, 4, 29, 14), "plant_2": (41, 34, -4, 25, 16)}
+    quoted = {"plant_1": (19, 54, 4, 28, 14), "plant_2": (41, 36, -4, 23, 16)}
     for name, (rank1, floor, low, high, bound) in quoted.items():
         d = shared_data / name
         res = analyze(d / "tapir_tracks.csv", d / "branch_graph.json", preset="default", n_boot=0)
@@ -204,14 +204,14 @@ def test_real_plant_budgets_are_what_the_readme_says(shared_data):
         assert abs(pc(b.unexplained_range[0]) - low) <= 1 and abs(pc(b.unexplained_range[1]) - high) <= 1
         assert len(b.floor_is_bound) == bound
         # the node error the residual's node-by-node pattern implies (quoted by the diagnosis' explanation)
-        assert round(noise_floor_of(res).nodewise_sigma_px, 2) == {"plant_1": 0.41, "plant_2": 0.22}[name]
+        assert round(noise_floor_of(res).nodewise_sigma_px, 2) == {"plant_1": 0.42, "plant_2": 0.23}[name]
 
 
 @pytest.mark.slow
 def test_noise_floor_bench_numbers_are_what_the_readme_says():
     """docs/validation/noise_floor.json: the noise floor within 25 % of the true angle-noise RMS on 20/20
-    simulated branches (median ratio 1.02, range 0.91-1.12), the budget's floor at the true noise variance
-    (median 0.947), and no effect-free branch told the model misses more than noise
+    simulated branches (median ratio 1.02, range 0.92-1.12), the budget's floor at the true noise variance
+    (median 0.955), and no effect-free branch told the model misses more than noise
     (``benchmarks/bench_noise_floor.py``, the same 20 seeds)."""
     import importlib.util
     from pathlib import Path
@@ -223,15 +223,15 @@ def test_noise_floor_bench_numbers_are_what_the_readme_says():
     ratio = np.array([r["est_rms"] / r["true_rms"] for r in rows])
     assert np.all(np.abs(ratio - 1) <= 0.25)
     assert round(float(np.median(ratio)), 2) == 1.02
-    assert (round(float(ratio.min()), 2), round(float(ratio.max()), 2)) == (0.91, 1.12)
+    assert (round(float(ratio.min()), 2), round(float(ratio.max()), 2)) == (0.92, 1.12)
     fv = np.array([r["budget_floor_over_true"] for r in rows])
-    assert abs(float(np.median(fv)) - 0.947) < 0.01 and fv.min() > 0.7 and fv.max() < 1.3
+    assert abs(float(np.median(fv)) - 0.955) < 0.01 and fv.min() > 0.7 and fv.max() < 1.3
     assert [r["budget_status"] for r in rows].count("misses") == 0
 
 
 @pytest.mark.slow
 def test_short_plant_record_is_inconclusive(shared_data, tmp_path):
-    """The first 120 frames of plant 1 leave 29 +/- 47 % unexplained; that is too uncertain to call the model
+    """The first 120 frames of plant 1 leave 26 +/- 48 % unexplained; that is too uncertain to call the model
     adequate."""
     import pandas as pd
     from rce_gtsam.diagnosis.budget import budget_of
@@ -241,7 +241,7 @@ def test_short_plant_record_is_inconclusive(shared_data, tmp_path):
     res = analyze(tmp_path / "first_120.csv", d / "branch_graph.json", preset="default", n_boot=0)
     b = budget_of(res)
     assert (b.status, b.reason) == ("inconclusive", "too_uncertain"), b.as_dict()
-    assert round(100 * b.share(b.unexplained)) == 29 and round(100 * b.share(b.unexplained_se)) == 47
+    assert round(100 * b.share(b.unexplained)) == 26 and round(100 * b.share(b.unexplained_se)) == 48
 
 
 def _chain_rest(n_nodes: int, seed: int) -> dict:
@@ -277,3 +277,39 @@ def test_nodewise_floor_reads_slow_node_errors_and_not_smooth_physics():
     zhat2 = kappa @ Y2 / (kappa @ kappa)
     assert np.mean(nodewise_floor(Y2 - np.outer(kappa, zhat2), kappa, bends, rest).variance_deg2) < 0.05 * np.mean(
         (Y2 - np.outer(kappa, zhat2)) ** 2)
+
+
+def test_nodewise_floor_restores_what_the_kappa_step_took_from_a_slow_drift():
+    """Each bend's kappa is a regression on z, so it takes the part of a slow drift that follows a slow
+    excitation: the residual then reads the node error low. With z given, the floor is corrected by the expected
+    share (``kappa_step_absorption``); for white noise that share is ~1/T and nothing changes."""
+    from rce_gtsam.diagnosis.noise_floor_nodewise import angle_sensitivity, kappa_step_absorption, nodewise_floor
+    from rce_gtsam.model.compliance import fit_rank1
+    from rce_gtsam.presets import get_preset
+    config = get_preset("default").compliance
+    N, T = 16, 450
+    bends = [(i - 1, i, i + 1) for i in range(1, N - 1)]
+    low, corrected, white = [], [], []
+    for seed in range(6):
+        rng = np.random.default_rng(seed)
+        rest = _chain_rest(N, seed)
+        A = angle_sensitivity(bends, rest)
+        kappa = np.exp(rng.normal(0, 0.4, len(bends)))
+        z = np.convolve(rng.standard_normal(T + 300), np.ones(150) / 15, "same")[150:-150] * 3  # slow excitation
+        slow = np.array([np.convolve(rng.standard_normal(T + 300), np.ones(150) / 12, "same")[150:-150]
+                         for _ in range(N)])
+        noise = A @ (0.5 * slow / slow.std())  # deg: 0.5 px node errors as slow as the excitation
+        fit = fit_rank1(np.outer(kappa, z) + noise, config)
+        R = np.outer(kappa, z) + noise - fit.predict()
+        true = np.sqrt(np.mean(noise ** 2))
+        low.append(np.sqrt(np.mean(nodewise_floor(R, fit.kappa, bends, rest).variance_deg2)) / true)
+        nw = nodewise_floor(R, fit.kappa, bends, rest, z=fit.z)
+        corrected.append(np.sqrt(np.mean(nw.variance_deg2)) / true)
+        assert 0.02 < nw.absorbed <= 0.5
+        white.append(kappa_step_absorption(rng.standard_normal((len(bends), T)), z))
+    low, corrected = np.array(low), np.array(corrected)
+    # read 0.59-0.87 of the truth without the correction, 0.72-1.00 with it (an underestimate still: the
+    # residual's spectrum it is estimated from is short of the same part)
+    assert np.median(corrected) > np.median(low) + 0.1 and corrected.max() < 1.25, (low, corrected)
+    assert np.sum(np.abs(corrected - 1) < np.abs(low - 1)) >= 5
+    assert max(white) < 0.03  # 1/T expected (0.002); at most a few per cent moves the floor by a per cent

@@ -38,8 +38,9 @@ from .settings import RESOLUTION
 #: Relative accuracy (1 SD, as a share of its variance) of the model-free noise floor, carried into the budget's
 #: SE as a systematic term. Measured by ``benchmarks/bench_noise_floor.py`` on 20 effect-free simulated
 #: branches with white noise, drift and along/across ratio varied over seeds: floor / true angle-noise variance
-#: median 0.947, RMS relative error 0.099 (0.85 and 0.195 before the node-wise estimate raised it); under the tracker-
-#: artifact families the floor's RMS reads 0.74-1.17 of the truth (``benchmarks/bench_artifacts.py``), so the
+#: median 0.955, RMS relative error 0.094 (0.85 and 0.195 before the node-wise estimate raised it, 0.947 and 0.099
+#: before its kappa-step correction); under the tracker-artifact families the floor's RMS reads a median 0.84-1.13 of
+#: the truth per family and size (``benchmarks/bench_artifacts.py``), so the
 #: term keeps 0.2: this is the accuracy the floor has shown, not a bound.
 FLOOR_REL_SD = 0.2
 

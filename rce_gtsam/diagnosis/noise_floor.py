@@ -372,7 +372,7 @@ def nodewise_of(result, triples):
     row = {int(n): i for i, n in enumerate(result.tracks.node_ids)}
     rest = np.nanmedian(result.smoothed.tracks.xy, axis=1)
     rest_xy = {n: rest[row[n]] for t in triples for n in t}
-    return nodewise_floor(r.Y - fit.predict(), kappa, triples, rest_xy)
+    return nodewise_floor(r.Y - fit.predict(), kappa, triples, rest_xy, z=fit.z)
 
 
 def with_nodewise(nf: NoiseFloor, nodewise) -> NoiseFloor:

@@ -22,6 +22,14 @@ of the model that does not put *negative* covariance between neighbouring bends.
 on the simulator's effect recordings it reads 0.86-0.95 of the true noise, never above it. So it raises the
 floor only where the tracker's own signature says the noise is larger than the inextensibility estimate saw.
 
+The kappa step takes some noise too (:func:`kappa_step_absorption`): each bend's kappa is a regression on the
+excitation z, so the part of the bend's noise that follows z goes into the fit. For white noise that is ~1/T of
+its variance; for a slow drift under a slow excitation (both in the few lowest frequencies) it is a large part,
+and the residual's covariance then reads the node error low. s2 is divided by (1 - a), a the expected share.
+Measured (``benchmarks/bench_artifacts.py --floor-only``, drift family at twice its measured size): the floor
+read 0.77 of the true noise before, 0.91 with it; effect-free and effect recordings of the other families are
+unchanged to +-0.02.
+
 Units: px (positions, s2 in px^2), deg (angles, variances in deg^2).
 """
 
@@ -35,15 +43,48 @@ import numpy as np
 MIN_PAIRS = 4
 
 
+#: largest share of a frequency's noise power the kappa step is taken to remove (its share of z's power, w_k, is
+#: clipped here: a frequency holding nearly all of z's power would otherwise have its residual power multiplied
+#: without bound by 1 / (1 - w_k))
+MAX_BIN_SHARE = 0.9
+#: largest share of the noise variance the kappa step is taken to remove: the floor is at most doubled
+MAX_ABSORBED = 0.5
+
+
 @dataclass(frozen=True)
 class NodewiseFloor:
     """The node-wise floor. variance_deg2: (E,) s2 (A A')_jj per bend (deg^2; NaN = not estimable);
     sigma_px: sqrt(s2), the node error's SD across the branch (px; NaN = not estimable); n_pairs: node-sharing
-    bend pairs it rests on."""
+    bend pairs it rests on; absorbed: the share of the noise variance the kappa step took (s2 is corrected for
+    it; 0 = not corrected)."""
 
     variance_deg2: np.ndarray
     sigma_px: float
     n_pairs: int
+    absorbed: float = 0.0
+
+
+def kappa_step_absorption(residuals: np.ndarray, z: np.ndarray) -> float:
+    """Expected share a of a bend's noise variance that its own kappa takes into the rank-1 fit.
+
+    kappa_e is the regression of bend e on the excitation z, so it takes the projection of the bend's noise n on
+    z: an energy sum_k S_k |Z_k|^2 / sum_k |Z_k|^2 out of the noise's sum_t n^2 = 2 / T^2 sum_k S_k (T frames;
+    k the non-zero frequencies; S_k the noise periodogram, Z_k z's Fourier transform). So
+    a = (sum_k S_k w_k) / (2 sum_k S_k), w_k = |Z_k|^2 / sum_j |Z_j|^2: 1/T for white noise, a large share
+    when the noise sits at z's frequencies (a slow drift under a slow excitation). S_k comes from the residuals
+    (their periodograms summed over bends, :func:`~rce_gtsam.model.surrogates.residual_spectrum`), which the
+    same projection left short by about (1 - w_k): they are divided by it first (w_k clipped at
+    :data:`MAX_BIN_SHARE`). Clipped to [0, :data:`MAX_ABSORBED`]; 0 when z has no power."""
+    from ..model.surrogates import residual_spectrum
+
+    S = (np.abs(residual_spectrum(residuals)) ** 2).sum(axis=0)[1:]
+    zc = np.asarray(z, float)
+    Zp = np.abs(np.fft.rfft(np.where(np.isfinite(zc), zc - np.nanmean(zc), 0.0)))[1:] ** 2
+    if S.size == 0 or not (np.isfinite(Zp).all() and Zp.sum() > 0 and np.isfinite(S).all() and S.sum() > 0):
+        return 0.0
+    w = Zp / Zp.sum()
+    S = S / (1.0 - np.minimum(w, MAX_BIN_SHARE))
+    return float(np.clip((S * w).sum() / (2.0 * S.sum()), 0.0, MAX_ABSORBED))
 
 
 def angle_sensitivity(bends: list[tuple[int, int, int]], rest_xy: dict) -> np.ndarray:
@@ -64,9 +105,10 @@ def angle_sensitivity(bends: list[tuple[int, int, int]], rest_xy: dict) -> np.nd
 
 
 def nodewise_floor(residuals: np.ndarray, kappa: np.ndarray, bends: list[tuple[int, int, int]],
-                   rest_xy: dict) -> NodewiseFloor:
+                   rest_xy: dict, z: np.ndarray | None = None) -> NodewiseFloor:
     """The node-wise floor of the rank-1 ``residuals`` (E, T deg, NaN = missing) of a fit with gains ``kappa``
-    (E,: signed, kappa x direction) on ``bends`` with rest positions ``rest_xy`` (module docstring)."""
+    (E,: signed, kappa x direction) and excitation ``z`` (T,; None: no correction for what the kappa step took)
+    on ``bends`` with rest positions ``rest_xy`` (module docstring)."""
     E = len(bends)
     none = NodewiseFloor(np.full(E, np.nan), float("nan"), 0)
     A = angle_sensitivity(bends, rest_xy)
@@ -87,4 +129,7 @@ def nodewise_floor(residuals: np.ndarray, kappa: np.ndarray, bends: list[tuple[i
     if n_pairs < MIN_PAIRS or np.sum(Mt[pairs] ** 2) <= 0:
         return none
     s2 = max(float(np.sum(C[pairs] * Mt[pairs]) / np.sum(Mt[pairs] ** 2)), 0.0)
-    return NodewiseFloor(variance_deg2=s2 * np.diag(M), sigma_px=float(np.sqrt(s2)), n_pairs=n_pairs)
+    absorbed = 0.0 if z is None else kappa_step_absorption(residuals, z)
+    s2 /= 1.0 - absorbed
+    return NodewiseFloor(variance_deg2=s2 * np.diag(M), sigma_px=float(np.sqrt(s2)), n_pairs=n_pairs,
+                         absorbed=absorbed)
