@@ -295,3 +295,21 @@ def test_the_delay_numbers_the_pages_quote_are_the_records():
     limits = (DOCS / "limits.md").read_text().replace("\n", " ")
     assert (f"is found in {out_now} of {sum(r[3] for r in out)} recordings, where a test that knew the true lag "
             f"would find it in {oracle}") in limits.replace("  ", " ")
+
+
+def test_the_texture_bed_coverage_the_limits_page_quotes_is_the_record():
+    """limits.md quotes how often the texture bed's intervals hold the truth, overall and by quality verdict, from
+    the ``texture_bed`` record (our tracks at this revision; the quality breakdown in its notes)."""
+    import re
+    rec = _record("texture_bed")
+    cols = rec["columns"]
+    ours = [r for r in rec["rows"] if str(r[0]).startswith("our tracks, this revision")]
+    assert len(ours) == 1
+    overall = round(float(ours[0][cols.index("truth in 95 % CI (%)")]))
+    note = [n for n in rec["notes"] if n.startswith("segments by quality verdict, our tracks, this revision")][0]
+    share = {k: int(v) for k, v in re.findall(r"(quality ok|uninformative) \d+ \(\d+ %\): (\d+) % in CI", note)}
+    limits = (DOCS / "limits.md").read_text().replace("\n", " ")
+    said = (f"The intervals hold the truth for {overall} % of its segments, the `uninformative` ones for "
+            f"{share['uninformative']} %")
+    assert said in limits, said
+    assert f"the segments whose verdict was `ok` for only {share['quality ok']} %" in limits

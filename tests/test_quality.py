@@ -146,8 +146,9 @@ def test_real_plants_flag_the_segments_the_readme_names(shared_data):
     """Which segments of the two plants (TAPIR tracks, default preset) are ok, and how many are informative.
     The segments with R^2 < 0 (README, 'Quality of each kappa') are still poor_fit; with the rule "R^2 at least
     half of what the noise allows" most rank-1 segments of both plants are poor_fit too (kappa z explains less
-    than half of their signal; their bending is 13-165x the noise floor), and the intervals of 7 of 18 and 11
-    of 23 reach both below 0.71 and above 1.41 (uninformative). No node is lost long enough for calm_support."""
+    than half of their signal; their bending is 13-165x the noise floor), and the intervals of 12 of 18 and 18
+    of 23 reach both below 0.71 and above 1.41 (uninformative; 7 and 11 before the posterior floor of the intervals,
+    ``ComplianceConfig.posterior_floor``). No node is lost long enough for calm_support."""
     from rce_gtsam.pipeline import analyze
     from rce_gtsam.quality import assess_quality
 
@@ -155,7 +156,7 @@ def test_real_plants_flag_the_segments_the_readme_names(shared_data):
                    "plant_2": {"10->9", "8->7", "7->6", "1->0"}}
     negative_r2 = {"plant_1": {"9->8", "7->6", "3->2"},
                    "plant_2": {"23->22", "22->21", "21->20", "20->19", "9->8"}}
-    informative = {"plant_1": 11, "plant_2": 12}
+    informative = {"plant_1": 6, "plant_2": 5}
     for plant, ok in expected_ok.items():
         result = analyze(shared_data / plant / "tapir_tracks.csv", shared_data / plant / "branch_graph.json")
         df = result.summary().dropna(subset=["kappa"])
