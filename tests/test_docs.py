@@ -313,3 +313,16 @@ def test_the_texture_bed_coverage_the_limits_page_quotes_is_the_record():
             f"{share['uninformative']} %")
     assert said in limits, said
     assert f"the segments whose verdict was `ok` for only {share['quality ok']} %" in limits
+
+
+def test_the_gap_bias_numbers_the_limits_page_quotes_are_the_record():
+    """limits.md: kappa from the TRUE positions on the gust_occlusion visibility (1x / 2x), default preset (the
+    ``gap_bias`` record's 'before' rows: per-observation sigma, each bend's own median rest)."""
+    rec = _record("gap_bias")
+    cols = rec["columns"]
+    row = {r[0]: r for r in rec["rows"] if r[1].startswith("before")}
+    one, two = (row[f"sim gust_occlusion {x}: exact positions"] for x in ("1x", "2x"))
+    lr, cov = cols.index("kappa log-RMSE (mean)"), cols.index("truth in 95 % CI (%)")
+    said = (f"log-RMSE of {one[lr]:.2f} / {two[lr]:.2f} with the truth in its interval for only "
+            f"{round(one[cov])} % / {round(two[cov])} % of segments")
+    assert said in (DOCS / "limits.md").read_text().replace("\n", " "), said
