@@ -326,3 +326,27 @@ def test_the_gap_bias_numbers_the_limits_page_quotes_are_the_record():
     said = (f"log-RMSE of {one[lr]:.2f} / {two[lr]:.2f} with the truth in its interval for only "
             f"{round(one[cov])} % / {round(two[cov])} % of segments")
     assert said in (DOCS / "limits.md").read_text().replace("\n", " "), said
+
+
+def test_the_interval_and_floor_numbers_the_changelog_quotes_are_the_records():
+    """changelog.md: the intervals' posterior floor (texture bed and beam coverage, records ``texture_bed`` and
+    ``beam_effect_free``: now in a row, before in a note) and the drift floor (record ``artifacts``)."""
+    import re
+    text = (DOCS / "changelog.md").read_text().replace("\n  ", " ")
+    tex = _record("texture_bed")
+    now = [r for r in tex["rows"] if str(r[0]).startswith("our tracks, this revision")][0]
+    now = round(float(now[tex["columns"].index("truth in 95 % CI (%)")]))
+    before = re.search(r"\(([\d.]+) % before it", " ".join(tex["notes"])).group(1)
+    assert f"hold the truth for {now} % of segments (was {before} %; record `texture_bed`)" in text
+    beam = _record("beam_effect_free")
+    cov = beam["rows"][0][beam["columns"].index("CI coverage")].replace(" ", "")
+    was = re.search(r"(\d+) % without it", " ".join(beam["notes"])).group(1)
+    assert f"effect-free branches for {cov.rstrip('%')} % (was {was} %; record" in text
+    art = _record("artifacts")
+    cols = art["columns"]
+    drift2 = [r for r in art["rows"] if r[0] == "drift" and float(r[1]) == 2.0][0]
+    within = drift2[cols.index("within 25 %")]
+    med = drift2[cols.index("noise floor / true (median)")]
+    old = re.search(r"0\.53-0\.95 \((\d+) of 40, median ([\d.]+)\)", " ".join(art["notes"]))
+    assert (f"on {within} recordings (was {old.group(1)} of 40; median {med:.2f} of the truth, was {old.group(2)}; record "
+            f"`artifacts`)") in text
