@@ -5,7 +5,8 @@
 * ``"phase"`` (default preset): the fitted model plus phase-randomised residuals
   (:mod:`rce_gtsam.model.surrogates`), refitted; the resampled log-kappa deviations are widened for the few
   independent noise samples kappa's error rests on (:func:`excitation_dof`, :func:`small_sample_factor`) and for
-  shrinkage (:func:`posterior_widening`), then placed about the estimate (:func:`interval_about`).
+  shrinkage (:func:`posterior_widening`), then placed about the estimate (:func:`interval_about`); with
+  ``posterior_floor`` no narrower than the posterior the shrinkage implies (:func:`posterior_floor`).
 
 Entry point: :func:`bootstrap_kappa` -> :class:`BootstrapCI` (95 % percentile intervals, dimensionless like
 kappa). Resamples are refitted in batches of :func:`bootstrap_chunk` (memory bounded in the recording's length);
@@ -224,9 +225,10 @@ def posterior_floor(kappa_hat: np.ndarray, placed: np.ndarray, shrinkage: np.nda
     resamples stay the interval's. The resamples alone can be far narrower at a low signal-to-noise ratio: made
     from a kappa_hat z_hat that already holds some of the noise, they show less of it than the data have.
 
-    Measured (default preset, 200 resamples; truth in the interval, per segment): the texture bed with our
-    tracker's tracks (10 cases) 67 -> 84 %, with white 0.36 px node noise 72 -> 92 %; the simulator's effect-free
-    tracks (20 seeds, 900 frames) 93 -> 97 %, median width x1.81 -> x2.49. Returns (low, high, placed) like
+    Measured (default preset; truth in the interval, per segment): the texture bed with our tracker's tracks (10
+    cases, record ``texture_bed``) 66.5 -> 84 %, with white 0.36 px node noise there 72 -> 92 %; the beam
+    simulator's effect-free branches (40, record ``beam_effect_free``) 81 -> 96 %; the simulator's effect-free tracks
+    (20 seeds, 900 frames) 93 -> 97 %, median width x1.81 -> x2.49. Returns (low, high, placed) like
     :func:`interval_about`."""
     k = np.maximum(np.abs(np.asarray(kappa_hat, float)), EPS)
     s = np.clip(np.asarray(shrinkage, float), 0.0, 1.0)
