@@ -350,3 +350,13 @@ def test_the_interval_and_floor_numbers_the_changelog_quotes_are_the_records():
     old = re.search(r"0\.53-0\.95 \((\d+) of 40, median ([\d.]+)\)", " ".join(art["notes"]))
     assert (f"on {within} recordings (was {old.group(1)} of 40; median {med:.2f} of the truth, was {old.group(2)}; record "
             f"`artifacts`)") in text
+
+
+def test_the_prior_width_results_md_quotes_is_the_default_preset_s():
+    """results.md: an interval as wide as the prior's spans 'a factor of ~7 either way' (95 % of a log-normal prior
+    of SD tau = ``prior_sd_log``: exp(1.96 tau))."""
+    from rce_gtsam.presets import DEFAULT
+    import math
+    factor = round(math.exp(1.959964 * DEFAULT.compliance.prior_sd_log))
+    assert DEFAULT.compliance.posterior_floor
+    assert f"a factor of ~{factor} either way" in (DOCS / "results.md").read_text().replace("\n   ", " ")
