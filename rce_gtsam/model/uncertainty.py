@@ -231,7 +231,7 @@ def posterior_floor(kappa_hat: np.ndarray, placed: np.ndarray, shrinkage: np.nda
     (20 seeds, 900 frames) 93 -> 97 %, median width x1.81 -> x2.49. Returns (low, high, placed) like
     :func:`interval_about`."""
     k = np.maximum(np.abs(np.asarray(kappa_hat, float)), EPS)
-    s = np.clip(np.asarray(shrinkage, float), 0.0, 1.0)
+    s = np.clip(np.nan_to_num(np.asarray(shrinkage, float), nan=1.0), 0.0, 1.0)  # unknown: no floor
     half = float(special.ndtri(0.975)) * float(tau) * np.sqrt(1.0 - s) * float(factor)
     dev = np.log(np.maximum(placed, EPS)) - np.log(k)
     q_lo, q_hi = np.percentile(dev, [2.5, 97.5], axis=0)
