@@ -33,8 +33,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .model.surrogates import centred_observed, phase_randomised_residuals
-from .model.uncertainty import (BootstrapCI, block_bootstrap_indices, excitation_dof, interval_about,
-                                posterior_floor, posterior_widening, small_sample_factor)
+from .model.uncertainty import (BootstrapCI, block_bootstrap_indices, excitation_dof, interval_about, phase_interval,
+                                small_sample_factor)
 from .model import ResponseModel, validate_inputs
 from .model.row_sets import node_disjoint_split, shared_node_matrix
 from .model.starts import solve_from_starts
@@ -190,9 +190,7 @@ def bootstrap_extended(fit: ExtendedFit, config: ComplianceConfig, refit_shared:
         n_eff = excitation_dof(R, mf.z)
         factor = small_sample_factor(n_eff)
         shrink = mf.shrinkage if mf.shrinkage is not None else np.ones(E)
-        low, high, placed = interval_about(np.abs(mf.kappa), samples, factor * posterior_widening(shrink))
-        if config.posterior_floor and config.shrinkage == "precision":
-            low, high, placed = posterior_floor(np.abs(mf.kappa), placed, shrink, config.prior_sd_log, factor)
+        low, high, placed = phase_interval(np.abs(mf.kappa), samples, shrink, factor, config)
         ci = BootstrapCI(low=low, high=high, samples=placed, block_length=0, seed=config.seed, method="phase",
                          effective_samples=n_eff, width_factor=factor)
         scheme = (f"the fitted extended model plus phase-randomised residuals (surrogates.phase_randomised_residuals, "

@@ -22,7 +22,7 @@ from scipy import special  # t and normal quantiles; scipy.stats would add ~0.8 
 
 from ..presets import ComplianceConfig
 from .compliance import EPS, Rank1Fit, fit_batch, fit_rank1
-from .surrogates import draw_phases, residual_spectrum, surrogate_slice
+from .surrogates import draw_phases, pooled_periodogram, residual_spectrum, surrogate_slice
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,7 +102,7 @@ def excitation_dof(R: np.ndarray, z: np.ndarray) -> float:
     :func:`residual_spectrum`, the spectrum the surrogates are drawn from).
     Measured (default preset): 2.1 on plant 2, 4.0 on plant 1.
     """
-    S = (np.abs(residual_spectrum(R)) ** 2).sum(axis=0)
+    S = pooled_periodogram(R)
     if len(S) > 1:
         S[0] = S[1]  # the residual mean's noise power: the spectrum at the lowest frequency (as resampled)
     w = S * np.abs(np.fft.rfft(np.asarray(z, float))) ** 2
@@ -198,9 +198,7 @@ def _phase_bootstrap(Y, config: ComplianceConfig, weights, chunk: int, fit: Rank
     factor = small_sample_factor(n_eff)
     # deviations from the resamples' own median: data made from an already shrunk kappa_hat and shrunk
     # again sit further toward 1; that offset is the estimator's, not kappa's, uncertainty
-    low, high, samples = interval_about(fit.kappa, samples, factor * posterior_widening(fit.shrinkage))
-    if config.posterior_floor and config.shrinkage == "precision":
-        low, high, samples = posterior_floor(fit.kappa, samples, fit.shrinkage, config.prior_sd_log, factor)
+    low, high, samples = phase_interval(fit.kappa, samples, fit.shrinkage, factor, config)
     return BootstrapCI(low=low, high=high, samples=samples, block_length=0, seed=config.seed,
                        method="phase", effective_samples=n_eff, width_factor=factor)
 
@@ -210,6 +208,18 @@ def posterior_widening(shrinkage: np.ndarray) -> np.ndarray:
     log kappa_hat, while the posterior of the log-normal prior it comes from has sqrt(s) times its spread
     (1 for well-measured edges; a stiff edge buried in noise is pulled toward 1 and gets the prior's width)."""
     return 1.0 / np.sqrt(np.clip(shrinkage, 1e-6, 1.0))
+
+
+def phase_interval(kappa_hat: np.ndarray, samples: np.ndarray, shrinkage: np.ndarray, factor: float,
+                   config: ComplianceConfig) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The phase bootstrap's 95 % interval (the rank-1 fit's and the extended model's): the resampled log-kappa
+    deviations widened by the small-sample ``factor`` and for shrinkage (:func:`posterior_widening`), placed about
+    ``kappa_hat`` (:func:`interval_about`), and with ``config.posterior_floor`` (precision shrinkage) no narrower than
+    the posterior that shrinkage implies (:func:`posterior_floor`). Returns (low, high, placed)."""
+    low, high, placed = interval_about(kappa_hat, samples, factor * posterior_widening(shrinkage))
+    if config.posterior_floor and config.shrinkage == "precision":
+        low, high, placed = posterior_floor(kappa_hat, placed, shrinkage, config.prior_sd_log, factor)
+    return low, high, placed
 
 
 def posterior_floor(kappa_hat: np.ndarray, placed: np.ndarray, shrinkage: np.ndarray, tau: float,
