@@ -73,12 +73,12 @@ def kappa_step_absorption(residuals: np.ndarray, z: np.ndarray) -> float:
     k the non-zero frequencies; S_k the noise periodogram, Z_k z's Fourier transform). So
     a = (sum_k S_k w_k) / (2 sum_k S_k), w_k = |Z_k|^2 / sum_j |Z_j|^2: 1/T for white noise, a large share
     when the noise sits at z's frequencies (a slow drift under a slow excitation). S_k comes from the residuals
-    (their periodograms summed over bends, :func:`~rce_gtsam.model.surrogates.residual_spectrum`), which the
+    (their periodograms summed over bends, :func:`~rce_gtsam.model.surrogates.pooled_periodogram`), which the
     same projection left short by about (1 - w_k): they are divided by it first (w_k clipped at
     :data:`MAX_BIN_SHARE`). Clipped to [0, :data:`MAX_ABSORBED`]; 0 when z has no power."""
-    from ..model.surrogates import residual_spectrum
+    from ..model.surrogates import pooled_periodogram
 
-    S = (np.abs(residual_spectrum(residuals)) ** 2).sum(axis=0)[1:]
+    S = pooled_periodogram(residuals)[1:]
     zc = np.asarray(z, float)
     Zp = np.abs(np.fft.rfft(np.where(np.isfinite(zc), zc - np.nanmean(zc), 0.0)))[1:] ** 2
     if S.size == 0 or not (np.isfinite(Zp).all() and Zp.sum() > 0 and np.isfinite(S).all() and S.sum() > 0):

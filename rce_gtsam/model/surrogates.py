@@ -57,6 +57,12 @@ def residual_spectrum(R: np.ndarray) -> np.ndarray:
     return np.fft.rfft(centred_observed(R) * np.sqrt(R.shape[1] / np.maximum(n_obs, 1)), axis=1)
 
 
+def pooled_periodogram(R: np.ndarray) -> np.ndarray:
+    """(K,) the periodograms of the rows of R (E, T; NaN = missing) summed over rows: |:func:`residual_spectrum`|^2,
+    the power per frequency the surrogates are drawn with (R's units squared, unnormalised FFT)."""
+    return (np.abs(residual_spectrum(R)) ** 2).sum(axis=0)
+
+
 def centred_observed(R: np.ndarray) -> np.ndarray:
     """(E, T) rows of R (NaN = missing) less each row's mean over its observed frames, 0 where missing: the
     zero-filled series a Fourier transform of residuals with gaps starts from (a mean taken over the filled
