@@ -300,7 +300,6 @@ def test_the_delay_numbers_the_pages_quote_are_the_records():
 def test_the_texture_bed_coverage_the_limits_page_quotes_is_the_record():
     """limits.md quotes how often the texture bed's intervals hold the truth, overall and by quality verdict, from
     the ``texture_bed`` record (our tracks at this revision; the quality breakdown in its notes)."""
-    import re
     rec = _record("texture_bed")
     cols = rec["columns"]
     ours = [r for r in rec["rows"] if str(r[0]).startswith("our tracks, this revision")]
@@ -331,7 +330,6 @@ def test_the_gap_bias_numbers_the_limits_page_quotes_are_the_record():
 def test_the_interval_and_floor_numbers_the_changelog_quotes_are_the_records():
     """changelog.md: the intervals' posterior floor (texture bed and beam coverage, records ``texture_bed`` and
     ``beam_effect_free``: now in a row, before in a note) and the drift floor (record ``artifacts``)."""
-    import re
     text = (DOCS / "changelog.md").read_text().replace("\n  ", " ")
     tex = _record("texture_bed")
     now = [r for r in tex["rows"] if str(r[0]).startswith("our tracks, this revision")][0]
