@@ -169,21 +169,32 @@ def across_along_ratio(raw_xy: np.ndarray, tangent: np.ndarray) -> float:
     return float(np.median(ratios)) if ratios else 1.0
 
 
-def smoother_white_gain(presmooth_window: int, measurement_weight: float, velocity_weight: float,
-                        acceleration_weight: float, n_freq: int = 4096) -> float:
-    """Share of a white input's variance that the smoother passes (0..1), per coordinate.
+def smoother_response(f: np.ndarray, presmooth_window: int, measurement_weight: float, velocity_weight: float,
+                      acceleration_weight: float) -> np.ndarray:
+    """The smoother's gain |H(f)| per coordinate at frequencies ``f`` (cycles/frame, 0..0.5).
 
     The smoother minimises w_m sum (x - y)^2 + w_v sum (dx)^2 + w_a sum (d2x)^2 (after an optional centred
     moving average), a linear time-invariant filter away from the ends with
-    H(f) = MA(f) w_m / (w_m + w_v |1 - e^(-i w)|^2 + w_a |1 - e^(-i w)|^4); the gain is the mean of |H|^2
-    over frequency. The edge prior (paper preset) is ignored: it couples nodes, not frames."""
-    f = (np.arange(n_freq) + 0.5) / (2 * n_freq)  # (0, 0.5) cycles/frame
+    H(f) = MA(f) w_m / (w_m + w_v |1 - e^(-i w)|^2 + w_a |1 - e^(-i w)|^4). The edge prior (paper preset) is
+    ignored: it couples nodes, not frames."""
+    f = np.asarray(f, float)
     d2 = np.abs(1 - np.exp(-2j * np.pi * f)) ** 2
     H = measurement_weight / (measurement_weight + velocity_weight * d2 + acceleration_weight * d2 ** 2)
     if presmooth_window and presmooth_window > 1:
         n = int(presmooth_window)
         w = 2 * np.pi * f
-        H = H * np.abs(np.sin(n * w / 2) / (n * np.sin(w / 2)))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ma = np.abs(np.sin(n * w / 2) / (n * np.sin(w / 2)))
+        H = H * np.where(f == 0, 1.0, ma)
+    return H
+
+
+def smoother_white_gain(presmooth_window: int, measurement_weight: float, velocity_weight: float,
+                        acceleration_weight: float, n_freq: int = 4096) -> float:
+    """Share of a white input's variance that the smoother passes (0..1), per coordinate: the mean of
+    |H(f)|^2 over frequency (:func:`smoother_response`)."""
+    f = (np.arange(n_freq) + 0.5) / (2 * n_freq)  # (0, 0.5) cycles/frame
+    H = smoother_response(f, presmooth_window, measurement_weight, velocity_weight, acceleration_weight)
     return float(np.mean(H ** 2))
 
 
@@ -340,15 +351,21 @@ def estimate_noise_floor(raw_xy: np.ndarray, smoothed_xy: np.ndarray, node_ids, 
                       coherent_share=coherent)
 
 
-def noise_floor_of(result) -> NoiseFloor:
-    """:func:`estimate_noise_floor` of an :class:`~rce_gtsam.pipeline.AnalysisResult` (its response rows)."""
-    r = result.response
+def smoother_weights(result) -> tuple[int, float, float, float]:
+    """(presmooth window, w_m, w_v, w_a) of ``result``'s smoother as :func:`smoother_response` takes them: w_m
+    from the tracks' median sigma_px where they carry one (1 / sigma^2), else the preset's."""
     sm = result.preset.smoother
     w_m = sm.measurement_weight
     sig = result.tracks.sigma_px
     if sig is not None and np.isfinite(sig).any():
         w_m = float(np.nanmedian(1.0 / np.asarray(sig)[np.isfinite(sig)] ** 2))
-    gain = smoother_white_gain(sm.presmooth_window, w_m, sm.velocity_weight, sm.acceleration_weight)
+    return sm.presmooth_window, w_m, sm.velocity_weight, sm.acceleration_weight
+
+
+def noise_floor_of(result) -> NoiseFloor:
+    """:func:`estimate_noise_floor` of an :class:`~rce_gtsam.pipeline.AnalysisResult` (its response rows)."""
+    r = result.response
+    gain = smoother_white_gain(*smoother_weights(result))
     bends = [result.bending.bends[k] for k in r.bend_rows]
     raw_angle = result.raw_bending.angle_deg[r.bend_rows]
     nodes = [frozenset((b.grandparent, b.joint, b.child)) for b in bends]

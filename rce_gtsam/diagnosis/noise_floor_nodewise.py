@@ -120,8 +120,9 @@ def nodewise_floor(residuals: np.ndarray, kappa: np.ndarray, bends: list[tuple[i
     k = k / np.linalg.norm(k)
     P = np.eye(E) - np.outer(k, k)
     Mt = P @ M @ P
-    R = residuals - np.nanmean(residuals, axis=1, keepdims=True)
-    ok = np.isfinite(R)
+    ok = np.isfinite(residuals)
+    means = np.nansum(residuals, axis=1, keepdims=True) / np.maximum(ok.sum(axis=1, keepdims=True), 1)
+    R = residuals - means  # a row with no finite entry stays all-NaN (no warning)
     R0 = np.where(ok, R, 0.0)
     both = ok.astype(float) @ ok.T.astype(float)
     C = (R0 @ R0.T) / np.maximum(both, 1.0)
