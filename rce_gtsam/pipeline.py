@@ -11,6 +11,7 @@ import dataclasses
 import time
 import warnings
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -247,6 +248,16 @@ class AnalysisResult:
             return None
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(self.fit.kappa > 1e-9, (self.ci.high - self.ci.low) / self.fit.kappa, np.nan)
+
+    @cached_property
+    def kappa_floor(self):
+        """What limits kappa on this recording: the accuracy the tracker's node error (estimated from the rank-1
+        residuals) allows on this branch and this bending (:class:`~rce_gtsam.kappa_floor.KappaFloor`,
+        computed once; seed: the preset's). None for an extended model's fit, or where it cannot be computed."""
+        if self.effects:
+            return None
+        from .kappa_floor import kappa_floor_of
+        return kappa_floor_of(self, seed=self.preset.compliance.seed)
 
     def summary(self):
         from .results import compliance_summary

@@ -141,6 +141,7 @@ def report_dict(result) -> dict:
         "excitation_rms_deg": float(np.sqrt(np.mean(fit.z**2))),
         "timings_s": result.timings_s,
         "quality": quality_report(result),
+        "kappa_floor": None if getattr(result, "kappa_floor", None) is None else result.kappa_floor.as_dict(),
         **({"effects": result.effects_report()} if getattr(result, "effects", None) else {}),
         **({"kappa_to_report": result.kappa_choice.as_dict()}
            if getattr(result, "kappa_choice", None) is not None else {}),

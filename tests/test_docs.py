@@ -358,3 +358,26 @@ def test_the_prior_width_results_md_quotes_is_the_default_preset_s():
     factor = round(math.exp(1.959964 * DEFAULT.compliance.prior_sd_log))
     assert DEFAULT.compliance.posterior_floor
     assert f"a factor of ~{factor} either way" in (DOCS / "results.md").read_text().replace("\n   ", " ")
+
+
+def test_the_kappa_floor_numbers_results_md_quotes_are_the_record():
+    """results.md, 'What limits κ': the floor against the measured error on the simulator (white 0.3 px and 1 px)
+    and on the texture bed (our tracks), from the ``kappa_floor`` record."""
+    rec = _record("kappa_floor")
+    cols = rec["columns"]
+    row = {r[0]: r for r in rec["rows"]}
+    c = {k: cols.index(v) for k, v in (("e", "estimated e (px, median)"), ("m", "measured log-RMSE (RMS)"),
+                                        ("f", "floor, estimated e (RMS)"), ("r", "measured / floor (median)"),
+                                        ("w", "within x1.5 of the floor (%)"),
+                                        ("b", "segments whose angle noise exceeds the bending (%)"))}
+    text = " ".join((DOCS / "results.md").read_text().split())
+    w3, w1, bed = row["simulator, white 0.3 px"], row["simulator, white 1 px"], row["texture bed, our tracks"]
+    assert (f"e was estimated as {w3[c['e']]} px. κ's measured log-RMSE was {w3[c['m']]} against a floor of "
+            f"{w3[c['f']]}, and within a factor 1.5 of the floor on {w3[c['w']]} % of {w3[1]} recordings") in text
+    assert (f"on {w1[c['b']]} % of segments, the measured error was {w1[c['r']]}× the floor") in text
+    assert (f"gave κ a log-RMSE of {bed[c['m']]} against a floor of {bed[c['f']]}") in text
+    assert f"below the noise on {bed[c['b']]} % of segments" in text
+    # the module's docstring quotes the two low-signal ratios
+    code = (REPO / "rce_gtsam" / "kappa_floor.py").read_text()
+    bed_white = row["texture bed, truth + white, our error's RMS"]
+    assert f"was {w1[c['r']]}x (simulator, 1 px) to {bed_white[c['r']]}x (texture bed, white noise) the floor" in code

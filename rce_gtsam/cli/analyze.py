@@ -253,6 +253,9 @@ def format_summary(result) -> str:
     info = informative_line(assess_quality(result))
     if info:
         lines.append(info)
+    floor = getattr(result, "kappa_floor", None)
+    if floor is not None and floor.line():
+        lines.append(floor.line())
     tot = result.timings_s.get("total", float("nan"))
     waited = " wall, from the command's start" if "imports" in result.timings_s else ""
     lines.append(f"\ntotal {tot:.2f} s{waited} (" + ", ".join(f"{k} {v:.2f}" for k, v in result.timings_s.items()
