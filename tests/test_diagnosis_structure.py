@@ -103,4 +103,10 @@ def test_every_test_reports_in_the_common_shape():
         if "heldout_null" in c.tests:
             sig = drift_rescued(c.tests)
         assert sig == c.extra["significant"]
+        # the route the report quotes is the decision's, recorded beside it
+        route = c.extra["significant_by"]
+        if not sig:
+            assert route is None
+        else:
+            assert route == ("held-out" if fold.statistic > fold.threshold else "full-data"), (c.effect, route)
     assert d.report() and "[[Candidates]]" in d.report() and d.explanation in d.report()

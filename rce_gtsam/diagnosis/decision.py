@@ -28,7 +28,6 @@ effect share one share), with the folds' t quantiles on (folds - 1) dof (:func:`
   held-out error significantly (fold t <= t(1 - alpha / n)) and its time course, where it has one, is the own
   term's (phase-surrogate p <= the own level: :func:`~rce_gtsam.diagnosis.verdict.weigh_beside_own`)
   (:mod:`rce_gtsam.diagnosis.own_family`, :func:`own_supported`).
-
 * **one node** (last, in :func:`~rce_gtsam.diagnosis.diagnose.diagnose`): the verdict stands only if, without the
   bends of the node that carries most of its in-sample gain, the effect still lowers the held-out error (fold t
   > 0, :mod:`rce_gtsam.diagnosis.one_node`); an own-family effect's test must hold without that node's segments
@@ -67,12 +66,10 @@ class Levels:
 def levels(alpha: float, n_findings: int, n_folds: int) -> Levels:
     """The :class:`Levels` for ``n_findings`` findings and ``n_folds`` scored folds.
 
-    alpha is shared among the findings the candidates can name, not the candidates: two forms of one effect
-    (dynamics graded along the branch, and per joint: resonances) test one physical hypothesis with strongly
-    correlated statistics, so splitting alpha between them would only cost every other effect power (a sixth
-    share moved the score tests' threshold from 0.005 to 0.0042 and lost borderline lags: dynamics 0.75x seed
-    1, delay p = 0.0050). The nominal family-wise bound becomes (n_candidates / n_findings) alpha (6 % for six
-    candidates of five findings); measured on effect-free pipeline data: 0 of 40 verdicts (bench_diagnose)."""
+    alpha is shared among the findings, not the candidates: two forms of one effect (dynamics, resonances) test one
+    hypothesis with correlated statistics (a sixth share lost borderline lags: dynamics 0.75x seed 1, delay p =
+    0.0050). The nominal family-wise bound becomes (n_candidates / n_findings) alpha; measured on effect-free
+    pipeline data: 0 of 40 verdicts (bench_diagnose)."""
     n_c, dof = max(n_findings, 1), max(int(n_folds) - 1, 1)
     return Levels(alpha=alpha, n_findings=n_c, t_crit=float(stats.t.ppf(1 - alpha / n_c, dof)),
                   t_crit_split=float(stats.t.ppf(1 - alpha / (2 * n_c), dof)), p_score=alpha / (2 * n_c),
@@ -105,17 +102,25 @@ def support_t(lv: Levels, excitation: str | None) -> float:
     return 0.0 if excitation in ARTIFACT_CALIBRATED else lv.t_support
 
 
+def significance_route(tests: dict, lv: Levels, both: bool = False, excitation: str | None = None) -> str | None:
+    """:func:`is_significant` on a candidate's ``tests`` ("fold_t", and "score" where it has one; ``both``: the
+    effect's ``needs_both_tests``; ``excitation``: its score test's version), as the test that made it true, which the
+    report quotes: "held-out" (the fold t), "full-data" (the score test beside a fold t above its support),
+    "both", or None (not significant)."""
+    score, t = tests.get("score"), tests["fold_t"]
+    if not is_significant(t.statistic, t.threshold, None if score is None else score.p, lv.p_score,
+                          -np.inf if score is None else support_t(lv, excitation), both=both):
+        return None
+    fold = bool(np.isfinite(t.statistic) and t.statistic > t.threshold)
+    return "both" if both and score is not None else "held-out" if fold else "full-data"
+
+
 def significant(tests: dict, lv: Levels, both: bool = False, excitation: str | None = None) -> bool:
-    """:func:`is_significant` on a candidate's ``tests`` (``"fold_t"``, and ``"score"`` where it has one); ``both``:
-    the effect's :attr:`~rce_gtsam.effects.Effect.needs_both_tests`; ``excitation``: its score test's version."""
-    score = tests.get("score")
-    return is_significant(tests["fold_t"].statistic, tests["fold_t"].threshold, None if score is None else score.p,
-                          lv.p_score, -np.inf if score is None else support_t(lv, excitation), both=both)
+    return significance_route(tests, lv, both, excitation) is not None
 
 
 def asks_drift_checks(basis, significant_by_fold_t: bool, has_score: bool) -> bool:
-    """An effect of per-segment time courses (``basis`` not None) significant by its fold t alone needs the
-    drift checks (:func:`~rce_gtsam.diagnosis.evidence.drift_checks`)."""
+    """Per-segment time courses (``basis``) significant by the fold t alone need the drift checks (evidence.py)."""
     return basis is not None and significant_by_fold_t and not has_score
 
 
@@ -175,11 +180,10 @@ def support_richer_forms(results: list, ask, b_rmse: float, resolution: float, p
 
 
 def decide(results: list, ask, lv: Levels, b_rmse: float, resolution: float, node_disjoint: bool, beside=None):
-    """The verdict among ``results`` (sorted by held-out RMSE, ``supported`` set): the lag's richer forms where
-    the row sets share no node (the encompassing test needs that), the encompassing tests the parsimony rule
-    reads, then :func:`~rce_gtsam.diagnosis.verdict.choose_verdict` (``beside``: the nested test of a bend verdict
-    beside a supported own-family candidate, :func:`~rce_gtsam.diagnosis.verdict.choose_with_own_last`). Returns (results, verdict effect or None,
-    the parsimony record)."""
+    """(results, verdict effect or None, the parsimony record) among ``results`` (sorted by held-out RMSE,
+    ``supported`` set): the lag's richer forms where the row sets share no node (the encompassing test needs that),
+    the encompassing tests the parsimony rule reads, then :func:`~rce_gtsam.diagnosis.verdict.choose_with_own_last`
+    (``beside``: the nested test of a bend verdict beside a supported own-family candidate)."""
     if node_disjoint:
         results = support_richer_forms(results, ask, b_rmse, resolution, lv.p_score)
         weigh_the_leading(results, ask, lv.t_crit, lv.p_score)

@@ -105,8 +105,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     for eff, model, full, starts in fulls:
         ev = candidate_evidence(h, eff, model, full, starts, lv)
         # 3. decision, per candidate: significant (with the drift checks where it asks for them), supported
-        extra, sig = ev.numbers, decision.significant(ev.tests, lv, both=eff.needs_both_tests,
-                                                      excitation=eff.score_excitation)
+        route = decision.significance_route(ev.tests, lv, both=eff.needs_both_tests, excitation=eff.score_excitation)
+        extra, sig = ev.numbers, route is not None
         if "score" in ev.tests:
             extra["support_threshold_t"] = decision.support_t(lv, eff.score_excitation)
         if decision.asks_drift_checks(ev.basis, sig, ev.score is not None):
@@ -114,7 +114,9 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
             sig = decision.drift_rescued(ev.tests)
         if eff.own_family:  # its own test at its own level (own_family.py)
             sig = own_test_significant(eff, base, seed, extra)
+            route = "own"
         extra["significant"] = sig
+        extra["significant_by"] = route if sig else None
         if starts:
             extra.update({"start_cross_prediction_sse": starts["errors"], "start_chosen": starts["chosen"],
                           "start_lowest_in_sample": starts["lowest_in_sample"]})

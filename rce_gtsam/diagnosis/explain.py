@@ -321,9 +321,10 @@ def explain(diag: Diagnosis) -> str:
         lines.append("Also supported (partly mimicking the same misfit, or further effects): " + ", ".join(others)
                      + "; refit with the verdict effect added and diagnose again to separate them.")
     if diag.budget is not None:
-        by_score = (not own and c.evidence <= diag.settings.get("evidence_threshold_t_split", np.inf)
-                    and score_is_significant(c.extra.get("score_p"), c.extra.get("score_threshold_p", 0.0)))
-        which = "its own" if own else ("the full-data" if by_score else "the held-out")
+        # the route the decision recorded (decision.significance_route); a diagnosis saved before it: the held-out
+        by = "own" if own else c.extra.get("significant_by")
+        which = {"own": "its own", "full-data": "the full-data", "both": "the held-out and the full-data"}.get(
+            by, "the held-out")
         lines.append(f"The variance budget is scored after adding {c.effect}: "
                      f"{remainder_text(diag.budget, c.effect).split(': ', 1)[1]}. That is about the rest, not "
                      f"about {c.effect}, which {which} test above names.")
