@@ -97,7 +97,8 @@ class KappaFloor:
                 + (f"; on {buried} of {ok.sum()} segments the noise exceeds the bending" if buried else "")
                 + f".\n  That error alone, were it white, allows kappa to about x{np.exp(self.log_rmse):.2f} "
                 f"(log-RMSE {self.log_rmse:.2f}); x{np.exp(self.log_rmse_half_error):.2f} with half of it (a 2x "
-                f"zoom or a better tracker). An error that follows the motion costs more")
+                f"zoom or a better tracker). Intervals much wider than that: an error that follows the motion, or a "
+                f"model that misses something")
         if buried > ok.sum() / 2:
             text += ("; with the noise above the bending on most segments the recording cannot show how uneven the "
                      "branch is, and the floor is only a rough guide")
