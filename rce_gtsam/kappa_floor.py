@@ -193,7 +193,9 @@ def kappa_floor(z: np.ndarray, direction: np.ndarray, kappa_raw: np.ndarray, obs
 def kappa_floor_of(result, node_error_px: float | None = None, n_draws: int = N_DRAWS,
                    seed: int = 0) -> KappaFloor | None:
     """:func:`kappa_floor` of an :class:`~rce_gtsam.pipeline.AnalysisResult`'s rank-1 fit. ``node_error_px``: None
-    takes the node-wise noise floor's estimate from the fit's residuals (source "estimated from the residuals")."""
+    takes the node-wise noise floor's estimate from the fit's residuals (source "estimated from the residuals"), or,
+    where too few bends share a node for it, the tracker's median sigma_px (source "the tracker's own sigma"); None
+    where neither exists."""
     from .diagnosis.noise_floor import nodewise_of, smoother_response, smoother_weights
 
     fit = getattr(result, "fit", None)
@@ -209,6 +211,10 @@ def kappa_floor_of(result, node_error_px: float | None = None, n_draws: int = N_
         gain = float(np.mean(smoother_response(np.fft.rfftfreq(r.Y.shape[1]), *smoother) ** 2))
         node_error_px = float("nan") if nw is None else nw.sigma_px / np.sqrt(gain)
         source = "estimated from the residuals"
+        sig = result.tracks.sigma_px
+        if not np.isfinite(node_error_px) and sig is not None and np.isfinite(sig).any():
+            # too few bends sharing a node to read it from the residuals (MIN_PAIRS): the tracker's own word
+            node_error_px, source = float(np.nanmedian(sig)), "the tracker's own sigma"
     row = {int(n): i for i, n in enumerate(result.tracks.node_ids)}
     rest = np.nanmedian(result.smoothed.tracks.xy, axis=1)
     rest_xy = {n: rest[row[n]] for b in bends for n in b}

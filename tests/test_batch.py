@@ -10,6 +10,7 @@ import json
 from collections import Counter
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -94,6 +95,16 @@ def test_summary_matches_each_recording_and_reports_the_broken_one(inputs, first
         assert (mine.verdict == (diag["verdict"] or "none")).all()
         assert (mine.diagnosis_status == diag["status"]).all() and diag["status"] in {
             "effect", "adequate", "misses", "inconclusive"}
+        # what limits kappa, per recording: its report.json's floor
+        floor = json.loads((out / r["id"] / "report.json").read_text())["kappa_floor"]
+        if floor is None:  # too few bends to read the tracker's error from the residuals, and no sigma_px
+            assert mine.tracker_error_px.isna().all() and mine.kappa_floor.isna().all()
+        else:
+            assert np.allclose(mine.tracker_error_px, floor["node_error_px"]) and floor["node_error_px"] > 0
+            assert np.allclose(mine.kappa_floor, floor["log_rmse"]) and floor["log_rmse"] > 0
+    floors = [json.loads((out / r["id"] / "report.json").read_text())["kappa_floor"] for r in rows
+              if r["id"] != "broken"]
+    assert sum(f is not None for f in floors) >= 1
     assert set(summary[summary.id == "v1"].kind) == {"video"}
     doc = json.loads((out / "summary.json").read_text())
     assert doc["batch"]["n_recordings"] == 7 and doc["batch"]["n_failed"] == 1 and doc["batch"]["n_computed"] == 6
@@ -103,6 +114,8 @@ def test_summary_matches_each_recording_and_reports_the_broken_one(inputs, first
     assert by_id["p1"]["budget"]["status"] in {"noise", "misses", "inconclusive"}
     assert by_id["p1"]["diagnosis_status"] == json.loads((out / "p1" / "diagnosis.json").read_text())["status"]
     assert len(by_id["p1"]["segments"]) == len(summary[summary.id == "p1"])
+    assert (by_id["p1"]["kappa_floor"] or {}).get("log_rmse", np.nan) == pytest.approx(
+        summary[summary.id == "p1"].kappa_floor.iloc[0], nan_ok=True)
     for name in ("kappa_by_zone.png", "verdicts.png", "uncertainty.png"):
         assert (out / "figures" / name).stat().st_size > 10_000
     from rerun.chunk import RrdReader

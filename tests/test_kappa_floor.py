@@ -91,3 +91,18 @@ def test_rce_analyze_prints_it_and_writes_it(tmp_path):
     assert rep["node_error_px"] == pytest.approx(0.5, rel=0.25)
     assert rep["log_rmse_half_error"] < rep["log_rmse"]
     assert len(rep["log_sd_per_segment"]) == len(rep["segment_px"])
+
+
+def test_a_short_branch_falls_back_on_the_tracker_s_own_sigma():
+    # three bends on a chain share too few node pairs (3) to read the error from the residuals
+    from rce_gtsam.sim.simulate import NoiseConfig
+    sim = simulate(SimulationConfig(n_nodes=5, n_frames=300, seed=0,
+                                    noise=NoiseConfig(sigma_across_px=0.4, along_ratio=1.0, tip_factor=1.0,
+                                                      drift_px=0.0, gap_rate=0.0, jump_prob=0.0, emit_sigma=True)))
+    r = analyze(sim.tracks, sim.graph, n_boot=0)
+    f = r.kappa_floor
+    assert f is not None and f.source == "the tracker's own sigma"
+    assert f.node_error_px == pytest.approx(float(np.nanmedian(sim.tracks.sigma_px)))
+    bare = analyze(type(sim.tracks)(node_ids=sim.tracks.node_ids, xy=sim.tracks.xy, source="no sigma"), sim.graph,
+                   n_boot=0)
+    assert bare.kappa_floor is None

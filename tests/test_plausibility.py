@@ -107,20 +107,20 @@ def test_the_report_says_why_a_saturation_with_one_test_was_not_named():
 
 
 def test_the_diagnosis_asks_a_saturation_for_both_tests(monkeypatch):
-    """diagnose hands each candidate's flag to the decision's significance rule (a nonlinear fit on a branch is
+    """diagnose hands each candidate's flag to the decision's significance route (a nonlinear fit on a branch is
     asked for both tests, the others for either)."""
     from rce_gtsam.diagnosis import decision
     from rce_gtsam.diagnosis.diagnose import diagnose
     from rce_gtsam.sim.simulate import SimulationConfig, simulate
 
     seen = []
-    real = decision.significant
+    real = decision.significance_route
 
     def spy(tests, lv, both=False, excitation=None):
         seen.append(both)
         return real(tests, lv, both=both, excitation=excitation)
 
-    monkeypatch.setattr(decision, "significant", spy)
+    monkeypatch.setattr(decision, "significance_route", spy)
     sim = simulate(SimulationConfig(seed=1, n_frames=200, n_nodes=10))
     Y = sim.response_true + np.random.default_rng(0).normal(0, 0.3, sim.response_true.shape)
     s = np.linspace(0.05, 1, Y.shape[0])

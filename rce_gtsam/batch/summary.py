@@ -4,13 +4,15 @@
 (video / tracks), ``preset``, ``verdict`` (the diagnosis' missing effect, ``none`` when the rank-1 model is
 not beaten), ``diagnosis_status`` (what a ``none`` means: ``adequate`` — the rest is at the noise floor —,
 ``misses`` — more than noise is left and no candidate explains it —, ``inconclusive``; ``effect`` with a
-verdict; diagnosis.json's ``status``), then every column of the recording's ``compliance_summary.csv`` for
+verdict; diagnosis.json's ``status``), ``tracker_error_px`` and ``kappa_floor`` (what limits kappa: the tracker's
+error across the branch estimated from the residuals, px, and the kappa log-RMSE that error alone allows;
+report.json's ``kappa_floor``, empty without one), then every column of the recording's ``compliance_summary.csv`` for
 each segment with a bend (parent, child, depth, zone, root_distance_px, rest_length_px, kappa, kappa_ci_low,
 kappa_ci_high, uncertainty = U_e, a ``quality`` column when the analysis writes one, ..., fit_rmse_deg), and ``error``.
 A failed recording has one row with its error and empty segment columns.
 
 ``summary.json``: ``{"batch": {...counts, timing, manifest, options...}, "recordings": [{id, status,
-error, metadata, verdict, diagnosis_status, budget, explanation, heldout_rmse_deg: {baseline, verdict},
+error, metadata, verdict, diagnosis_status, budget, explanation, kappa_floor, heldout_rmse_deg: {baseline, verdict},
 elapsed_s, worker, folder, segments: [...]}, ...]}``.
 """
 
@@ -26,7 +28,8 @@ from .manifest import Manifest
 from .process import Outcome
 
 #: Per-recording columns that come before the segment columns.
-RECORDING_COLUMNS = ("id", "status", "kind", "preset", "verdict", "diagnosis_status")
+RECORDING_COLUMNS = ("id", "status", "kind", "preset", "verdict", "diagnosis_status", "tracker_error_px",
+                     "kappa_floor")
 
 
 @dataclass(frozen=True)
@@ -43,6 +46,7 @@ class RecordingSummary:
     segments: pd.DataFrame
     diagnosis: dict | None
     folder: Path
+    kappa_floor: dict | None = None
 
     @property
     def verdict(self) -> str | None:
@@ -63,17 +67,18 @@ def read_recordings(manifest: Manifest, out: Path, outcomes: dict[str, Outcome],
     for rec in manifest.recordings:
         folder = out / rec.id
         oc = outcomes[rec.id]
-        segments, diagnosis, preset = pd.DataFrame(), None, None
+        segments, diagnosis, preset, floor = pd.DataFrame(), None, None, None
         if oc.status != "failed":
             comp = pd.read_csv(folder / "compliance_summary.csv")
             segments = comp[comp["kappa"].notna() | (comp["n_frames"] > 0)].reset_index(drop=True)
             diagnosis = json.loads((folder / "diagnosis.json").read_text())
-            preset = json.loads((folder / "report.json").read_text())["preset"]["name"]
+            report = json.loads((folder / "report.json").read_text())
+            preset, floor = report["preset"]["name"], report.get("kappa_floor")
         else:
             preset = options.preset_for(rec).name
         rows.append(RecordingSummary(id=rec.id, status="failed" if oc.status == "failed" else "ok", kind=rec.kind,
                                      preset=preset, metadata=dict(rec.metadata), outcome=oc, segments=segments,
-                                     diagnosis=diagnosis, folder=folder))
+                                     diagnosis=diagnosis, folder=folder, kappa_floor=floor))
     return rows
 
 
@@ -85,8 +90,10 @@ def summary_table(manifest: Manifest, recordings: list[RecordingSummary]) -> pd.
             if c not in seg_cols:
                 seg_cols.append(c)
     for r in recordings:
+        floor = r.kappa_floor or {}
         head = {"id": r.id, **r.metadata, "status": r.status, "kind": r.kind, "preset": r.preset,
-                "verdict": r.verdict, "diagnosis_status": r.diagnosis_status}
+                "verdict": r.verdict, "diagnosis_status": r.diagnosis_status,
+                "tracker_error_px": floor.get("node_error_px"), "kappa_floor": floor.get("log_rmse")}
         if r.segments.empty:
             df = pd.DataFrame([head])
         else:
@@ -117,7 +124,7 @@ def summary_document(manifest: Manifest, recordings: list[RecordingSummary], bat
             "error": r.outcome.error, "error_kind": r.outcome.error_kind, "computed": r.outcome.status != "skipped",
             "elapsed_s": r.outcome.elapsed_s, "worker": r.outcome.worker, "folder": str(r.folder.resolve()),
             "verdict": r.verdict, "diagnosis_status": r.diagnosis_status, "budget": d.get("budget"),
-            "explanation": d.get("explanation"),
+            "explanation": d.get("explanation"), "kappa_floor": r.kappa_floor,
             "heldout_rmse_deg": None if r.diagnosis is None else {
                 "baseline": (d.get("baseline") or {}).get("heldout_rmse"),
                 "verdict": cand[verdict].get("heldout_rmse") if verdict in cand else None},
