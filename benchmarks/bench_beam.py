@@ -154,6 +154,12 @@ def best(rows: list[dict], key: str) -> str:
     return f"{r[key]} of {r['n']} at x{r['mult']:g}" if r[key] else "none at any strength tried"
 
 
+def effect_free_outcomes(cache: str, frames: int) -> list[dict]:
+    """The effect-free cases' outcomes (verdicts) in ``cache`` at ``frames`` frames (bootstrap at the preset's)."""
+    import json
+    return [json.loads(p.read_text()) for p in sorted(Path(cache).glob(f"none_*_{frames}_bootpreset.outcome.json"))]
+
+
 def curve_mode(a, effects: list[str]) -> int:
     """``--curve``: pass rate against strength per effect from the outcomes in ``--cache`` (``--frames``), the 90 %
     points of the diagnosis and its oracle (:func:`beam_curve.curve`); ``--record NAME`` saves it."""
@@ -195,9 +201,17 @@ def curve_mode(a, effects: list[str]) -> int:
                                  f"{row['right']} of {row['n']}", f"{row['oracle']} of {row['n']}",
                                  _rounded(row["effect_rms_deg"], 2), _rounded(row["noise_rms_deg"], 2),
                                  _rounded(row["max_joint_deg"], 1), _rounded(row["tip_pct"], 0), rules[0], rules[1]])
+                n_all = sum(row["n"] for row in r["rows"])
                 notes.append(f"{eff}, {frames} frames: 90 % point: diagnosis {fmt_point(r['diagnosis_90'])}, oracle "
                              f"{fmt_point(r['oracle_90'])}, ratio {ratio_text(r)}; highest pass rate: diagnosis "
-                             f"{best(r['rows'], 'right')}, oracle {best(r['rows'], 'oracle')}")
+                             f"{best(r['rows'], 'right')}, oracle {best(r['rows'], 'oracle')}; pooled over the "
+                             f"strengths tried: diagnosis {sum(row['right'] for row in r['rows'])} of {n_all}, "
+                             f"oracle {sum(row['oracle'] for row in r['rows'])} of {n_all}")
+            free = effect_free_outcomes(a.cache, frames)
+            if free:
+                named = Counter(o["verdict"] for o in free if o["verdict"] is not None)
+                notes.append(f"effect-free beam, {frames} frames (the cases in the same cache): {sum(named.values())} "
+                             f"false verdicts of {len(free)}" + (f" ({dict(named)})" if named else ""))
         effs = sorted({e for res in results.values() for e in res})
         notes += [f"{eff} strength: {BEAM_EFFECT_MEANING[eff]}" for eff in effs]
         save_record(a.record, title="The beam simulator: detection against strength, the diagnosis and its oracle",
@@ -283,6 +297,10 @@ def main() -> int:
                 cover.append(cv)
                 ratio.append(floor_ratio(c, c["inputs"]["noise_floor"]))
                 size.append(effect_size(c["truth"]))
+                if cache is not None and hidden is None:  # effect-free: the verdict is the outcome
+                    save_outcome(case_path(cache, hidden, sd, a.frames, mult, a.boot).with_suffix(".outcome.json"),
+                                 {"effect": "none", "mult": mult, "seed": sd, "frames": a.frames,
+                                  "verdict": d.verdict, "right": bool(ok)})
                 if cache is not None and hidden is not None:
                     out = case_outcome(hidden, mult, BEAM_EFFECT_DEFAULTS[hidden] * mult, sd, a.frames, d, ok, o,
                                        size[-1], c.get("phys"))
