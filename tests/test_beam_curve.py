@@ -78,6 +78,9 @@ def test_curve_writes_a_valid_record_from_the_outcomes_in_the_cache(tmp_path, mo
     from record import load_records
     for i, o in enumerate([_outcome(1, 0, False, True, "significance"), _outcome(2, 0, True, True, "")]):
         (tmp_path / f"creep_{o['mult']}_{o['seed']}_450_bootpreset.outcome.json").write_text(json.dumps(o))
+    for seed, verdict in ((0, None), (1, "delay")):  # effect-free outcomes: their false verdicts go in a note
+        (tmp_path / f"none_1_{seed}_450_bootpreset.outcome.json").write_text(json.dumps(
+            {"effect": "none", "mult": 1, "seed": seed, "frames": 450, "verdict": verdict, "right": verdict is None}))
     out = tmp_path / "records"
     monkeypatch.setenv("RCE_RECORD_DIR", str(out))
     monkeypatch.setattr(sys, "argv", ["bench_beam.py", "--curve", "--effects", "creep", "--cache", str(tmp_path),
@@ -89,5 +92,8 @@ def test_curve_writes_a_valid_record_from_the_outcomes_in_the_cache(tmp_path, mo
     assert rec["rows"][0][-2] == "significance 1" and rec["rows"][0][7] == "-"   # no pickle: no effect RMS
     # 0 -> 1 of 1 between x1 and x2 reaches 0.9 at x1.9; the oracle passed at the weakest: the ratio is a bound
     assert rec["notes"][0] == ("creep, 450 frames: 90 % point: diagnosis x1.90, oracle <= x1, ratio >= 1.90; "
-                               "highest pass rate: diagnosis 1 of 1 at x2, oracle 1 of 1 at x1")
+                               "highest pass rate: diagnosis 1 of 1 at x2, oracle 1 of 1 at x1; pooled over the "
+                               "strengths tried: diagnosis 1 of 2, oracle 2 of 2")
     assert "ratio >= 1.90" in capsys.readouterr().out
+    assert ("effect-free beam, 450 frames (the cases in the same cache): 1 false verdicts of 2 ({'delay': 1})"
+            in rec["notes"])
