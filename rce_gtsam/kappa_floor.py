@@ -54,7 +54,8 @@ class KappaFloor:
     segment_px: (E,) the shorter of each bend's two segments in the rest pose (px).
     angle_noise_deg: (E,) the bend-angle noise e px gives, e sqrt((A A')_jj) (deg).
     bend_rms_deg: (E,) RMS of the fitted bending kappa_e z_t over the observed frames (deg): what has to be measured.
-    log_sd: (E,) SD of log kappa_e over the draws: each segment's floor.
+    log_rmse_per_segment: (E,) each segment's floor: the RMS over draws of its log kappa's error (geometric-mean-free;
+        the shrinkage's pull as well as the scatter).
     log_rmse: kappa's log-RMSE (geometric-mean-free, RMS over draws) that the error alone gives.
     log_rmse_half_error: the same with half the node error (e / 2 px): what a better tracker or a 2x zoom buys.
     n_draws, seed: the simulation's size and seed.
@@ -65,7 +66,7 @@ class KappaFloor:
     segment_px: np.ndarray
     angle_noise_deg: np.ndarray
     bend_rms_deg: np.ndarray
-    log_sd: np.ndarray
+    log_rmse_per_segment: np.ndarray
     log_rmse: float
     log_rmse_half_error: float
     n_draws: int
@@ -76,7 +77,7 @@ class KappaFloor:
             return [None if not np.isfinite(v) else float(v) for v in np.asarray(x, float)]
         return {"node_error_px": float(self.node_error_px), "node_error_source": self.source,
                 "segment_px": fl(self.segment_px), "angle_noise_deg": fl(self.angle_noise_deg),
-                "bend_rms_deg": fl(self.bend_rms_deg), "log_sd_per_segment": fl(self.log_sd),
+                "bend_rms_deg": fl(self.bend_rms_deg), "log_rmse_per_segment": fl(self.log_rmse_per_segment),
                 "log_rmse": float(self.log_rmse), "log_rmse_half_error": float(self.log_rmse_half_error),
                 "n_draws": int(self.n_draws), "seed": int(self.seed),
                 "meaning": "the kappa log-RMSE (geometric-mean-free) that white node errors of node_error_px "
@@ -175,9 +176,9 @@ def kappa_floor(z: np.ndarray, direction: np.ndarray, kappa_raw: np.ndarray, obs
         logk, _ = _draws(predict(lref), observed, weights, A, config, err, n_draws, rng, H)
         d = _centred(np.where(good, logk - lref[None], np.nan))
         per_draw = np.sqrt(np.nanmean(d ** 2, axis=1))
-        return float(np.sqrt(np.mean(per_draw ** 2))), np.nanstd(_centred(logk), axis=0)
+        return float(np.sqrt(np.mean(per_draw ** 2))), np.sqrt(np.nanmean(d ** 2, axis=0))
 
-    log_rmse, log_sd = floor_at(e, np.random.default_rng(seed + 1))
+    log_rmse, per_segment = floor_at(e, np.random.default_rng(seed + 1))
     half, _ = floor_at(e / 2, np.random.default_rng(seed + 2))
     gain = 1.0 if H is None else float(np.mean(H ** 2))
     seg = np.array([min(np.linalg.norm(np.subtract(rest_xy[m], rest_xy[g])),
@@ -186,7 +187,7 @@ def kappa_floor(z: np.ndarray, direction: np.ndarray, kappa_raw: np.ndarray, obs
     bend_rms = np.sqrt((predict(lref) ** 2).sum(axis=1) / n_obs)
     return KappaFloor(node_error_px=e, source=source, segment_px=seg,
                       angle_noise_deg=e * np.sqrt(gain * np.diag(A @ A.T)), bend_rms_deg=bend_rms,
-                      log_sd=np.where(good, log_sd, np.nan), log_rmse=log_rmse, log_rmse_half_error=half,
+                      log_rmse_per_segment=np.where(good, per_segment, np.nan), log_rmse=log_rmse, log_rmse_half_error=half,
                       n_draws=int(n_draws), seed=int(seed))
 
 

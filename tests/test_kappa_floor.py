@@ -57,7 +57,9 @@ def test_half_the_error_lowers_the_floor_and_every_field_is_finite(white_runs):
     f: KappaFloor = white_runs[0][3]
     assert 0 < f.log_rmse_half_error < f.log_rmse
     assert np.isfinite(f.angle_noise_deg).all() and np.isfinite(f.bend_rms_deg).all()
-    assert np.isfinite(f.log_sd).all() and f.segment_px.min() > 0
+    assert np.isfinite(f.log_rmse_per_segment).all() and f.segment_px.min() > 0
+    # the segments' floors make up the whole: their RMS is the log-RMSE (both over the same draws)
+    assert np.sqrt(np.mean(f.log_rmse_per_segment ** 2)) == pytest.approx(f.log_rmse, rel=1e-6)
     # the angle noise is e through the bend's geometry: about 2.4 e / L rad on an even chain, less the smoother
     assert 0.2 < np.median(f.angle_noise_deg) < 3.0
 
@@ -90,7 +92,7 @@ def test_rce_analyze_prints_it_and_writes_it(tmp_path):
     rep = json.loads((out / "report.json").read_text())["kappa_floor"]
     assert rep["node_error_px"] == pytest.approx(0.5, rel=0.25)
     assert rep["log_rmse_half_error"] < rep["log_rmse"]
-    assert len(rep["log_sd_per_segment"]) == len(rep["segment_px"])
+    assert len(rep["log_rmse_per_segment"]) == len(rep["segment_px"])
 
 
 def test_a_short_branch_falls_back_on_the_tracker_s_own_sigma():
