@@ -6,7 +6,8 @@ Output folder (all CSV, one header row):
   root_distance_px, rest_length_px, kappa, kappa_ci_low, kappa_ci_high, uncertainty (U_e = CI width /
   kappa), direction (+1/-1, sign of the fitted gain), relative_stiffness (1/kappa), n_frames (frames
   with a usable bend response), fit_rmse_deg, fit_r2, bend_rms_deg (filtered RMS of delta), bend_snr
-  (bending variance / its noise floor) and quality (``ok`` or the reasons kappa should not be trusted,
+  (bending variance / its noise floor), z_var_seen, floor_log_rmse (the kappa log-RMSE the tracker's error alone
+  allows the segment, :mod:`rce_gtsam.kappa_floor`) and quality (``ok`` or the reasons kappa should not be trusted,
   :mod:`rce_gtsam.quality`). The root edge has no bend, so its kappa columns are empty.
 * ``excitation.csv`` — frame, z (degrees).
 * ``bending.csv`` — grandparent, joint, child, frame, angle_deg, delta_deg, inlier (0/1), angle_var_deg2.
@@ -47,6 +48,7 @@ def compliance_summary(result) -> pd.DataFrame:
     quality = assess_quality(result)
     from .tracks import dropped_edges, lost_nodes
     dropped = set(dropped_edges(g, lost_nodes(result.tracks)))
+    floor = getattr(result, "kappa_floor", None)
     records = []
     for e in sorted(g.edges, key=lambda e: (geo.root_distance_px[e[1]], e[0], e[1])):
         p, c = e
@@ -57,7 +59,7 @@ def compliance_summary(result) -> pd.DataFrame:
             rec.update(kappa=np.nan, kappa_ci_low=np.nan, kappa_ci_high=np.nan, uncertainty=np.nan,
                        direction=np.nan, relative_stiffness=np.nan, n_frames=0, fit_rmse_deg=np.nan,
                        fit_r2=np.nan, bend_rms_deg=np.nan, bend_snr=np.nan, z_var_seen=np.nan,
-                       quality="tracking_lost" if e in dropped else "")
+                       floor_log_rmse=np.nan, quality="tracking_lost" if e in dropped else "")
         else:
             y = resp.Y[i]
             ok = np.isfinite(y)
@@ -77,6 +79,7 @@ def compliance_summary(result) -> pd.DataFrame:
                 bend_rms_deg=float(bend_rms[e]),
                 bend_snr=quality[e].snr,
                 z_var_seen=quality[e].z_var_seen,
+                floor_log_rmse=float(floor.log_rmse_per_segment[i]) if floor is not None else np.nan,
                 quality=quality[e].quality,
             )
         records.append(rec)

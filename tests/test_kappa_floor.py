@@ -93,6 +93,9 @@ def test_rce_analyze_prints_it_and_writes_it(tmp_path):
     assert rep["node_error_px"] == pytest.approx(0.5, rel=0.25)
     assert rep["log_rmse_half_error"] < rep["log_rmse"]
     assert len(rep["log_rmse_per_segment"]) == len(rep["segment_px"])
+    import pandas as pd
+    table = pd.read_csv(out / "compliance_summary.csv")  # each segment's floor beside its interval
+    assert sorted(table.floor_log_rmse.dropna()) == pytest.approx(sorted(rep["log_rmse_per_segment"]))
 
 
 def test_a_short_branch_falls_back_on_the_tracker_s_own_sigma():
