@@ -58,7 +58,7 @@ class KappaFloor:
         the shrinkage's pull as well as the scatter).
     log_rmse: kappa's log-RMSE (geometric-mean-free, RMS over draws) that the error alone gives.
     log_rmse_half_error: the same with half the node error (e / 2 px): what a better tracker or a 2x zoom buys.
-    n_draws, seed: the simulation's size and seed.
+    n_draws, seed: the simulation's size and seed. edges: (joint, child) of each row (empty where not given).
     """
 
     node_error_px: float
@@ -71,6 +71,7 @@ class KappaFloor:
     log_rmse_half_error: float
     n_draws: int
     seed: int
+    edges: tuple = ()
 
     def as_dict(self) -> dict:
         def fl(x):
@@ -80,6 +81,7 @@ class KappaFloor:
                 "bend_rms_deg": fl(self.bend_rms_deg), "log_rmse_per_segment": fl(self.log_rmse_per_segment),
                 "log_rmse": float(self.log_rmse), "log_rmse_half_error": float(self.log_rmse_half_error),
                 "n_draws": int(self.n_draws), "seed": int(self.seed),
+                "edges": [f"{j}->{c}" for j, c in self.edges],
                 "meaning": "the kappa log-RMSE (geometric-mean-free) that white node errors of node_error_px "
                            "across the branch alone allow on this branch and this bending (simulated through the "
                            "same fit); an error that follows the motion costs more"}
@@ -97,13 +99,25 @@ class KappaFloor:
                 f"{np.median(br):.2f} deg RMS of bending (medians)"
                 + (f"; on {buried} of {ok.sum()} segments the noise exceeds the bending" if buried else "")
                 + f".\n  That error alone, were it white, allows kappa to about x{np.exp(self.log_rmse):.2f} "
-                f"(log-RMSE {self.log_rmse:.2f}); x{np.exp(self.log_rmse_half_error):.2f} with half of it (a 2x "
-                f"zoom or a better tracker). Intervals much wider than that: an error that follows the motion, or a "
-                f"model that misses something")
+                f"(log-RMSE {self.log_rmse:.2f}{self._spread_text()}); x{np.exp(self.log_rmse_half_error):.2f} with "
+                f"half of it (a 2x zoom or a better tracker). Intervals much wider than that: an error that follows "
+                f"the motion, or a model that misses something")
         if buried > ok.sum() / 2:
             text += ("; with the noise above the bending on most segments the recording cannot show how uneven the "
                      "branch is, and the floor is only a rough guide")
         return text + " (docs/results.md, 'What limits κ')"
+
+
+    def _spread_text(self) -> str:
+        """"; median segment x.., worst j->c x.." where the segments' floors differ (one segment seen in a few
+        frames can carry most of the log-RMSE)."""
+        seg = self.log_rmse_per_segment
+        ok = np.isfinite(seg)
+        if ok.sum() < 2:
+            return ""
+        worst = int(np.nanargmax(seg))
+        label = (f" {self.edges[worst][0]}->{self.edges[worst][1]}" if len(self.edges) == len(seg) else "")
+        return f"; median segment x{np.exp(np.nanmedian(seg)):.2f}, worst{label} x{np.exp(seg[worst]):.2f}"
 
 
 def _draws(pred, observed, weights, A, config, e, n_draws, rng, response):
@@ -131,14 +145,15 @@ def _centred(x: np.ndarray) -> np.ndarray:
 
 def kappa_floor(z: np.ndarray, direction: np.ndarray, kappa_raw: np.ndarray, observed: np.ndarray,
                 weights: np.ndarray | None, bends, rest_xy: dict, config, node_error_px: float,
-                source: str = "given", n_draws: int = N_DRAWS, seed: int = 0, smoother=None) -> KappaFloor | None:
+                source: str = "given", n_draws: int = N_DRAWS, seed: int = 0, smoother=None,
+                edges=()) -> KappaFloor | None:
     """The floor (module docstring) of a rank-1 fit with excitation ``z`` (T,, deg), signs ``direction`` (E,) and
     gains ``kappa_raw`` (E,, > 0) before the shrinkage, on the ``observed`` (E, T) entries, with the fit's
     ``weights`` (E, T or None) and ``config`` (:class:`~rce_gtsam.presets.ComplianceConfig`); ``bends``:
     (grandparent, joint, child) node ids per row; ``rest_xy``: {node id: (2,) px}; ``smoother``: (presmooth window,
     w_m, w_v, w_a) of the smoother the tracks went through
     (:func:`~rce_gtsam.diagnosis.noise_floor.smoother_weights`; None: the node errors reach the bends unsmoothed).
-    None where the geometry or e is unusable.
+    None where the geometry or e is unusable. ``edges``: (joint, child) per row, for the report.
 
     The simulated branch's kappa is the recording's, spread as the truth's is estimated to be: the shrunk kappa
     is too even (it is a posterior mean) and the unshrunk one too uneven (its noise adds to the spread), and either
@@ -188,7 +203,7 @@ def kappa_floor(z: np.ndarray, direction: np.ndarray, kappa_raw: np.ndarray, obs
     return KappaFloor(node_error_px=e, source=source, segment_px=seg,
                       angle_noise_deg=e * np.sqrt(gain * np.diag(A @ A.T)), bend_rms_deg=bend_rms,
                       log_rmse_per_segment=np.where(good, per_segment, np.nan), log_rmse=log_rmse, log_rmse_half_error=half,
-                      n_draws=int(n_draws), seed=int(seed))
+                      n_draws=int(n_draws), seed=int(seed), edges=tuple(tuple(e) for e in edges))
 
 
 def kappa_floor_of(result, node_error_px: float | None = None, n_draws: int = N_DRAWS,
@@ -225,4 +240,4 @@ def kappa_floor_of(result, node_error_px: float | None = None, n_draws: int = N_
         kappa_raw = np.exp(np.log(kappa) / np.maximum(np.asarray(fit.shrinkage, float), MIN_SHRINK))
     return kappa_floor(fit.z, fit.direction, kappa_raw, np.isfinite(r.Y), weights, bends, rest_xy,
                        result.preset.compliance, node_error_px, source, n_draws=n_draws, seed=seed,
-                       smoother=smoother)
+                       smoother=smoother, edges=r.edges)

@@ -88,11 +88,12 @@ def test_rce_analyze_prints_it_and_writes_it(tmp_path):
                         str(tmp_path / "sim" / "graph.json"), "--out", str(out), "--quiet"],
                        capture_output=True, text=True)
     assert p.returncode == 0, p.stderr
-    assert "what limits kappa: a tracker error of" in p.stdout
+    assert "what limits kappa: a tracker error of" in p.stdout and "median segment x" in p.stdout
+    assert "worst " in p.stdout.split("median segment x", 1)[1].split("\n")[0]
     rep = json.loads((out / "report.json").read_text())["kappa_floor"]
     assert rep["node_error_px"] == pytest.approx(0.5, rel=0.25)
     assert rep["log_rmse_half_error"] < rep["log_rmse"]
-    assert len(rep["log_rmse_per_segment"]) == len(rep["segment_px"])
+    assert len(rep["log_rmse_per_segment"]) == len(rep["segment_px"]) == len(rep["edges"])
     import pandas as pd
     table = pd.read_csv(out / "compliance_summary.csv")  # each segment's floor beside its interval
     assert sorted(table.floor_log_rmse.dropna()) == pytest.approx(sorted(rep["log_rmse_per_segment"]))
