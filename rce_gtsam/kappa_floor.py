@@ -9,8 +9,9 @@ so a tracker good to e px gives bend j an angle noise of e * sqrt((A A')_jj) deg
 has to be read from the bending against that noise. How well it can be read depends on more than the ratio: the
 excitation z is estimated from the same noisy bends, the shrinkage pulls poorly determined kappa toward the
 prior, and neighbouring bends share a node's error. So the floor is not a formula but a simulation of exactly
-that: the fitted bending kappa_e z_t, plus white node errors of e px through A, fitted again with the recording's
-own weights and settings; the scatter of log kappa over the draws is the floor (:class:`KappaFloor`). It is what a
+that: the fitted bending kappa_e z_t, plus white node errors of e px passed through the smoother's frequency
+response and through A, fitted again with the recording's own weights and settings; the RMS error of log kappa over
+the draws, against the simulated branch's kappa, is the floor (:class:`KappaFloor`). It is what a
 tracker whose error is e px and *independent from frame to frame* would allow; an error that follows the motion
 (blur, slide along the stem) costs more, and no number of frames averages it out.
 
@@ -21,7 +22,8 @@ kappa rests mostly on the prior and the data cannot show how uneven the branch r
 was 0.71x (simulator, 1 px) to 1.83x (texture bed, white noise) the floor (medians), and the printed line says so.
 
 Where e comes from: the node-wise noise floor (:mod:`rce_gtsam.diagnosis.noise_floor_nodewise`): the node error
-across the branch that the covariance between the rank-1 residuals of bends sharing a node implies. Measured
+across the branch that the covariance between the rank-1 residuals of bends sharing a node implies. That is the
+error after smoothing; e, the tracker's, is larger by 1 / sqrt(the smoother's white gain). Measured
 against known truth in ``benchmarks/bench_kappa_floor.py`` (record ``kappa_floor``).
 
 Reading it: the floor scales with e / (L x bending); halving it takes half the node error, twice the segment
@@ -52,7 +54,7 @@ class KappaFloor:
 
     node_error_px: e, the node error across the branch the floor assumes (px); source: where it came from.
     segment_px: (E,) the shorter of each bend's two segments in the rest pose (px).
-    angle_noise_deg: (E,) the bend-angle noise e px gives, e sqrt((A A')_jj) (deg).
+    angle_noise_deg: (E,) the bend-angle noise e px gives after smoothing, e sqrt(gain (A A')_jj) (deg).
     bend_rms_deg: (E,) RMS of the fitted bending kappa_e z_t over the observed frames (deg): what has to be measured.
     log_rmse_per_segment: (E,) each segment's floor: the RMS over draws of its log kappa's error (geometric-mean-free;
         the shrinkage's pull as well as the scatter).
