@@ -88,6 +88,18 @@ class KappaFloor:
                            "across the branch alone allow on this branch and this bending (simulated through the "
                            "same fit); an error that follows the motion costs more"}
 
+    @classmethod
+    def from_dict(cls, d: dict) -> "KappaFloor":
+        """The floor back from its report.json form (:meth:`as_dict`)."""
+        def arr(key):
+            return np.array([np.nan if v is None else v for v in d.get(key) or []], float)
+        edges = tuple(tuple(int(x) for x in e.split("->")) for e in d.get("edges") or [])
+        return cls(node_error_px=float(d["node_error_px"]), source=str(d.get("node_error_source", "")),
+                   segment_px=arr("segment_px"), angle_noise_deg=arr("angle_noise_deg"),
+                   bend_rms_deg=arr("bend_rms_deg"), log_rmse_per_segment=arr("log_rmse_per_segment"),
+                   log_rmse=float(d["log_rmse"]), log_rmse_half_error=float(d["log_rmse_half_error"]),
+                   n_draws=int(d.get("n_draws", 0)), seed=int(d.get("seed", 0)), edges=edges)
+
     def line(self) -> str:
         """Two lines for the terminal summary: e, L, angle noise against bending, and the floor they set."""
         ok = np.isfinite(self.angle_noise_deg) & np.isfinite(self.bend_rms_deg)

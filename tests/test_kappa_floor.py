@@ -71,6 +71,16 @@ def test_the_floor_grows_with_the_node_error():
     assert floors[0] < floors[1] < floors[2]
 
 
+def test_the_viewer_reads_the_floor_from_the_result():
+    from rce_gtsam.viz.rerun_log import summary_markdown
+    from rce_gtsam.viz.scene import AnalysisView
+    sim = simulate(SimulationConfig(n_frames=300, seed=1, noise=white(0.3)))
+    r = analyze(sim.tracks, sim.graph, n_boot=0)
+    view = AnalysisView.from_result(r)
+    assert view.floor_text == r.kappa_floor.line() and "floor (×)" in summary_markdown(view)
+    assert np.allclose(view.floor_log_rmse, r.kappa_floor.log_rmse_per_segment)
+
+
 def test_seeded_and_absent_for_an_extended_model():
     sim = simulate(SimulationConfig(n_frames=300, seed=1, noise=white(0.3)))
     r = analyze(sim.tracks, sim.graph, n_boot=0)
@@ -97,6 +107,13 @@ def test_rce_analyze_prints_it_and_writes_it(tmp_path):
     import pandas as pd
     table = pd.read_csv(out / "compliance_summary.csv")  # each segment's floor beside its interval
     assert sorted(table.floor_log_rmse.dropna()) == pytest.approx(sorted(rep["log_rmse_per_segment"]))
+    # the Rerun viewer's compliance table (rce view DIR reads the folder): a floor column and the same lines
+    from rce_gtsam.viz.rerun_log import summary_markdown
+    from rce_gtsam.viz.scene import AnalysisView
+    view = AnalysisView.from_folder(out)
+    md = summary_markdown(view)
+    assert "floor (×)" in md and view.floor_text.split("\n")[0] in p.stdout and "what limits kappa" in md
+    assert np.isfinite(view.floor_log_rmse).all() and len(view.floor_log_rmse) == len(view.edges)
 
 
 def test_a_short_branch_falls_back_on_the_tracker_s_own_sigma():

@@ -206,13 +206,17 @@ def summary_markdown(view: AnalysisView) -> str:
     lines = [f"# Relative compliance — {view.title}", "",
              f"Response: `{view.response}` bending; {len(view.edges)} edges, {len(view.frames)} frames. "
              "κ is relative (geometric mean 1); U_e = CI width / κ.", "",
-             "| edge | zone | κ | 95 % CI | U_e | residual RMS (deg) |", "|---|---|---|---|---|---|"]
+             "| edge | zone | κ | 95 % CI | U_e | residual RMS (deg) | floor (×) |", "|---|---|---|---|---|---|---|"]
+    floor = view.floor_log_rmse
     for i, e in enumerate(view.edges):
         r = res[i][np.isfinite(res[i])]
         rms = float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan")
         u = (view.ci_high[i] - view.ci_low[i]) / view.kappa[i] if view.kappa[i] > 1e-9 else float("nan")
+        f = f"{np.exp(floor[i]):.2f}" if floor is not None and np.isfinite(floor[i]) else "–"
         lines.append(f"| {e[0]}→{e[1]} | {view.zone[i]} | {view.kappa[i]:.3f} | "
-                     f"[{view.ci_low[i]:.3f}, {view.ci_high[i]:.3f}] | {u:.3f} | {rms:.3f} |")
+                     f"[{view.ci_low[i]:.3f}, {view.ci_high[i]:.3f}] | {u:.3f} | {rms:.3f} | {f} |")
+    if view.floor_text:  # what limits kappa: floor (x) is the factor either way the tracker's error alone allows
+        lines += ["", "floor (×): the factor either way the tracker's error alone allows κ. " + view.floor_text]
     return "\n".join(lines) + "\n"
 
 

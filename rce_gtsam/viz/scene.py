@@ -37,7 +37,9 @@ class AnalysisView:
     rank-1 prediction; variance (E, T) angle variance deg^2 or None; kappa, ci_low, ci_high (E,);
     zone (E,) str; root_distance_px (E,); z (T,) excitation in degrees.
     predicted_xy (N, F, 2): predicted skeleton (NaN outside ``frames``). response: "signed" | "abs".
-    title: a short description (input file or "simulation").
+    title: a short description (input file or "simulation"). floor_log_rmse (E,): what the tracker's error alone
+    allows each segment's kappa (log-RMSE, :mod:`rce_gtsam.kappa_floor`) or None; floor_text: the summary's "what
+    limits kappa" lines ("" without them).
     """
 
     node_ids: np.ndarray
@@ -60,6 +62,8 @@ class AnalysisView:
     predicted_xy: np.ndarray
     response: str
     title: str = ""
+    floor_log_rmse: np.ndarray | None = None
+    floor_text: str = ""
 
     @property
     def residual(self) -> np.ndarray:
@@ -96,7 +100,8 @@ class AnalysisView:
                    zone=np.array([result.geometry.zone[c] for _, c in resp.edges]),
                    root_distance_px=resp.root_distance_px, z=fit.z, predicted_xy=pxy,
                    response=result.preset.compliance.response,
-                   title=str(result.inputs.get("tracks", result.tracks.source)))
+                   title=str(result.inputs.get("tracks", result.tracks.source)),
+                   **_floor_fields(getattr(result, "kappa_floor", None)))
 
     @classmethod
     def from_folder(cls, folder: str | Path, tracks: str | Path | None = None) -> "AnalysisView":
@@ -188,7 +193,21 @@ class AnalysisView:
                    frames=frames, Y=Y, pred=pred, variance=None if np.isnan(var).all() else var, kappa=kappa,
                    ci_low=fitted.kappa_ci_low.to_numpy(float), ci_high=fitted.kappa_ci_high.to_numpy(float),
                    zone=fitted.zone.to_numpy().astype(str), root_distance_px=fitted.root_distance_px.to_numpy(float),
-                   z=z, predicted_xy=pxy, response=response, title=str(folder))
+                   z=z, predicted_xy=pxy, response=response, title=str(folder),
+                   **_floor_fields(report.get("kappa_floor"),
+                                   fitted.floor_log_rmse.to_numpy(float) if "floor_log_rmse" in fitted else None))
+
+
+def _floor_fields(floor, per_segment=None) -> dict:
+    """The view's floor fields from a :class:`~rce_gtsam.kappa_floor.KappaFloor` or its report.json dict (None:
+    none); ``per_segment``: the rows' floors where they were read elsewhere (compliance_summary.csv)."""
+    from ..kappa_floor import KappaFloor
+    if floor is None:
+        return {"floor_log_rmse": per_segment}
+    if isinstance(floor, dict):
+        floor = KappaFloor.from_dict(floor)
+    return {"floor_log_rmse": floor.log_rmse_per_segment if per_segment is None else per_segment,
+            "floor_text": floor.line()}
 
 
 def _turning_deg(pg, pj, pc) -> np.ndarray:
