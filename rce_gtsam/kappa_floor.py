@@ -216,8 +216,8 @@ def kappa_floor(z: np.ndarray, direction: np.ndarray, kappa_raw: np.ndarray, obs
     bend_rms = np.sqrt((predict(lref) ** 2).sum(axis=1) / n_obs)
     return KappaFloor(node_error_px=e, source=source, segment_px=seg,
                       angle_noise_deg=e * np.sqrt(gain * np.diag(A @ A.T)), bend_rms_deg=bend_rms,
-                      log_rmse_per_segment=np.where(good, per_segment, np.nan), log_rmse=log_rmse, log_rmse_half_error=half,
-                      n_draws=int(n_draws), seed=int(seed), edges=tuple(tuple(e) for e in edges))
+                      log_rmse_per_segment=np.where(good, per_segment, np.nan), log_rmse=log_rmse,
+                      log_rmse_half_error=half, n_draws=int(n_draws), seed=int(seed), edges=tuple(tuple(e) for e in edges))
 
 
 def kappa_floor_of(result, node_error_px: float | None = None, n_draws: int = N_DRAWS,
@@ -226,7 +226,7 @@ def kappa_floor_of(result, node_error_px: float | None = None, n_draws: int = N_
     takes the node-wise noise floor's estimate from the fit's residuals (source "estimated from the residuals"), or,
     where too few bends share a node for it, the tracker's median sigma_px (source "the tracker's own sigma"); None
     where neither exists."""
-    from .diagnosis.noise_floor import nodewise_of, smoother_response, smoother_weights
+    from .diagnosis.noise_floor import nodewise_of, rest_positions, smoother_response, smoother_weights
 
     fit = getattr(result, "fit", None)
     if fit is None or getattr(fit, "z", None) is None or getattr(fit, "shrinkage", None) is None:
@@ -245,9 +245,7 @@ def kappa_floor_of(result, node_error_px: float | None = None, n_draws: int = N_
         if not np.isfinite(node_error_px) and sig is not None and np.isfinite(sig).any():
             # too few bends sharing a node to read it from the residuals (MIN_PAIRS): the tracker's own word
             node_error_px, source = float(np.nanmedian(sig)), "the tracker's own sigma"
-    row = {int(n): i for i, n in enumerate(result.tracks.node_ids)}
-    rest = np.nanmedian(result.smoothed.tracks.xy, axis=1)
-    rest_xy = {n: rest[row[n]] for b in bends for n in b}
+    rest_xy = rest_positions(result, bends)
     weights = r.weights if result.preset.compliance.weighted else None
     kappa = np.asarray(fit.kappa, float)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -386,10 +386,14 @@ def nodewise_of(result, triples):
         return None
     r = result.response
     kappa = np.asarray(fit.kappa, float) * np.asarray(getattr(fit, "direction", 1.0), float)
+    return nodewise_floor(r.Y - fit.predict(), kappa, triples, rest_positions(result, triples), z=fit.z)
+
+
+def rest_positions(result, triples) -> dict:
+    """{node id: (2,) px} the rest position (median smoothed position) of every node of the bends ``triples``."""
     row = {int(n): i for i, n in enumerate(result.tracks.node_ids)}
     rest = np.nanmedian(result.smoothed.tracks.xy, axis=1)
-    rest_xy = {n: rest[row[n]] for t in triples for n in t}
-    return nodewise_floor(r.Y - fit.predict(), kappa, triples, rest_xy, z=fit.z)
+    return {n: rest[row[n]] for t in triples for n in t}
 
 
 def with_nodewise(nf: NoiseFloor, nodewise) -> NoiseFloor:
