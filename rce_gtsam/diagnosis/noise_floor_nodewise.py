@@ -79,8 +79,7 @@ def kappa_step_absorption(residuals: np.ndarray, z: np.ndarray) -> float:
     from ..model.surrogates import pooled_periodogram
 
     S = pooled_periodogram(residuals)[1:]
-    zc = np.asarray(z, float)
-    Zp = np.abs(np.fft.rfft(np.where(np.isfinite(zc), zc - np.nanmean(zc), 0.0)))[1:] ** 2
+    Zp = pooled_periodogram(np.asarray(z, float)[None])[1:]  # z's own periodogram (only its shape counts: w_k)
     if S.size == 0 or not (np.isfinite(Zp).all() and Zp.sum() > 0 and np.isfinite(S).all() and S.sum() > 0):
         return 0.0
     w = Zp / Zp.sum()
