@@ -95,3 +95,88 @@ def test_a_second_excitation_of_the_whole_branch_holds_without_any_one_node():
     check = d.settings["one_node"]
     assert check["holds"] and check["heldout_gain_pct"] > 0 and check["fold_t"] > 0
     assert "does not rest on one tracked node" in d.explanation
+
+
+def _chain_geometry(n_nodes, length=20.0, bend_deg=6.0):
+    """Rest positions of a gently curved chain (node ids 0..n-1) and its bends as (grandparent, joint, child)."""
+    heading = np.cumsum(np.full(n_nodes - 1, np.radians(bend_deg)))
+    steps = length * np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    xy = np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])
+    return {i: xy[i] for i in range(n_nodes)}, [(j, j + 1, j + 2) for j in range(n_nodes - 2)]
+
+
+def test_the_bend_jacobian_is_the_turning_angles_derivative():
+    from rce_gtsam.diagnosis.one_node import bend_jacobian
+
+    rest, bends = _chain_geometry(6, bend_deg=17.0)
+
+    def turning(p):
+        out = []
+        for g, m, c in bends:
+            r1, r2 = p[m] - p[g], p[c] - p[m]
+            out.append(np.degrees(np.arctan2(r2[1], r2[0]) - np.arctan2(r1[1], r1[0])))
+        return np.array(out)
+
+    J = bend_jacobian(bends, rest)
+    for node in rest:
+        for axis in (0, 1):
+            moved = {k: v.copy() for k, v in rest.items()}
+            moved[node][axis] += 1e-6
+            assert np.allclose((turning(moved) - turning(rest)) / 1e-6, J[node][:, axis], atol=1e-4)
+    rest[3] = rest[2].copy()  # a segment with no length: no Jacobian
+    assert bend_jacobian(bends, rest) is None
+
+
+def test_the_projected_row_keeps_the_branch_and_none_of_the_nodes_error():
+    from rce_gtsam.diagnosis.one_node import bend_jacobian, projected_row
+
+    rest, bends = _chain_geometry(8)
+    E, T = len(bends), 400
+    rng = np.random.default_rng(0)
+    kappa = np.exp(rng.normal(0, 0.4, E))
+    z = np.cumsum(rng.normal(0, 0.2, T))
+    J = bend_jacobian(bends, rest)
+    error = np.cumsum(rng.normal(0, 0.3, (T, 2)), axis=0)  # node 4's error, any course, along and across
+    Y = kappa[:, None] * z[None] + J[4] @ error.T
+    nodes = [set(b) for b in bends]
+    y, w, s_row = projected_row(Y, None, np.linspace(0.1, 1, E), 4, nodes, J, kappa)
+    slope = (y @ z) / (z @ z)
+    assert slope > 0.5 * np.linalg.norm(kappa[~rows_without(4, nodes)])  # most of the branch's response is kept
+    assert np.allclose(y, slope * z, atol=1e-9)  # and none of the node's error
+    assert np.all(w == 1.0) and 0.1 < s_row < 1.0
+    Y[3, 7] = np.nan
+    assert np.isnan(projected_row(Y, None, np.linspace(0.1, 1, E), 4, nodes, J, kappa)[0][7])
+    assert projected_row(Y, None, np.linspace(0.1, 1, E), 0, nodes, J, kappa) is None  # the root enters one bend
+    assert projected_row(Y, None, np.linspace(0.1, 1, E), 4, nodes, None, kappa) is None  # geometry unknown
+
+
+def test_a_second_mode_resting_on_one_node_stays_unnamed_with_the_projection():
+    """With the geometry known the check keeps the combination of node 11's bends that its error cannot move: the
+    tracker's second mode (the +1, -2, +1 pattern across a straight stem) is still not named."""
+    from rce_gtsam.diagnosis.one_node import bend_jacobian
+
+    Y, s = _tracker_second_mode()
+    E = Y.shape[0]
+    rest, bends = _chain_geometry(E + 2, bend_deg=0.0)
+    nodes = chain_nodes(E)
+    d = diagnose(Y, root_distance=s, effects=["second_mode"], edge_nodes=nodes,
+                 node_sensitivity=bend_jacobian(bends, rest))
+    check = d.settings["one_node"]
+    assert d.verdict is None and check["node"] == 11 and check["projected"] and not check["holds"]
+
+
+def test_an_analysis_hands_the_check_its_geometry():
+    """``rce diagnose`` (diagnose_inputs) gives the check each node's Jacobian at the analysis' rest pose."""
+    from rce_gtsam.diagnosis.io import diagnose_inputs
+    from rce_gtsam.pipeline import analyze
+    from rce_gtsam.sim.simulate import SimulationConfig, simulate
+
+    sim = simulate(SimulationConfig(n_nodes=8, n_frames=150, seed=3))
+    result = analyze(sim.tracks, sim.graph, preset="default", n_boot=0)
+    kw = diagnose_inputs(result)
+    J, nodes = kw["node_sensitivity"], kw["edge_nodes"]
+    E = kw["Y"].shape[0]
+    assert set(J) == {n for t in nodes for n in t} and all(a.shape == (E, 2) for a in J.values())
+    for j, t in enumerate(nodes):  # a bend moves only with its own three nodes, and its joint moves it most
+        assert all(np.allclose(J[n][j], 0.0) for n in J if n not in t)
+        assert np.linalg.norm(J[t[1]][j]) > max(np.linalg.norm(J[t[0]][j]), np.linalg.norm(J[t[2]][j]))

@@ -29,9 +29,9 @@ effect share one share), with the folds' t quantiles on (folds - 1) dof (:func:`
   term's (phase-surrogate p <= the own level: :func:`~rce_gtsam.diagnosis.verdict.weigh_beside_own`)
   (:mod:`rce_gtsam.diagnosis.own_family`, :func:`own_supported`).
 * **one node** (last, in :func:`~rce_gtsam.diagnosis.diagnose.diagnose`): the verdict stands only if, without the
-  bends of the node that carries most of its in-sample gain, the effect still lowers the held-out error (fold t
-  > 0, :mod:`rce_gtsam.diagnosis.one_node`); an own-family effect's test must hold without that node's segments
-  (:func:`~rce_gtsam.diagnosis.own_family.own_test_significant`).
+  bends of the node that carries most of its in-sample gain (keeping what no error of that node moves), the effect
+  still lowers the held-out error (fold t > 0, :mod:`rce_gtsam.diagnosis.one_node`); an own-family effect's test must
+  hold without that node's segments (:func:`~rce_gtsam.diagnosis.own_family.own_test_significant`).
 
 Nothing here computes a statistic: the tests' results come in from :mod:`rce_gtsam.diagnosis.evidence`, which
 runs an encompassing test where :func:`support_richer_forms` asks for one (``ask``). Why each rule is there,

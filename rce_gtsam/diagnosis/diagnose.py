@@ -39,7 +39,7 @@ from .heldout import fold_blocks
 from .information import effective_ic, effective_sample  # noqa: F401 (re-exported)
 from .misfit import resolve_effects, residual_statistics, worst_edges_and_frames  # noqa: F401 (re-exported)
 from .noise_floor import NoiseFloor
-from .one_node import OneNodeCheck, carrying_node, gain_window, one_node_text, rows_without
+from .one_node import OneNodeCheck, carrying_node, gain_window, node_id, one_node_text, projected_row, rows_without
 from .own_family import own_test_significant
 from .result import CandidateResult, Diagnosis  # noqa: F401 (re-exported)
 from .settings import BLOCK_LENGTH, N_FOLDS, RESOLUTION
@@ -53,7 +53,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
              alpha: float = 0.05, edge_labels=None, frames=None, edge_nodes=None,
              config: ComplianceConfig | None = None, noise_floor: NoiseFloor | None = None,
              resolution: float = RESOLUTION, outside_domain: tuple[str, ...] = (),
-             check_one_node: bool = True) -> Diagnosis:
+             check_one_node: bool = True, node_sensitivity: dict | None = None) -> Diagnosis:
     """Diagnose which physical effect the rank-1 model misses.
 
     Y: (E, T) bend response in degrees (NaN = missing/outlier); weights: (E, T) >= 0 or None;
@@ -78,6 +78,10 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     the one that would have been) and the status reads ``"uncalibrated"``.
     check_one_node: a named bend effect must hold without the node that carries most of its gain
     (:mod:`rce_gtsam.diagnosis.one_node`; the check's own re-run passes False).
+    node_sensitivity: {node id: (E, 2) deg of each row's bend per px of that node's displacement in x and y}
+    (:func:`~rce_gtsam.diagnosis.one_node.bend_jacobian`); with it the one-node check keeps, of the carrying node's
+    bends, what no displacement of that node can move (:func:`~rce_gtsam.diagnosis.one_node.projected_row`); without
+    it, it leaves them out.
     """
     Y, W, s = validate_inputs(Y, weights, root_distance)
     E, T = Y.shape
@@ -144,7 +148,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     one_node = None
     if check_one_node and named is not None and not is_own_family(named):
         one_node = _one_node_check(named, base, Y, W, s, labels, nodes, cands, config, n_folds, seed, block_length,
-                                   alpha, resolution, frames)
+                                   alpha, resolution, frames, node_sensitivity)
         if one_node is not None:
             named.tests["one_node"] = one_node.as_test()
             named.extra["one_node"] = one_node.as_dict()
@@ -195,10 +199,11 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
 
 
 def _one_node_check(named, base, Y, W, s, labels, nodes, cands, config, n_folds, seed, block_length, alpha,
-                    resolution, frames):
+                    resolution, frames, sensitivity=None):
     """:class:`~rce_gtsam.diagnosis.one_node.OneNodeCheck` of the named candidate: the diagnosis again, for it
-    alone, without the bends of the node that carries most of its in-sample gain; None where it gains nothing
-    in-sample, too few bends are left, or the rows' nodes are not known."""
+    alone, on the other bends plus, where the geometry is known (``sensitivity``), the one row of the carrying
+    node's bends that no error of that node reaches (:func:`~rce_gtsam.diagnosis.one_node.projected_row`); None
+    where it gains nothing in-sample, too few bends are left, or the rows' nodes are not known."""
     if nodes is None:
         return None
     found = carrying_node(base.residuals, named.fit.residuals, nodes, W)
@@ -208,15 +213,29 @@ def _one_node_check(named, base, Y, W, s, labels, nodes, cands, config, n_folds,
     keep = rows_without(node, nodes)
     if keep.sum() < 4 or keep.all():
         return None
+    Y2, W2, s2 = Y[keep], None if W is None else W[keep], s[keep]
+    labels2 = [l for l, k in zip(labels, keep) if k]
+    nodes2 = [n for n, k in zip(nodes, keep) if k]
     eff = next(e for e in cands if e.name == named.effect)
-    again = diagnose(Y[keep], W[keep], s[keep], effects=[eff], n_folds=n_folds, seed=seed,
-                     block_length=block_length, alpha=alpha, edge_labels=[l for l, k in zip(labels, keep) if k],
-                     frames=frames, edge_nodes=[n for n, k in zip(nodes, keep) if k], config=config,
+    courses = eff.heldout_time_basis(Y.shape[1]) is not None
+    # not for an effect of per-segment courses (offset, creep): the drift of the node's neighbours, which the
+    # projection keeps, gives that row a course of its own (effect-free user-path renders: 3 offsets named)
+    projected = None if courses else projected_row(Y, W, s, node, nodes, sensitivity, np.asarray(base.kappa, float))
+    if projected is not None:
+        y, w, sp = projected
+        Y2, s2 = np.vstack([Y2, y[None]]), np.r_[s2, sp]
+        W2 = None if W is None else np.vstack([W2, w[None]])
+        labels2 = labels2 + [f"bends of node {node_id(node)}, its error taken out"]
+        nodes2 = nodes2 + [tuple(sorted({n for ns, k in zip(nodes, keep) if not k for n in ns} - {node},
+                                        key=str))]
+    again = diagnose(Y2, W2, s2, effects=[eff], n_folds=n_folds, seed=seed,
+                     block_length=block_length, alpha=alpha, edge_labels=labels2,
+                     frames=frames, edge_nodes=nodes2, config=config,
                      resolution=resolution, check_one_node=False)
     c = again.candidates[0]
     return OneNodeCheck(effect=named.effect, node=node, share=share,
                         rows=tuple(str(l) for l, k in zip(labels, keep) if not k),
                         fold_t=float(c.evidence), heldout_gain_pct=float(c.improvement_pct),
                         significant=bool(c.extra.get("significant", False)),
-                        courses=eff.heldout_time_basis(Y.shape[1]) is not None,
-                        frames=gain_window(base.residuals, named.fit.residuals, ~keep, W, frames))
+                        courses=courses, frames=gain_window(base.residuals, named.fit.residuals, ~keep, W, frames),
+                        projected=projected is not None)

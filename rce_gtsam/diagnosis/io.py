@@ -76,8 +76,20 @@ def diagnose_inputs(result, effects=None, seed: int = 0, n_folds: int | None = N
                 block_length=cfg.block_length, config=cfg,
                 edge_labels=resp.edge_labels, frames=resp.frames,
                 edge_nodes=result.bending.nodes_of(resp.bend_rows),
+                node_sensitivity=node_sensitivity_of(result),
                 noise_floor=noise_floor_of(result),
                 outside_domain=settings_outside_domain(result.preset) if respect_domain else (), **kw)
+
+
+def node_sensitivity_of(result) -> dict | None:
+    """{node id: (E, 2) deg of each analysed bend per px of that node's displacement in x and y} at the rest pose
+    (:func:`~rce_gtsam.diagnosis.one_node.bend_jacobian`), for the one-node check; None where a segment has no
+    length."""
+    from .noise_floor import rest_positions
+    from .one_node import bend_jacobian
+
+    triples = [tuple(t) for t in result.bending.nodes_of(result.response.bend_rows)]
+    return bend_jacobian(triples, rest_positions(result, triples))
 
 
 def diagnosis_baseline(result, seed: int = 0):

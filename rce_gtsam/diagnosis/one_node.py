@@ -15,7 +15,13 @@ or no longer significant (records ``user_path`` and ``one_node``).
 **Statistic.** The *carrying node*: the node whose bends (every bend it enters: as the joint, the parent or the
 child) carry the largest share of the verdict candidate's in-sample gain, sum over frames of weight x (baseline
 residual^2 - candidate residual^2) (:func:`carrying_node`). The diagnosis runs again, for that candidate alone, on the
-other bends (:func:`rows_without`), and reads the candidate's fold t and held-out gain there.
+other bends (:func:`rows_without`) and, where the rest geometry is known and the node enters three bends or more, on
+one more row: the combination of its bends that no displacement of that node moves (orthogonal to their Jacobian in
+x and y, :func:`bend_jacobian`), taken along the rank-1 loadings (:func:`projected_row`). A node's error moves a
+joint's own bend against its two neighbours'; the branch moves all three with the same sign, so that row keeps a
+part of a physical effect there and none of the node's error. The check reads the candidate's fold t and held-out
+gain on those rows. An effect of per-segment courses (offset, creep) gets no such row: the drift of the node's
+neighbours, which the projection keeps, gives it a course of its own.
 
 **Rule (a sign, no tuned level).** The finding holds when, without the carrying node, the candidate still
 predicts the held-out bends better than the rank-1 model: fold t > 0 and held-out RMSE lower
@@ -73,6 +79,7 @@ class OneNodeCheck:
     significant: bool = False
     courses: bool = False
     frames: tuple = ()
+    projected: bool = False
 
     @property
     def holds(self) -> bool:
@@ -86,13 +93,14 @@ class OneNodeCheck:
         """The check back from :meth:`as_dict` (``diagnosis.json``'s ``settings["one_node"]``)."""
         return cls(effect=d["effect"], node=d["node"], share=d["share"], rows=tuple(d["rows"]), fold_t=d["fold_t"],
                    heldout_gain_pct=d["heldout_gain_pct"], significant=d.get("significant_without_node", False),
-                   courses=d.get("per_segment_courses", False), frames=tuple(d.get("frames", ())))
+                   courses=d.get("per_segment_courses", False), frames=tuple(d.get("frames", ())),
+                   projected=d.get("projected", False))
 
     def as_dict(self) -> dict:
         return {"effect": self.effect, "node": node_id(self.node), "share": float(self.share), "rows": list(self.rows),
                 "fold_t": float(self.fold_t), "heldout_gain_pct": float(self.heldout_gain_pct),
                 "significant_without_node": bool(self.significant), "per_segment_courses": bool(self.courses),
-                "frames": [int(f) for f in self.frames],
+                "frames": [int(f) for f in self.frames], "projected": bool(self.projected),
                 "holds": bool(self.holds)}
 
 
@@ -167,6 +175,54 @@ def gain_window(base_residuals, cand_residuals, rows: np.ndarray, weights=None, 
     lo = int(np.argmax(sums))
     fr = np.arange(T) if frames is None else np.asarray(frames)
     return int(fr[lo]), int(fr[lo + width - 1])
+
+
+def bend_jacobian(bends, rest_xy: dict) -> dict | None:
+    """{node id: (E, 2)} deg of each bend's turning angle per px of that node's displacement in x and y, at the rest
+    positions ``rest_xy`` ({node id: (2,) px}); ``bends``: (grandparent, joint, child) node ids per row. The turning
+    angle at joint m is phi(m -> c) - phi(g -> m), and a segment u -> v turns by perp(v - u) / |v - u|^2 rad per
+    px that v moves (perp(r) = (-r_y, r_x)), by minus that when u moves. None where a segment has no length."""
+    out: dict = {}
+    for j, (g, m, c) in enumerate(bends):
+        r1 = np.subtract(rest_xy[m], rest_xy[g]).astype(float)
+        r2 = np.subtract(rest_xy[c], rest_xy[m]).astype(float)
+        n1, n2 = float(r1 @ r1), float(r2 @ r2)
+        if not (n1 > 0 and n2 > 0):
+            return None
+        d1, d2 = np.array([-r1[1], r1[0]]) / n1, np.array([-r2[1], r2[0]]) / n2
+        for node, grad in ((c, d2), (m, -d2 - d1), (g, d1)):
+            out.setdefault(node, np.zeros((len(bends), 2)))[j] += np.degrees(grad)
+    return out
+
+
+def projected_row(Y: np.ndarray, W, s: np.ndarray, node, edge_nodes, sensitivity, kappa):
+    """What the bends ``node`` enters still show once any displacement of that node is taken out: one row (y (T,),
+    w (T,), s) made of those bends, ``c @ Y[rows]``, with c orthogonal to the node's sensitivity A (deg of each
+    bend per px of the node's displacement in x and y, ``sensitivity``: {node: (E, 2)}, :func:`bend_jacobian`) and,
+    within that, along the rank-1 loadings ``kappa`` (E,: signed), normalised. A displacement d of the node moves
+    those bends by A d, so ``c @ Y`` holds none of it (to first order), whatever its time course; a response of
+    the branch moves them along kappa (all three bends of a joint with the same sign, where a node's error moves
+    the joint's own bend against its neighbours'), and a part of it is kept. None where the node enters fewer than
+    three bends (two or fewer: its displacement can move them every way), the sensitivity is unknown, or kappa
+    lies in A's span. y is NaN where a bend is missing; w the inverse of the combined variance ``1 / sum(c^2 / W)``
+    (W None: 1 per bend); s the c^2-weighted root distance."""
+    if sensitivity is None or node not in sensitivity:
+        return None
+    rows = ~rows_without(node, edge_nodes)
+    A = np.asarray(sensitivity[node], float)[rows]
+    k = np.asarray(kappa, float)[rows]
+    if rows.sum() < 3 or not (np.all(np.isfinite(A)) and np.all(np.isfinite(k))):
+        return None
+    c = k - A @ np.linalg.lstsq(A, k, rcond=None)[0]
+    if np.linalg.norm(c) <= 1e-3 * max(np.linalg.norm(k), 1e-300):
+        return None
+    c = c / np.linalg.norm(c)
+    Yr = np.asarray(Y, float)[rows]
+    Wr = np.ones_like(Yr) if W is None else np.asarray(W, float)[rows]
+    ok = np.all(np.isfinite(Yr) & np.isfinite(Wr) & (Wr > 0), axis=0)
+    y = np.where(ok, c @ np.where(np.isfinite(Yr), Yr, 0.0), np.nan)
+    w = np.where(ok, 1.0 / np.sum(c[:, None] ** 2 / np.where(Wr > 0, Wr, 1.0), axis=0), 0.0)
+    return y, w, float(c ** 2 @ np.asarray(s, float)[rows])
 
 
 def rows_without(node, edge_nodes) -> np.ndarray:
