@@ -275,7 +275,7 @@ def test_the_delay_numbers_the_pages_quote_are_the_records():
     assert quoted.replace(" ", "") in text.replace("\n", "").replace(" ", ""), quoted
     free = _record("user_path")["rows"]
     named = sum(int(r[5].split(" of ")[0]) for r in free)
-    assert f"at {named} of {sum(r[3] for r in free)} effect-free renders named" in text.replace("\n  ", " ")
+    assert f"Effect-free renders: {named} of {sum(r[3] for r in free)} named" in text.replace("\n  ", " ")
     rows = {(r[0], r[1]): r for r in _record("delay_test")["rows"]}  # [bed, group, cases, baseline, now, oracle]
 
     def fired(keys):  # cases at p <= 0.005 under the current test, and cases
@@ -392,3 +392,25 @@ def test_the_kappa_floor_numbers_results_md_quotes_are_the_record():
     code = (REPO / "rce_gtsam" / "kappa_floor.py").read_text()
     bed_white = row["texture bed, truth + white, our error's RMS"]
     assert f"was {w1[c['r']]}x (simulator, 1 px) to {bed_white[c['r']]}x (texture bed, white noise) the floor" in code
+
+
+def test_the_outdoor_lag_ceiling_the_pages_quote_is_the_record():
+    """limits.md and the changelog quote the ladder of ``user_path_lag_ceiling``: the outdoor lag recordings on the
+    true positions, with white noise of our tracker's size (the record's note measures it) and of half it, and ours."""
+    rec = _record("user_path_lag_ceiling")
+    found = {r[0]: int(r[3].split(" of ")[0]) for r in rec["rows"]}
+    n = {r[0]: int(r[3].split(" of ")[1]) for r in rec["rows"]}
+    rms = float(re.search(r"per-axis RMS of ([0-9.]+) px", rec["notes"][0]).group(1))
+    assert f"true + white {rms:g} px" in found  # the white noise is our tracker's measured size
+    limits = " ".join((DOCS / "limits.md").read_text().split())
+    assert (f"the same recordings on the true node positions find it in {found['true']} of {n['true']}; with white "
+            f"noise of {rms:g} px per axis added to them (the size of our tracker's error there, its gross errors "
+            f"aside) in {found[f'true + white {rms:g} px']} of 40, about as on our tracks; with 0.16 px in "
+            f"{found['true + white 0.16 px']} of 40") in limits
+    log = " ".join((DOCS / "changelog.md").read_text().split())
+    assert (f"find it in {found['true']} of 40, with white noise of 0.16 px per axis in "
+            f"{found['true + white 0.16 px']} of 40, with {rms:g} px (our tracker's error there, its gross errors "
+            f"aside) in {found[f'true + white {rms:g} px']} of 40, on our tracks in {found['ours']}; our tracks with "
+            f"every point over 2 px from the truth marked lost, in {found['no gross']}") in log
+    ours = [r for r in _record("user_path_lag")["rows"] if r[1] == "outdoor"]
+    assert found["ours"] == sum(int(r[6].split(" / ")[1]) for r in ours)  # the same recordings, the same diagnosis
