@@ -163,6 +163,7 @@ def test_a_second_mode_resting_on_one_node_stays_unnamed_with_the_projection():
                  node_sensitivity=bend_jacobian(bends, rest))
     check = d.settings["one_node"]
     assert d.verdict is None and check["node"] == 11 and check["projected"] and not check["holds"]
+    assert "keeping only the combination of them no error of node 11 can move" in d.explanation
 
 
 def test_an_analysis_hands_the_check_its_geometry():

@@ -246,16 +246,18 @@ def one_node_text(check: OneNodeCheck | None, labels=()) -> str:
     if check is None:
         return ""
     rows = ", ".join(check.rows)
+    kept = (f", keeping only the combination of them no error of node {check.node} can move," if check.projected
+            else "")
     if check.holds:
         return (f" It does not rest on one tracked node: without node {check.node}'s bends ({rows}; "
-                f"{100 * check.share:.0f}% of its in-sample gain) {check.effect} still predicts the held-out bends "
-                f"{check.heldout_gain_pct:.1f}% better (fold t {check.fold_t:.1f}).")
+                f"{100 * check.share:.0f}% of its in-sample gain){kept} {check.effect} still predicts the held-out "
+                f"bends {check.heldout_gain_pct:.1f}% better (fold t {check.fold_t:.1f}).")
     if holds(check.fold_t, check.heldout_gain_pct):  # the sign held; a per-segment course lost its significance
         without = (f"without them {check.effect} is no longer significant by its own tests (held-out RMSE "
                    f"{check.heldout_gain_pct:.1f}% lower, fold t {check.fold_t:.1f}), and a slow course per segment "
                    f"is what a node's drift makes")
     else:
-        without = (f"without them the model with {check.effect} predicts the held-out bends no better than the "
+        without = (f"without them{kept} the model with {check.effect} predicts the held-out bends no better than the "
                    f"rank-1 model (held-out RMSE {-check.heldout_gain_pct:+.1f}%, fold t {check.fold_t:.1f})")
     where = f" (most in frames {check.frames[0]}-{check.frames[1]})" if len(check.frames) == 2 else ""
     return (f" Not named: the tracker, not physics. {check.effect}'s gain rests on node {check.node}: its bends "
