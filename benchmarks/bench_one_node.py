@@ -164,7 +164,9 @@ def main() -> int:
                                  "checked on its own channel and is not listed) and on the project's simulator "
                                  "through the pipeline (900 frames). The carrying node is the one whose bends hold "
                                  "the largest share of the named effect's in-sample gain; the diagnosis then runs "
-                                 "again for that effect without those bends. 'holds': its held-out gain stays "
+                                 "again for that effect without those bends, keeping (where the geometry is known "
+                                 "and the effect is not a course per segment) the one combination of them that no "
+                                 "displacement of that node moves. 'holds': its held-out gain stays "
                                  "positive there (and an offset, a course per segment, stays significant); "
                                  "'withheld': the report names the node instead of the effect."),
                     columns=cols, rows=tab, notes=notes)
