@@ -15,9 +15,13 @@ named; the noise-floor ratio = estimated angle-noise RMS (:func:`rce_gtsam.diagn
 ``bench_diagnose.cached_case`` -- Y, W, s, k, y, labels -- plus the noise-floor numbers), so the diagnosis can be
 re-run after a change to it without the pipeline.
 
+The diagnosis gets the one-node check's geometry (each node's Jacobian at the rest pose, from the simulation's
+true positions: :func:`node_sensitivity`) as ``rce diagnose`` does; ``--no-geometry`` leaves it out (the check then
+drops the carrying node's bends whole, as it did before it had the geometry).
+
 Usage: OMP_NUM_THREADS=1 python benchmarks/bench_artifacts.py [--seeds 5] [--first-seed 0] [--frames 450]
        [--families none,lag,speed_error,gust_occlusion,slide,coloured_along,drift] [--scales 1,2]
-       [--cache /work/cache/artifacts]
+       [--cache /work/cache/artifacts] [--workers 2] [--no-geometry] [--record NAME [--note LINE]]
 """
 
 from __future__ import annotations
@@ -26,6 +30,7 @@ import argparse
 import sys
 import time
 from collections import Counter
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -100,6 +105,42 @@ def cached(cache: str | None, family: str | None, scale: float, seed: int, frame
     return d
 
 
+def node_sensitivity(family: str | None, scale: float, seed: int, frames: int, labels) -> dict | None:
+    """The one-node check's geometry for a case's rows (``"joint->child"`` labels), as ``rce diagnose`` hands it over
+    (:func:`rce_gtsam.diagnosis.io.node_sensitivity_of`): each node's Jacobian at the rest pose, here the median of
+    the simulation's true positions (the pipeline takes its smoothed ones), keyed by the label's node text."""
+    from rce_gtsam.diagnosis.one_node import bend_jacobian
+    from rce_gtsam.sim.artifacts import ArtifactConfig
+    from rce_gtsam.sim.simulate import SimulationConfig, simulate
+
+    art = ArtifactConfig(families=(family,), scale=scale) if family else ArtifactConfig()
+    sim = simulate(SimulationConfig(seed=seed, n_frames=frames, artifacts=art))
+    rest = {int(n): np.median(sim.true_xy[i], axis=0) for i, n in enumerate(sim.tracks.node_ids)}
+    parent = {int(c): int(p) for p, c in sim.graph.edges}
+    triples = []
+    for lab in labels:
+        j, c = (int(x) for x in str(lab).split("->"))
+        if j not in parent:
+            return None
+        triples.append((parent[j], j, c))
+    J = bend_jacobian(triples, rest)
+    return None if J is None else {str(n): a for n, a in J.items()}
+
+
+def verdict_of(cache, family, scale, seed, frames, geometry=True):
+    """The diagnosis' verdict on one cached case (the default preset's core model, as ``rce diagnose``), with the
+    one-node check's geometry unless ``geometry`` is False."""
+    from rce_gtsam.diagnosis.diagnose import diagnose
+    from rce_gtsam.presets import get_preset
+
+    c = cached(cache, family, scale, seed, frames)
+    W = c["W"] if np.size(c["W"]) else None
+    labels = list(c["labels"])
+    sens = node_sensitivity(family, scale, seed, frames, labels) if geometry else None
+    return diagnose(c["Y"], weights=W, root_distance=c["s"], seed=0, edge_labels=labels,
+                    config=get_preset("default").compliance, node_sensitivity=sens).verdict
+
+
 def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, default=5)
@@ -113,9 +154,11 @@ def main() -> int:
                          "the record's rows of the same family and size and keep its verdict columns")
     ap.add_argument("--record", default=None, metavar="NAME",
                     help="save the table as the docs' validation record docs/validation/NAME.json")
+    ap.add_argument("--note", action="append", default=[], help="a line under the record's table (repeatable)")
+    ap.add_argument("--workers", type=int, default=1, help="processes for the diagnoses (the cases must be cached)")
+    ap.add_argument("--no-geometry", action="store_true",
+                    help="diagnose without the one-node check's geometry (its rows left out, as before it had one)")
     a = ap.parse_args()
-    from rce_gtsam.diagnosis.diagnose import diagnose
-    from rce_gtsam.presets import get_preset
     from rce_gtsam.sim.artifacts import FAMILIES
 
     fams = [f.strip() for f in a.families.split(",") if f.strip()]
@@ -126,7 +169,6 @@ def main() -> int:
         scales = [float(x) for x in a.scales.split(",")]
     except ValueError:
         ap.error(f"--scales: not a list of numbers: {a.scales!r}")
-    config = get_preset("default").compliance
     print(f"effect-free recordings, {a.seeds} seeds from {a.first_seed}, {a.frames} frames; one artifact family at "
           f"{a.scales} x its measured size on top of the default tracker noise", flush=True)
     rows = []
@@ -134,15 +176,21 @@ def main() -> int:
     for fam in fams:
         for sc in ([1.0] if fam == "none" else scales):
             verdicts, ratios, raw, miss, budgets, tds = [], [], [], [], [], []
-            for sd in range(a.first_seed, a.first_seed + a.seeds):
-                c = cached(a.cache, None if fam == "none" else fam, sc, sd, a.frames)
-                t = time.perf_counter()
-                W = c["W"] if np.size(c["W"]) else None
-                verdict = None
-                if not a.floor_only:
-                    verdict = diagnose(c["Y"], weights=W, root_distance=c["s"], seed=0, edge_labels=list(c["labels"]),
-                                       config=config).verdict
-                tds.append(time.perf_counter() - t)
+            seeds = list(range(a.first_seed, a.first_seed + a.seeds))
+            family = None if fam == "none" else fam
+            cases = [cached(a.cache, family, sc, sd, a.frames) for sd in seeds]
+            t = time.perf_counter()
+            if a.floor_only:
+                found = [None] * len(seeds)
+            elif a.workers > 1:
+                with ProcessPoolExecutor(a.workers) as pool:
+                    found = list(pool.map(verdict_of, *zip(*[(a.cache, family, sc, sd, a.frames, not a.no_geometry)
+                                                             for sd in seeds])))
+            else:
+                found = [verdict_of(a.cache, family, sc, sd, a.frames, not a.no_geometry) for sd in seeds]
+            per_case = (time.perf_counter() - t) / len(seeds)
+            for sd, c, verdict in zip(seeds, cases, found):
+                tds.append(per_case)
                 verdicts.append(verdict)
                 ratios.append(c["nf_rms"] / c["true_rms"])
                 raw.append(c["raw_angle_noise"])
@@ -182,7 +230,7 @@ def main() -> int:
                              "range", "within 25 %"],
                     rows=[[fam, sc, f"{nf} of {n}", ", ".join(f"{k} {v}" for k, v in named.items()) or "-",
                            round(med, 2), f"{lo:.2f}-{hi:.2f}", f"{w25} of {n}"]
-                          for fam, sc, nf, n, named, med, lo, hi, w25, rw, ms, bud in rows])
+                          for fam, sc, nf, n, named, med, lo, hi, w25, rw, ms, bud in rows], notes=a.note)
     return 0
 
 
