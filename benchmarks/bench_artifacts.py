@@ -127,13 +127,12 @@ def node_sensitivity(family: str | None, scale: float, seed: int, frames: int, l
     return None if J is None else {str(n): a for n, a in J.items()}
 
 
-def verdict_of(cache, family, scale, seed, frames, geometry=True):
-    """The diagnosis' verdict on one cached case (the default preset's core model, as ``rce diagnose``), with the
-    one-node check's geometry unless ``geometry`` is False."""
+def verdict_of(c: dict, family, scale, seed, frames, geometry=True):
+    """The diagnosis' verdict on one case's pipeline output ``c`` (:func:`cached`; the default preset's core model, as
+    ``rce diagnose``), with the one-node check's geometry unless ``geometry`` is False."""
     from rce_gtsam.diagnosis.diagnose import diagnose
     from rce_gtsam.presets import get_preset
 
-    c = cached(cache, family, scale, seed, frames)
     W = c["W"] if np.size(c["W"]) else None
     labels = list(c["labels"])
     sens = node_sensitivity(family, scale, seed, frames, labels) if geometry else None
@@ -182,12 +181,14 @@ def main() -> int:
             t = time.perf_counter()
             if a.floor_only:
                 found = [None] * len(seeds)
-            elif a.workers > 1:
-                with ProcessPoolExecutor(a.workers) as pool:
-                    found = list(pool.map(verdict_of, *zip(*[(a.cache, family, sc, sd, a.frames, not a.no_geometry)
-                                                             for sd in seeds])))
             else:
-                found = [verdict_of(a.cache, family, sc, sd, a.frames, not a.no_geometry) for sd in seeds]
+                jobs = [({k: c[k] for k in ("Y", "W", "s", "labels")}, family, sc, sd, a.frames, not a.no_geometry)
+                        for c, sd in zip(cases, seeds)]
+                if a.workers > 1:
+                    with ProcessPoolExecutor(a.workers) as pool:
+                        found = list(pool.map(verdict_of, *zip(*jobs)))
+                else:
+                    found = [verdict_of(*job) for job in jobs]
             per_case = (time.perf_counter() - t) / len(seeds)
             for sd, c, verdict in zip(seeds, cases, found):
                 tds.append(per_case)
@@ -227,7 +228,8 @@ def main() -> int:
                                  "true: the diagnosis' angle-noise floor over the true angle-noise RMS."),
                     columns=["family", "x measured size", "false verdicts", "names", "noise floor / true (median)",
                              "range", "within 25 %"],
-                    rows=[[fam, int(sc) if float(sc).is_integer() else sc, f"{nf} of {n}", ", ".join(f"{k} {v}" for k, v in named.items()) or "-",
+                    rows=[[fam, int(sc) if float(sc).is_integer() else sc, f"{nf} of {n}",
+                           ", ".join(f"{k} {v}" for k, v in named.items()) or "-",
                            round(med, 2), f"{lo:.2f}-{hi:.2f}", f"{w25} of {n}"]
                           for fam, sc, nf, n, named, med, lo, hi, w25, rw, ms, bud in rows], notes=a.note)
     return 0

@@ -124,7 +124,8 @@ def error_stats(cases: list[str], gross_px: float) -> dict:
         err.append(np.hypot(tracks.x.to_numpy() - t[:, 0], tracks.y.to_numpy() - t[:, 1]))
     e = np.concatenate(err)
     small = e[e <= gross_px]
-    return {"rms_per_axis_below_px": float(np.sqrt(np.mean(small ** 2) / 2)), "share_beyond": float(np.mean(e > gross_px)),
+    return {"rms_per_axis_below_px": float(np.sqrt(np.mean(small ** 2) / 2)),
+            "share_beyond": float(np.mean(e > gross_px)),
             "sq_share_beyond": float(np.sum(e[e > gross_px] ** 2) / np.sum(e ** 2)), "median_px": float(np.median(e))}
 
 
@@ -168,7 +169,8 @@ def main() -> int:
         found = cell["delay"][0] + cell["dynamics"][0]
         n = cell["delay"][1] + cell["dynamics"][1]
         name = v if not v.startswith("white:") else f"true + white {v[6:]} px"
-        table.append([name, f"{cell['delay'][0]} of {cell['delay'][1]}", f"{cell['dynamics'][0]} of {cell['dynamics'][1]}",
+        table.append([name, f"{cell['delay'][0]} of {cell['delay'][1]}",
+                      f"{cell['dynamics'][0]} of {cell['dynamics'][1]}",
                       f"{found} of {n}", cell["delay"][2] + cell["dynamics"][2],
                       f"{sum(x['verdict'] is not None for x in rf)} of {len(rf)}" if rf else "-"])
     cols = ["tracks", "delay found", "dynamics found", "lag found", "withheld by the one-node check",
@@ -187,8 +189,9 @@ def main() -> int:
                                  f"{a.first_seed}-{a.first_seed + a.seeds - 1}; blur, shadow, shake, x264 crf 28), "
                                  "diagnosed (rce diagnose, default preset) on five versions of their tracks, each with "
                                  "our tracker's visibility and sigmas: ours; ours with every visible point more than "
-                                 f"{a.gross_px:g} px from the truth marked lost; the true positions; the true positions "
-                                 "plus white noise per axis. A lag counts as found when delay or dynamics is named. "
+                                 f"{a.gross_px:g} px from the truth marked lost; the true positions; the true "
+                                 "positions plus white noise per axis. A lag counts as found when delay or dynamics "
+                                 "is named. "
                                  "Effect-free: the outdoor effect-free recordings of record user_path."),
                     columns=cols, rows=table,
                     notes=[f"our tracker there (visible points): median error {stats['median_px']:.2f} px; "
