@@ -27,6 +27,7 @@ import pickle
 import sys
 import tempfile
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -55,8 +56,13 @@ def bed_case(seed: int, effects: tuple, n_frames: int, tip_px: float, cache: Pat
 
     settings = settings or RenderSettings()
     tag = f"v2_s{seed}_{'-'.join(effects) or 'none'}_f{n_frames}_tip{tip_px:g}"
-    if settings != RenderSettings():
+    if (settings.inner_px, settings.outer_px) != (RenderSettings.inner_px, RenderSettings.outer_px):
         tag += f"_in{settings.inner_px:g}_out{settings.outer_px:g}"
+    if settings.crf != RenderSettings.crf:
+        tag += f"_crf{settings.crf}"
+    if replace(settings, inner_px=RenderSettings.inner_px, outer_px=RenderSettings.outer_px,
+               crf=RenderSettings.crf) != RenderSettings():
+        raise ValueError(f"bed_case caches by rigid band and crf only, got {settings}")
     cache.mkdir(parents=True, exist_ok=True)
     path, meta = cache / f"{tag}.mp4", cache / f"{tag}.pkl"
     cf = clean_first_frame(PLANT)
@@ -105,6 +111,22 @@ def score(res, bed, graph, n_boot: int) -> dict:
             "z_p90": float(np.percentile(z, 90))}
 
 
+def bound_kappa(bed, graph, per_axis_px: np.ndarray, n_boot: int, draws: int = 3) -> float:
+    """Mean kappa log-RMSE of the true tracks plus white noise of ``per_axis_px`` (P,) px per axis per node (its
+    sigma reported with it), over ``draws`` seeded draws: kappa from a tracker at the Cramér-Rao bound."""
+    from rce_gtsam.tracks import Tracks
+
+    nodes = list(graph.nodes)
+    out = []
+    for k in range(draws):
+        rng = np.random.default_rng([bed.seed, k, 71])
+        xy = bed.true_xy + rng.standard_normal(bed.true_xy.shape) * per_axis_px[:, None, None]
+        sig = np.broadcast_to(np.maximum(per_axis_px, 0.05)[:, None], bed.true_xy.shape[:2])
+        t = Tracks(node_ids=np.array(nodes), xy=xy[nodes], sigma_px=np.array(sig[nodes]), source="bound")
+        out.append(kappa_scores(t, graph, bed, n_boot)[0])
+    return float(np.mean(out))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0,1,2,3,4")
@@ -113,12 +135,19 @@ def main():
     ap.add_argument("--n-boot", type=int, default=100, help="bootstrap resamples of each analysis")
     ap.add_argument("--conditions", default="none,delay", help="comma list: none and/or effect names")
     ap.add_argument("--baseline", default=None, help="git revision of the default tracker (rce_gtsam/track/lk*.py) to run as well")
+    ap.add_argument("--crf", default=None, metavar="N[,N]",
+                    help="x264 constant rate factors to render the bed at (default: the bed's, 23), e.g. 0,12,18,23")
+    ap.add_argument("--bound", action="store_true",
+                    help="also the Cramér-Rao bound of the node positions on each video (texture_bound.py) and kappa "
+                         "of the true tracks plus white noise at that bound")
+    ap.add_argument("--record", default=None, metavar="NAME",
+                    help="save the per-crf summary as docs/validation/NAME.json (with --crf)")
     ap.add_argument("--cache", type=Path, default=None)
     args = ap.parse_args()
     cv2.setNumThreads(1)
     if not (PLANT / "annotated_nodes.mp4").is_file():
         raise SystemExit(f"plant 2 footage not found at {PLANT}")
-    from rce_gtsam.sim.texture_bed import angle_floor_deg
+    from rce_gtsam.sim.texture_bed import RenderSettings, angle_floor_deg
     from rce_gtsam.track import LKTracker, open_video
     from rce_gtsam.tracks import Tracks
 
@@ -130,38 +159,55 @@ def main():
         trackers = {"baseline": baseline_tracker(args.baseline, Path(tmp.name)), **trackers}
     seeds = [int(s) for s in args.seeds.split(",")]
     conds = [() if c == "none" else (c,) for c in args.conditions.split(",")]
-    rows = {(name, c): [] for name in trackers for c in conds}
+    crfs = [int(c) for c in args.crf.split(",")] if args.crf else [RenderSettings.crf]
+    rows = {(name, crf, c): [] for name in trackers for crf in crfs for c in conds}
     truth_rows = {c: [] for c in conds}
+    bounds = {crf: [] for crf in crfs}  # (bound median px per axis, noise grey levels, kappa log-RMSE at the bound)
+    sizes = {crf: [] for crf in crfs}  # MB per 10 s of video
     floor = []
     print(f"texture bed: plant 2 frame 0 inpainted, {args.frames} frames, tip excursion {args.tip_px:g} px, "
-          f"seeds {seeds}, H.264; kappa: default preset, n_boot {args.n_boot}; cache {cache}")
-    hdr = (f"  {'tracker':8s} {'cond':6s} {'seed':>4s} {'med':>5s} {'p90':>5s} {'max':>5s} {'vis':>5s} {'visfast':>7s} "
-           f"{'logRMSE':>7s} {'rho':>5s} {'inCI':>5s} {'root':>5s} {'tipvis':>6s} {'tiplost':>7s} {'z90':>5s}")
+          f"seeds {seeds}, H.264 crf {crfs}; kappa: default preset, n_boot {args.n_boot}; cache {cache}")
+    hdr = (f"  {'tracker':8s} {'crf':>3s} {'cond':6s} {'seed':>4s} {'med':>5s} {'p90':>5s} {'max':>5s} {'vis':>5s} "
+           f"{'visfast':>7s} {'logRMSE':>7s} {'rho':>5s} {'inCI':>5s} {'root':>5s} {'tipvis':>6s} {'tiplost':>7s} "
+           f"{'z90':>5s}" + (f" {'bound':>6s} {'noise':>5s} {'bndRMSE':>7s}" if args.bound else ""))
     print(hdr)
-    for c in conds:
-        for seed in seeds:
-            bed, cf, path = bed_case(seed, c, args.frames, args.tip_px, cache)
-            graph = cf.graph
-            nodes = list(graph.nodes)
-            true_tr = Tracks(node_ids=np.array(nodes), xy=bed.true_xy[nodes], source="truth")
-            truth_rows[c].append(kappa_scores(true_tr, graph, bed, args.n_boot))
-            for name, cls in trackers.items():
-                with open_video(path) as src:
-                    res = cls().track(src, cf.points, graph)
-                s = score(res, bed, graph, args.n_boot)
-                rows[(name, c)].append(s)
-                print(f"  {name:8s} {'-'.join(c) or 'none':6s} {seed:4d} {s['median']:5.2f} {s['p90']:5.2f} "
-                      f"{s['max']:5.1f} {s['visible']:5.3f} {s['visible_fast']:7.3f} {s['kappa_logrmse']:7.2f} "
-                      f"{s['kappa_rho']:5.2f} {s['kappa_in_ci']:5.2f} {s['root_median_px']:5.2f} "
-                      f"{s['tip_visible']:6.2f} {s['tip_err_lost']:7.2f} {s['z_p90']:5.1f}", flush=True)
-            L = np.array([np.hypot(*(cf.points[ch] - cf.points[p])) for p, ch in bed.edges])
-            floor.append((np.median(L), float(np.sqrt(np.mean(bed.response_deg ** 2)))))
+    for crf in crfs:
+        settings = RenderSettings(crf=crf)
+        for c in conds:
+            for seed in seeds:
+                bed, cf, path = bed_case(seed, c, args.frames, args.tip_px, cache, settings)
+                graph = cf.graph
+                nodes = list(graph.nodes)
+                if crf == crfs[0]:
+                    true_tr = Tracks(node_ids=np.array(nodes), xy=bed.true_xy[nodes], source="truth")
+                    truth_rows[c].append(kappa_scores(true_tr, graph, bed, args.n_boot))
+                    L = np.array([np.hypot(*(cf.points[ch] - cf.points[p])) for p, ch in bed.edges])
+                    floor.append((np.median(L), float(np.sqrt(np.mean(bed.response_deg ** 2)))))
+                sizes[crf].append(path.stat().st_size / 1e6 * 300.0 / args.frames)
+                extra = ""
+                if args.bound:
+                    from texture_bound import node_bound
+                    per, noise = node_bound(bed, cf.rgb, cf.points, path, settings)
+                    b = (float(np.median(per[per > 0])), noise, bound_kappa(bed, graph, per, args.n_boot))
+                    bounds[crf].append(b)
+                    extra = f" {b[0]:6.3f} {b[1]:5.2f} {b[2]:7.2f}"
+                for name, cls in trackers.items():
+                    with open_video(path) as src:
+                        res = cls().track(src, cf.points, graph)
+                    s = score(res, bed, graph, args.n_boot)
+                    rows[(name, crf, c)].append(s)
+                    print(f"  {name:8s} {crf:3d} {'-'.join(c) or 'none':6s} {seed:4d} {s['median']:5.2f} "
+                          f"{s['p90']:5.2f} {s['max']:5.1f} {s['visible']:5.3f} {s['visible_fast']:7.3f} "
+                          f"{s['kappa_logrmse']:7.2f} {s['kappa_rho']:5.2f} {s['kappa_in_ci']:5.2f} "
+                          f"{s['root_median_px']:5.2f} {s['tip_visible']:6.2f} {s['tip_err_lost']:7.2f} "
+                          f"{s['z_p90']:5.1f}{extra}", flush=True)
     print("summary (mean over seeds):")
-    for (name, c), rs in rows.items():
+    for (name, crf, c), rs in rows.items():
         with warnings.catch_warnings():  # a tip never marked lost has no error-where-lost (NaN in every seed)
             warnings.simplefilter("ignore", RuntimeWarning)
             m = {k: np.nanmean([r[k] for r in rs]) for k in rs[0]}
-        print(f"  {name:8s} {'-'.join(c) or 'none':6s}: error median {m['median']:.2f} / p90 {m['p90']:.2f} px; "
+        print(f"  {name:8s} {'-'.join(c) or 'none':6s}" + (f" crf {crf}" if len(crfs) > 1 else "")
+              + f": error median {m['median']:.2f} / p90 {m['p90']:.2f} px; "
               f"visible {100 * m['visible']:.1f} %, fastest 30 % {100 * m['visible_fast']:.1f} %; kappa log-RMSE "
               f"{m['kappa_logrmse']:.2f}, Spearman {m['kappa_rho']:.2f}, truth in CI {100 * m['kappa_in_ci']:.0f} %; "
               f"root {m['root_median_px']:.2f} px; tip visible {100 * m['tip_visible']:.0f} %")
@@ -171,11 +217,50 @@ def main():
               f"{a[:, 1].mean():.2f}, truth in CI {100 * a[:, 2].mean():.0f} %")
     L, bend = np.median([f[0] for f in floor]), np.mean([f[1] for f in floor])
     for name in trackers:
-        e = float(np.mean([r["median"] for c in conds for r in rows[(name, c)]]))  # median error, px
+        e = float(np.mean([r["median"] for c in conds for r in rows[(name, crfs[-1], c)]]))  # median error, px
         lo, hi = angle_floor_deg(e, L)
         print(f"  physical floor ({name}): error e = {e:.2f} px on the median segment L = {L:.1f} px gives "
               f"{lo:.2f}-{hi:.2f} deg of angle noise against a bending RMS of {bend:.2f} deg "
               f"(noise/signal {lo / bend:.2f}-{hi / bend:.2f})")
+    table = []
+    for crf in crfs:
+        rs = [r for c in conds for r in rows[("current", crf, c)]]
+        m = {k: float(np.mean([r[k] for r in rs])) for k in ("median", "p90", "kappa_logrmse", "kappa_rho",
+                                                               "kappa_in_ci", "visible")}
+        row = [crf, len(rs), round(float(np.mean(sizes[crf])), 2), round(m["median"], 3), round(m["p90"], 3),
+               round(100 * m["visible"], 1), round(m["kappa_logrmse"], 3), round(m["kappa_rho"], 2),
+               round(100 * m["kappa_in_ci"], 1)]
+        if args.bound:
+            b = np.array(bounds[crf])
+            row += [round(float(b[:, 1].mean()), 2), round(float(b[:, 0].mean()), 3), round(float(b[:, 2].mean()), 3)]
+            print(f"  crf {crf}: noise {b[:, 1].mean():.2f} grey levels; Cramér-Rao bound {b[:, 0].mean():.3f} px per "
+                  f"axis (median node); kappa log-RMSE at the bound {b[:, 2].mean():.2f} (ours "
+                  f"{m['kappa_logrmse']:.2f})")
+        table.append(row)
+    if args.record:
+        from record import save_record
+        a = np.array([r for rs in truth_rows.values() for r in rs])
+        cols = ["x264 crf", "cases", "video (MB per 10 s)", "error median (px)", "error p90 (px)", "visible (%)",
+                "kappa log-RMSE", "Spearman", "truth in 95 % CI (%)"]
+        if args.bound:
+            cols += ["noise (grey levels RMS)", "Cramér-Rao bound (px per axis, median node)",
+                     "kappa log-RMSE at the bound"]
+        save_record(args.record, title="Texture bed: what compression costs the tracker and kappa, and what any "
+                                       "tracker could reach",
+                    command=f"python benchmarks/bench_texture_bed.py --seeds {args.seeds} --conditions "
+                            f"{args.conditions} --crf {','.join(map(str, crfs))}"
+                            + (" --bound" if args.bound else "") + f" --record {args.record}",
+                    description=("Plant 2's frame 0 (overlays inpainted) warped by the simulator's motion at the real "
+                                 f"plant's scale (tip {args.tip_px:g} px, {args.frames} frames), blur, sensor noise "
+                                 "2 grey levels, flicker, then H.264 at each crf; our tracker (default) and kappa "
+                                 "(default preset) against the truth, mean over seeds and conditions. The bound: per "
+                                 "node the Cramér-Rao bound of its position from the stem pixels of the noise-free "
+                                 "render, with white noise of the level measured in the decoded video "
+                                 "(benchmarks/texture_bound.py); kappa at the bound: the true tracks plus white "
+                                 "noise of that size."),
+                    columns=cols, rows=table,
+                    notes=[f"true tracks: kappa log-RMSE {a[:, 0].mean():.3f}, truth in CI {100 * a[:, 2].mean():.0f} %",
+                           f"the bed's bending: {bend:.2f} deg RMS per joint on segments of median {L:.1f} px"])
     tmp.cleanup()
 
 

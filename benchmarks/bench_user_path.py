@@ -11,6 +11,7 @@ hidden effect named), the names given, and the median wall seconds of simulate +
 
 Usage: python benchmarks/bench_user_path.py --cache DIR [--seeds 20] [--first-seed 100] [--frames 450]
        [--effects none,delay,dynamics] [--renders clean,outdoor] [--workers 2] [--rediagnose [--every]]
+       (a render ``R-crfN``, e.g. ``outdoor-crf18``: the preset R compressed at x264 crf N, ``rce simulate --crf``)
        (a rediagnosis already in the cache is kept unless RCE_BENCH_FRESH=1)
 """
 
@@ -43,8 +44,9 @@ def run_case(cache: str, effect: str, render: str, seed: int, frames: int) -> di
     wall = None
     if not diag.exists():
         t0 = time.perf_counter()
+        realism, _, crf = render.partition("-crf")
         sim = [str(BIN / "rce"), "simulate", "--seed", str(seed), "--frames", str(frames), "--video",
-               "--realism", render, "--out", str(d / "sim")]
+               "--realism", realism, "--out", str(d / "sim")] + (["--crf", crf] if crf else [])
         if effect != "none":
             sim += ["--effect", effect]
         subprocess.run(sim, check=True, capture_output=True)

@@ -267,3 +267,21 @@ def test_cli_output_cut_short_by_its_reader_ends_quietly(tmp_path):
     err = p.stderr.read().decode()
     assert p.wait(timeout=120) == 141, err
     assert "Traceback" not in err and "BrokenPipe" not in err
+
+
+def test_cli_crf_sets_the_videos_compression_and_names_a_bad_one(tmp_path, capsys):
+    """--crf overrides the realism preset's compression: a lossless render is many times the crf-28 file (the same
+    frames), and a crf outside x264's range, or without a video, is refused in one line before any work."""
+    from rce_gtsam.cli import main
+    sizes = {}
+    for crf in ("0", "28"):
+        out = tmp_path / f"crf{crf}"
+        assert main(["simulate", "--out", str(out), "--frames", "20", "--nodes", "6", "--video", "--crf", crf]) == 0
+        sizes[crf] = (out / "video.mp4").stat().st_size
+    assert sizes["0"] > 5 * sizes["28"]
+    capsys.readouterr()
+    for bad in (["--video", "--crf", "52"], ["--crf", "18"]):
+        assert main(["simulate", "--out", str(tmp_path / "bad"), "--frames", "20", *bad]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "--crf" in err[0]
+        assert not (tmp_path / "bad").exists()

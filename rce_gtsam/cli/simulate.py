@@ -168,6 +168,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="camera nuisances of the video: clean (default; crisp, still, constant light) or outdoor "
                         "(180-degree-shutter motion blur, light drift and a moving soft shadow, ~1 px tripod "
                         "shake, crf 28; true_tracks.csv then includes the camera shake)")
+    p.add_argument("--crf", type=int, default=None, metavar="N",
+                   help="x264 constant rate factor of the video, 0 (lossless) .. 51 (default: the --realism "
+                        "preset's, 16 clean, 28 outdoor): how hard the camera compressed the footage")
     p.set_defaults(func=run)
 
 
@@ -198,12 +201,17 @@ def run(args: argparse.Namespace) -> int:
         raise InputError("--z-rms", f"must be > 0 degrees, got {args.z_rms}")
     if args.realism != "clean" and not (args.video or args.depth):
         raise InputError("--realism", "only applies to the rendered video: add --video")
+    if args.crf is not None and not (args.video or args.depth):
+        raise InputError("--crf", "only applies to the rendered video: add --video")
+    if args.crf is not None and not 0 <= args.crf <= 51:
+        raise InputError("--crf", f"must be an integer in 0..51 (x264's constant rate factor), got {args.crf}")
+    render = REALISM[args.realism] if args.crf is None else replace(REALISM[args.realism], crf=args.crf)
     if args.simulator == "beam":
         for option, given in (("--oop-share", args.oop_share), ("--tilt-deg", args.tilt_deg),
                               ("--depth", args.depth or None)):
             if given is not None:
                 raise InputError(option, "applies to --simulator branch only")
-        return _run_beam(args, effects, strengths, noise)
+        return _run_beam(args, effects, strengths, noise, render)
     from .three_d_args import scene_from_args
     strengths, scene = scene_from_args(args, effects, strengths)
     cfg = SimulationConfig(n_nodes=args.nodes, n_frames=args.frames, effects=effects, effect_strength=strengths,
@@ -213,7 +221,7 @@ def run(args: argparse.Namespace) -> int:
         cfg = replace(cfg, z_rms_deg=args.z_rms)
     t0 = time.perf_counter()
     sim = simulate(cfg)
-    files = sim.write(args.out, video=args.video or args.depth, render=REALISM[args.realism], depth=args.depth)
+    files = sim.write(args.out, video=args.video or args.depth, render=render, depth=args.depth)
     eff = ", ".join(f"{e} (strength {cfg.strength(e):g}"
                     + ("" if e not in EFFECT_FORMS or cfg.form(e) == default_form(e)
                        else f", held-out form {cfg.form(e)}") + ")"
@@ -235,10 +243,9 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_beam(args: argparse.Namespace, effects: tuple[str, ...], strengths: dict | None, noise) -> int:
+def _run_beam(args: argparse.Namespace, effects: tuple[str, ...], strengths: dict | None, noise, render) -> int:
     """``rce simulate --simulator beam``: :func:`rce_gtsam.sim.beam.simulate_beam`, written like the branch's."""
     from ..sim.beam import BeamConfig, simulate_beam
-    from ..sim.nuisance import REALISM
 
     for name, value in (strengths or {}).items():
         if not (math.isfinite(value) and value > 0):
@@ -251,7 +258,7 @@ def _run_beam(args: argparse.Namespace, effects: tuple[str, ...], strengths: dic
     cfg.validate()
     t0 = time.perf_counter()
     sim = simulate_beam(cfg)
-    files = sim.write(args.out, video=args.video, render=REALISM[args.realism])
+    files = sim.write(args.out, video=args.video, render=render)
     eff = ", ".join(f"{e} (strength {cfg.strength(e):g})" for e in cfg.effects) or "none"
     f1 = sim.effect_params["_beam"]["f_hz_effect_free"][0]
     obs = sim.tracks.observed
