@@ -140,6 +140,10 @@ def main():
     ap.add_argument("--bound", action="store_true",
                     help="also the Cramér-Rao bound of the node positions on each video (texture_bound.py) and kappa "
                          "of the true tracks plus white noise at that bound")
+    ap.add_argument("--rigid-px", type=float, default=None, metavar="PX",
+                    help="render the bed with the stem's surroundings rigid out to PX px (inner_px; the fade ends 6 px "
+                         "further), e.g. 14: plant 2's stem is 6.5 px in half-width, so at the default 7 px its edges "
+                         "lie where the bed's motion already fades toward the still background")
     ap.add_argument("--record", default=None, metavar="NAME",
                     help="save the per-crf summary as docs/validation/NAME.json (with --crf)")
     ap.add_argument("--cache", type=Path, default=None)
@@ -172,7 +176,8 @@ def main():
            f"{'z90':>5s}" + (f" {'bound':>6s} {'noise':>5s} {'bndRMSE':>7s}" if args.bound else ""))
     print(hdr)
     for crf in crfs:
-        settings = RenderSettings(crf=crf)
+        settings = (RenderSettings(crf=crf) if args.rigid_px is None
+                    else RenderSettings(crf=crf, inner_px=args.rigid_px, outer_px=args.rigid_px + 6))
         for c in conds:
             for seed in seeds:
                 bed, cf, path = bed_case(seed, c, args.frames, args.tip_px, cache, settings)
@@ -249,11 +254,15 @@ def main():
                                        "tracker could reach",
                     command=f"python benchmarks/bench_texture_bed.py --seeds {args.seeds} --conditions "
                             f"{args.conditions} --crf {','.join(map(str, crfs))}"
+                            + (f" --rigid-px {args.rigid_px:g}" if args.rigid_px is not None else "")
                             + (" --bound" if args.bound else "") + f" --record {args.record}",
                     description=("Plant 2's frame 0 (overlays inpainted) warped by the simulator's motion at the real "
                                  f"plant's scale (tip {args.tip_px:g} px, {args.frames} frames), blur, sensor noise "
                                  "2 grey levels, flicker, then H.264 at each crf; our tracker (default) and kappa "
-                                 "(default preset) against the truth, mean over seeds and conditions. The bound: per "
+                                 "(default preset) against the truth, mean over seeds and conditions"
+                                 + (f"; the stem's surroundings rigid out to {args.rigid_px:g} px (the bed's default: "
+                                    f"{RenderSettings.inner_px:g} px)" if args.rigid_px is not None else "")
+                                 + ". The bound: per "
                                  "node the Cramér-Rao bound of its position from the stem pixels of the noise-free "
                                  "render, with white noise of the level measured in the decoded video "
                                  "(benchmarks/texture_bound.py); kappa at the bound: the true tracks plus white "

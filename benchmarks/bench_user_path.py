@@ -192,7 +192,8 @@ def main() -> int:
                                     + (", first and current diagnosis" if a.rediagnose else ""),
                     command=cmd,
                     description=("Each case renders a simulated branch as video (clean: crisp and still; outdoor: "
-                                 "motion blur, light drift, shadow, camera shake, crf 28), tracks it with the built-in "
+                                 "motion blur, light drift, shadow, camera shake, crf 28; R-crfN: the preset R "
+                                 "compressed at x264 crf N instead), tracks it with the built-in "
                                  "tracker and runs the whole analysis and diagnosis, as a user would (450 frames, "
                                  "20 nodes, default preset). 'first' is the diagnosis rce run wrote, 'now' that of "
                                  "the current diagnosis on the same tracks (the same where there was no "

@@ -414,3 +414,27 @@ def test_the_outdoor_lag_ceiling_the_pages_quote_is_the_record():
             f"every point over 2 px from the truth marked lost, in {found['no gross']}") in log
     ours = [r for r in _record("user_path_lag")["rows"] if r[1] == "outdoor"]
     assert found["ours"] == sum(int(r[6].split(" / ")[1]) for r in ours)  # the same recordings, the same diagnosis
+
+
+def test_the_texture_compression_numbers_the_limits_page_quotes_are_the_record():
+    """limits.md: the texture bed at crf 23 and lossless (record ``texture_compression``): the Cramér-Rao bound, kappa
+    at the bound, ours, our tracker's median error and how often the intervals hold the truth."""
+    rec = _record("texture_compression")
+    cols = rec["columns"]
+    row = {r[0]: r for r in rec["rows"]}
+    hi, lo = row[23], row[0]
+
+    def c(r, name):
+        return r[cols.index(name)]
+
+    bound, at, ours = ("Cramér-Rao bound (px per axis, median node)", "kappa log-RMSE at the bound", "kappa log-RMSE")
+    limits = " ".join((DOCS / "limits.md").read_text().split())
+    said = (f"the Cramér–Rao bound of a node's position is {c(hi, bound):.3f} px per axis at the bed's compression "
+            f"(x264 crf 23) and {c(lo, bound):.3f} px without loss; white noise of that size would leave κ a log-RMSE "
+            f"of {c(hi, at):.2f} and {c(lo, at):.2f}. Ours leaves {c(hi, ours):.2f} and {c(lo, ours):.2f}. Less "
+            f"compression cuts our tracker's error (median {c(hi, 'error median (px)'):.2f} px at crf 23, "
+            f"{c(lo, 'error median (px)'):.2f} px lossless) but hardly κ's, and its intervals then hold the truth for "
+            f"only {round(c(lo, 'truth in 95 % CI (%)'))} % of segments ({round(c(hi, 'truth in 95 % CI (%)'))} % at "
+            f"crf 23)")
+    assert said in limits, said
+    assert c(hi, ours) == _record("texture_bed")["rows"][-1][1]  # crf 23 is the bed of record texture_bed
