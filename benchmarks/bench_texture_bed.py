@@ -251,7 +251,9 @@ def main():
             cols += ["noise (grey levels RMS)", "Cramér-Rao bound (px per axis, median node)",
                      "kappa log-RMSE at the bound"]
         save_record(args.record, title="Texture bed: what compression costs the tracker and kappa, and what any "
-                                       "tracker could reach",
+                                       "tracker could reach"
+                                       + (f" (the stem's surroundings rigid out to {args.rigid_px:g} px)"
+                                          if args.rigid_px is not None else ""),
                     command=f"python benchmarks/bench_texture_bed.py --seeds {args.seeds} --conditions "
                             f"{args.conditions} --crf {','.join(map(str, crfs))}"
                             + (f" --rigid-px {args.rigid_px:g}" if args.rigid_px is not None else "")

@@ -438,3 +438,24 @@ def test_the_texture_compression_numbers_the_limits_page_quotes_are_the_record()
             f"crf 23)")
     assert said in limits, said
     assert c(hi, ours) == _record("texture_bed")["rows"][-1][1]  # crf 23 is the bed of record texture_bed
+
+
+def test_the_rigid_texture_bed_numbers_the_limits_page_quotes_are_the_record():
+    """limits.md: the texture bed with the stem's surroundings rigid out to 14 px (record
+    ``texture_compression_rigid``): ours and the bound at lossless and crf 23, and the intervals' coverage."""
+    rec = _record("texture_compression_rigid")
+    cols = rec["columns"]
+    row = {r[0]: r for r in rec["rows"]}
+    hi, lo = row[23], row[0]
+
+    def c(r, name):
+        return r[cols.index(name)]
+
+    assert "--rigid-px 14" in rec["command"]
+    limits = " ".join((DOCS / "limits.md").read_text().split())
+    said = (f"With the surroundings rigid out to 14 px (record `texture_compression_rigid`), our tracker leaves κ a "
+            f"log-RMSE of {c(lo, 'kappa log-RMSE'):.2f} lossless and {c(hi, 'kappa log-RMSE'):.2f} at crf 23 (the "
+            f"bound: {c(lo, 'kappa log-RMSE at the bound'):.2f} and {c(hi, 'kappa log-RMSE at the bound'):.2f}), and "
+            f"the intervals hold the truth for {round(c(lo, 'truth in 95 % CI (%)'))} % and "
+            f"{round(c(hi, 'truth in 95 % CI (%)'))} % of segments")
+    assert said in limits, said

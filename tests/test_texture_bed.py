@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -82,3 +84,17 @@ def test_angle_floor():
     lo, hi = angle_floor_deg(0.2, np.array([20.0]))
     np.testing.assert_allclose(np.radians(lo), np.sqrt(2) * 0.01)
     np.testing.assert_allclose(np.radians(hi), np.sqrt(6) * 0.01)
+
+
+def test_the_stems_edges_lie_where_the_beds_motion_already_fades(bed, frames):
+    """limits.md: plant 2's stem is 6.5 px in half-width (the tracker's own measurement on frame 0), and the bed's
+    motion fades toward the still background from ``RenderSettings.inner_px`` = 7 px off the axis."""
+    from rce_gtsam.sim.texture_bed import RenderSettings
+
+    cf, _ = bed
+    res = LKTracker().track(ArraySource(frames[:2]), cf.points, cf.graph)
+    half = res.info["branch_halfwidth_px"]
+    assert RenderSettings.inner_px == 7.0 and half == pytest.approx(6.5)
+    limits = " ".join((Path(__file__).resolve().parents[1] / "docs" / "limits.md").read_text().split())
+    assert (f"plant 2's stem is {half:g} px in half-width, and the bed's motion fades toward the still background "
+            f"from {RenderSettings.inner_px:g} px off the stem's axis") in limits
