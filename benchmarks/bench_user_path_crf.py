@@ -57,6 +57,8 @@ def main() -> int:
     ap.add_argument("--frames", type=int, default=450)
     ap.add_argument("--renders", default="outdoor,outdoor-crf23,outdoor-crf18")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--more-none", default=None, metavar="A-B",
+                    help="also count false verdicts on the effect-free cases of seeds A..B (inclusive) where cached")
     ap.add_argument("--record", default=None, metavar="NAME")
     a = ap.parse_args()
     from bench_lag_ceiling import error_stats
@@ -86,16 +88,28 @@ def main() -> int:
         print(f"crf {row[0]:2d} ({render}): lag found {row[2]} (delay {row[3]}, dynamics {row[4]}); effect-free "
               f"named {row[5]}; tracker error median {med:.3f} px (median over cases), per-axis RMS below 2 px "
               f"{rms:.3f} px, beyond 2 px {100 * beyond:.2f} %", flush=True)
+    notes = []
+    if a.more_none:
+        lo, hi = (int(x) for x in a.more_none.split("-"))
+        for render in a.renders.split(","):
+            more = [d for d in (find_case(a.cache, "none", render, s, a.frames) for s in range(lo, hi + 1)) if d]
+            if more:
+                named = sum(1 for d in more if verdict(d))
+                notes.append(f"effect-free, {render}, seeds {lo}-{hi}: {named} of {len(more)} named")
+                print(notes[-1])
     if missing:
+        notes.append(f"missing cases: {len(missing)}")
         print(f"missing cases ({len(missing)}): {', '.join(missing[:8])}{' ...' if len(missing) > 8 else ''}")
     if a.record:
         from record import save_record
         save_record(a.record, title="The user's path on outdoor video at several compressions: tracker error, lags found, "
                                     "false verdicts",
                     command=(f"python benchmarks/bench_user_path.py --cache DIR --seeds {a.seeds} --first-seed "
-                             f"{a.first_seed} --frames {a.frames} --effects delay,dynamics,none --renders {a.renders}; "
+                             f"{a.first_seed} --frames {a.frames} --effects delay,dynamics,none --renders {a.renders}"
+                             + (f" (and --effects none over seeds {a.more_none})" if a.more_none else "") + "; "
                              f"python benchmarks/bench_user_path_crf.py --cache DIR --seeds {a.seeds} --first-seed "
-                             f"{a.first_seed} --renders {a.renders} --record {a.record}"),
+                             f"{a.first_seed} --renders {a.renders}"
+                             + (f" --more-none {a.more_none}" if a.more_none else "") + f" --record {a.record}"),
                     description=("The same simulated scenes (450 frames, 20 nodes; seeds "
                                  f"{a.first_seed}-{a.first_seed + a.seeds - 1}; a hidden delay, a hidden inertia, or "
                                  "none) rendered as the outdoor preset (motion blur, light drift, shadow, ~1 px shake) "
@@ -106,7 +120,7 @@ def main() -> int:
                     columns=["x264 crf", "render", "lag found", "delay found", "dynamics found",
                              "effect-free named", "tracker error median (px)", "RMS per axis below 2 px (px)",
                              "points beyond 2 px (%)"],
-                    rows=rows, notes=[f"missing cases: {len(missing)}"] if missing else None)
+                    rows=rows, notes=notes or None)
     return 0
 
 

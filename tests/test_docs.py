@@ -459,3 +459,42 @@ def test_the_rigid_texture_bed_numbers_the_limits_page_quotes_are_the_record():
             f"the intervals hold the truth for {round(c(lo, 'truth in 95 % CI (%)'))} % and "
             f"{round(c(hi, 'truth in 95 % CI (%)'))} % of segments")
     assert said in limits, said
+
+
+def test_the_compression_numbers_the_pages_quote_are_the_record():
+    """limits.md, own-video.md and the changelog quote ``user_path_crf``: per x264 crf the lags found, our tracker's
+    median error, and the false verdicts; its crf-28 row is the outdoor row of ``user_path_lag`` and
+    ``user_path_lag_ceiling`` (the same recordings, the same diagnosis)."""
+    rec = _record("user_path_crf")
+    cols = rec["columns"]
+    row = {r[0]: r for r in rec["rows"]}
+    found = {k: int(r[cols.index("lag found")].split(" of ")[0]) for k, r in row.items()}
+    err = {k: r[cols.index("tracker error median (px)")] for k, r in row.items()}
+    named = {k: r[cols.index("effect-free named")] for k, r in row.items()}
+    assert all(n.startswith("0 of ") for n in named.values())
+    more = [n for n in rec["notes"] if n.startswith("effect-free, outdoor-crf18, seeds 120-139")][0]
+    more_named = int(re.search(r": (\d+) of (\d+) named", more).group(1))
+    ours = [r for r in _record("user_path_lag")["rows"] if r[1] == "outdoor"]
+    assert found[28] == sum(int(r[6].split(" / ")[1]) for r in ours)
+    ceiling = {r[0]: r for r in _record("user_path_lag_ceiling")["rows"]}
+    assert found[28] == int(ceiling["ours"][3].split(" of ")[0])
+    limits = " ".join((DOCS / "limits.md").read_text().split())
+    said = (f"at x264 crf 23 our tracker's median error is {err[23]:.2f} px and the lag is found in {found[23]} of 40, "
+            f"at crf 18 {err[18]:.2f} px and {found[18]} of 40, against {err[28]:.2f} px and {found[28]} of 40 at "
+            f"crf 28. No effect-free render was named at any of them (20 per crf, 40 at crf 18)")
+    assert more_named == 0
+    assert said in limits, said
+    own = " ".join((DOCS / "own-video.md").read_text().split())
+    said = (f"a hidden lag was found in {found[28]} of 40 recordings at x264 crf 28, {found[23]} at crf 23 and "
+            f"{found[18]} at crf 18 (record `user_path_crf`)")
+    assert said in own, said
+    log = " ".join((DOCS / "changelog.md").read_text().split())
+    tex = {r[0]: r for r in _record("texture_compression")["rows"]}
+    tcols = _record("texture_compression")["columns"]
+    said = (f"a hidden lag is found in {found[28]} of 40 recordings at crf 28, {found[23]} at crf 23, {found[18]} at "
+            f"crf 18, with no effect-free render named; our tracker's median error {err[28]:.2f} / {err[23]:.2f} / "
+            f"{err[18]:.2f} px. On the texture bed (record `texture_compression`) the Cramér–Rao bound of the node "
+            f"positions says what any tracker could reach there: κ log-RMSE "
+            f"{tex[23][tcols.index('kappa log-RMSE at the bound')]:.2f} at crf 23 against our "
+            f"{tex[23][tcols.index('kappa log-RMSE')]:.2f}")
+    assert said in log, said
