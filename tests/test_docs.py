@@ -416,17 +416,17 @@ def test_the_outdoor_lag_ceiling_the_pages_quote_is_the_record():
     assert found["ours"] == sum(int(r[6].split(" / ")[1]) for r in ours)  # the same recordings, the same diagnosis
 
 
+def _crf_rows(name: str):
+    """(record, its crf-23 row, its lossless row, cell(row, column name)) of a ``bench_texture_bed.py --crf`` record."""
+    rec = _record(name)
+    row = {r[0]: r for r in rec["rows"]}
+    return rec, row[23], row[0], lambda r, col: r[rec["columns"].index(col)]
+
+
 def test_the_texture_compression_numbers_the_limits_page_quotes_are_the_record():
     """limits.md: the texture bed at crf 23 and lossless (record ``texture_compression``): the Cramér-Rao bound, kappa
     at the bound, ours, our tracker's median error and how often the intervals hold the truth."""
-    rec = _record("texture_compression")
-    cols = rec["columns"]
-    row = {r[0]: r for r in rec["rows"]}
-    hi, lo = row[23], row[0]
-
-    def c(r, name):
-        return r[cols.index(name)]
-
+    rec, hi, lo, c = _crf_rows("texture_compression")
     bound, at, ours = ("Cramér-Rao bound (px per axis, median node)", "kappa log-RMSE at the bound", "kappa log-RMSE")
     limits = " ".join((DOCS / "limits.md").read_text().split())
     said = (f"the Cramér–Rao bound of a node's position is {c(hi, bound):.3f} px per axis at the bed's compression "
@@ -443,14 +443,7 @@ def test_the_texture_compression_numbers_the_limits_page_quotes_are_the_record()
 def test_the_rigid_texture_bed_numbers_the_limits_page_quotes_are_the_record():
     """limits.md: the texture bed with the stem's surroundings rigid out to 14 px (record
     ``texture_compression_rigid``): ours and the bound at lossless and crf 23, and the intervals' coverage."""
-    rec = _record("texture_compression_rigid")
-    cols = rec["columns"]
-    row = {r[0]: r for r in rec["rows"]}
-    hi, lo = row[23], row[0]
-
-    def c(r, name):
-        return r[cols.index(name)]
-
+    rec, hi, lo, c = _crf_rows("texture_compression_rigid")
     assert "--rigid-px 14" in rec["command"]
     limits = " ".join((DOCS / "limits.md").read_text().split())
     said = (f"With the surroundings rigid out to 14 px (record `texture_compression_rigid`), our tracker leaves κ a "
