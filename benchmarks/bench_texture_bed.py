@@ -270,7 +270,8 @@ def main():
                                  "(benchmarks/texture_bound.py); kappa at the bound: the true tracks plus white "
                                  "noise of that size."),
                     columns=cols, rows=table,
-                    notes=[f"true tracks: kappa log-RMSE {a[:, 0].mean():.3f}, truth in CI {100 * a[:, 2].mean():.0f} %",
+                    notes=[f"true tracks: kappa log-RMSE {a[:, 0].mean():.3f}, truth in CI "
+                           f"{100 * a[:, 2].mean():.0f} %",
                            f"the bed's bending: {bend:.2f} deg RMS per joint on segments of median {L:.1f} px"])
     tmp.cleanup()
 

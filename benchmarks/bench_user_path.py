@@ -37,6 +37,12 @@ def case_dir(cache: Path, effect: str, render: str, seed: int, frames: int) -> P
     return cache / f"{effect}_{render}_f{frames}_s{seed}"
 
 
+def render_parts(render: str) -> tuple[str, int | None]:
+    """(realism preset, x264 crf or None for the preset's) of a render name: ``outdoor``, ``outdoor-crf18``."""
+    realism, _, crf = render.partition("-crf")
+    return realism, int(crf) if crf else None
+
+
 def run_case(cache: str, effect: str, render: str, seed: int, frames: int) -> dict:
     """simulate -> run for one case (skipped where its diagnosis.json exists); returns its row."""
     d = case_dir(Path(cache), effect, render, seed, frames)
@@ -44,9 +50,9 @@ def run_case(cache: str, effect: str, render: str, seed: int, frames: int) -> di
     wall = None
     if not diag.exists():
         t0 = time.perf_counter()
-        realism, _, crf = render.partition("-crf")
+        realism, crf = render_parts(render)
         sim = [str(BIN / "rce"), "simulate", "--seed", str(seed), "--frames", str(frames), "--video",
-               "--realism", realism, "--out", str(d / "sim")] + (["--crf", crf] if crf else [])
+               "--realism", realism, "--out", str(d / "sim")] + (["--crf", str(crf)] if crf is not None else [])
         if effect != "none":
             sim += ["--effect", effect]
         subprocess.run(sim, check=True, capture_output=True)

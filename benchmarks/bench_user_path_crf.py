@@ -43,10 +43,11 @@ def verdict(case: Path) -> str | None:
 
 
 def crf_of(render: str) -> int:
+    from bench_user_path import render_parts
     from rce_gtsam.sim.nuisance import REALISM
 
-    realism, _, crf = render.partition("-crf")
-    return int(crf) if crf else REALISM[realism].crf
+    realism, crf = render_parts(render)
+    return REALISM[realism].crf if crf is None else crf
 
 
 def main() -> int:
@@ -66,7 +67,8 @@ def main() -> int:
     seeds = range(a.first_seed, a.first_seed + a.seeds)
     rows, missing = [], []
     for render in a.renders.split(","):
-        cases = {(e, s): find_case(a.cache, e, render, s, a.frames) for e in ("delay", "dynamics", "none") for s in seeds}
+        cases = {(e, s): find_case(a.cache, e, render, s, a.frames)
+                 for e in ("delay", "dynamics", "none") for s in seeds}
         missing += [f"{e}_{render}_s{s}" for (e, s), d in cases.items() if d is None]
         have = {k: d for k, d in cases.items() if d is not None}
         ver = {k: verdict(d) for k, d in have.items()}
@@ -102,8 +104,8 @@ def main() -> int:
         print(f"missing cases ({len(missing)}): {', '.join(missing[:8])}{' ...' if len(missing) > 8 else ''}")
     if a.record:
         from record import save_record
-        save_record(a.record, title="The user's path on outdoor video at several compressions: tracker error, lags found, "
-                                    "false verdicts",
+        save_record(a.record, title="The user's path on outdoor video at several compressions: tracker error, lags "
+                                    "found, false verdicts",
                     command=(f"python benchmarks/bench_user_path.py --cache DIR --seeds {a.seeds} --first-seed "
                              f"{a.first_seed} --frames {a.frames} --effects delay,dynamics,none --renders {a.renders}"
                              + (f" (and --effects none over seeds {a.more_none})" if a.more_none else "") + "; "

@@ -90,7 +90,8 @@ def node_bound(bed, image_rgb: np.ndarray, q: np.ndarray, video, settings, every
              for f, img in enumerate(render_frames(bed, image_rgb, q, replace(settings, noise_grey=0.0, flicker=0.0)))
              if f in want}
     with open_video(video) as src:
-        dec = {f: cv2.cvtColor(fr.image, cv2.COLOR_RGB2GRAY).astype(np.float64) for f, fr in enumerate(src) if f in want}
+        dec = {f: cv2.cvtColor(fr.image, cv2.COLOR_RGB2GRAY).astype(np.float64)
+               for f, fr in enumerate(src) if f in want}
     P, root = bed.true_xy.shape[0], bed.graph.root
     per, noise = [], []
     for f in sorted(want):

@@ -114,8 +114,8 @@ class KappaFloor:
                 + (f"; on {buried} of {ok.sum()} segments the noise exceeds the bending" if buried else "")
                 + f".\n  That error alone, were it white, allows kappa to about x{np.exp(self.log_rmse):.2f} "
                 f"(log-RMSE {self.log_rmse:.2f}{self._spread_text()}); x{np.exp(self.log_rmse_half_error):.2f} with "
-                f"half of it (a 2x zoom, less compression or a better tracker). Intervals much wider than that: an error that follows "
-                f"the motion, or a model that misses something")
+                f"half of it (a 2x zoom, less compression or a better tracker). Intervals much wider than that: an "
+                f"error that follows the motion, or a model that misses something")
         if buried > ok.sum() / 2:
             text += ("; with the noise above the bending on most segments the recording cannot show how uneven the "
                      "branch is, and the floor is only a rough guide")
