@@ -55,7 +55,7 @@ def bed_case(seed: int, effects: tuple, n_frames: int, tip_px: float, cache: Pat
     from rce_gtsam.sim.texture_bed import RenderSettings, clean_first_frame, make_bed, write_bed_video
 
     settings = settings or RenderSettings()
-    tag = f"v2_s{seed}_{'-'.join(effects) or 'none'}_f{n_frames}_tip{tip_px:g}"
+    tag = f"v3_s{seed}_{'-'.join(effects) or 'none'}_f{n_frames}_tip{tip_px:g}"
     if (settings.inner_px, settings.outer_px) != (RenderSettings.inner_px, RenderSettings.outer_px):
         tag += f"_in{settings.inner_px:g}_out{settings.outer_px:g}"
     if settings.crf != RenderSettings.crf:
@@ -140,10 +140,6 @@ def main():
     ap.add_argument("--bound", action="store_true",
                     help="also the Cramér-Rao bound of the node positions on each video (texture_bound.py) and kappa "
                          "of the true tracks plus white noise at that bound")
-    ap.add_argument("--rigid-px", type=float, default=None, metavar="PX",
-                    help="render the bed with the stem's surroundings rigid out to PX px (inner_px; the fade ends 6 px "
-                         "further), e.g. 14: plant 2's stem is 6.5 px in half-width, so at the default 7 px its edges "
-                         "lie where the bed's motion already fades toward the still background")
     ap.add_argument("--record", default=None, metavar="NAME",
                     help="save the per-crf summary as docs/validation/NAME.json (with --crf)")
     ap.add_argument("--cache", type=Path, default=None)
@@ -176,8 +172,7 @@ def main():
            f"{'z90':>5s}" + (f" {'bound':>6s} {'noise':>5s} {'bndRMSE':>7s}" if args.bound else ""))
     print(hdr)
     for crf in crfs:
-        settings = (RenderSettings(crf=crf) if args.rigid_px is None
-                    else RenderSettings(crf=crf, inner_px=args.rigid_px, outer_px=args.rigid_px + 6))
+        settings = RenderSettings(crf=crf)
         for c in conds:
             for seed in seeds:
                 bed, cf, path = bed_case(seed, c, args.frames, args.tip_px, cache, settings)
@@ -251,19 +246,14 @@ def main():
             cols += ["noise (grey levels RMS)", "Cramér-Rao bound (px per axis, median node)",
                      "kappa log-RMSE at the bound"]
         save_record(args.record, title="Texture bed: what compression costs the tracker and kappa, and what any "
-                                       "tracker could reach"
-                                       + (f" (the stem's surroundings rigid out to {args.rigid_px:g} px)"
-                                          if args.rigid_px is not None else ""),
+                                       "tracker could reach",
                     command=f"python benchmarks/bench_texture_bed.py --seeds {args.seeds} --conditions "
                             f"{args.conditions} --crf {','.join(map(str, crfs))}"
-                            + (f" --rigid-px {args.rigid_px:g}" if args.rigid_px is not None else "")
                             + (" --bound" if args.bound else "") + f" --record {args.record}",
                     description=("Plant 2's frame 0 (overlays inpainted) warped by the simulator's motion at the real "
                                  f"plant's scale (tip {args.tip_px:g} px, {args.frames} frames), blur, sensor noise "
                                  "2 grey levels, flicker, then H.264 at each crf; our tracker (default) and kappa "
                                  "(default preset) against the truth, mean over seeds and conditions"
-                                 + (f"; the stem's surroundings rigid out to {args.rigid_px:g} px (the bed's default: "
-                                    f"{RenderSettings.inner_px:g} px)" if args.rigid_px is not None else "")
                                  + ". The bound: per "
                                  "node the Cramér-Rao bound of its position from the stem pixels of the noise-free "
                                  "render, with white noise of the level measured in the decoded video "

@@ -87,7 +87,8 @@ def node_bound(bed, image_rgb: np.ndarray, q: np.ndarray, video, settings, every
 
     want = set(range(every, bed.true_xy.shape[1], every))
     clean = {f: cv2.cvtColor(img, cv2.COLOR_RGB2GRAY).astype(np.float64)
-             for f, img in enumerate(render_frames(bed, image_rgb, q, replace(settings, noise_grey=0.0, flicker=0.0)))
+             for f, img in enumerate(render_frames(bed, image_rgb, q, replace(settings, noise_grey=0.0, flicker=0.0),
+                                                   only=want))
              if f in want}
     with open_video(video) as src:
         dec = {f: cv2.cvtColor(fr.image, cv2.COLOR_RGB2GRAY).astype(np.float64)

@@ -19,7 +19,7 @@ How good a guide it is (record ``kappa_floor``): under white node error on the s
 3 % of the true error and kappa's measured log-RMSE within a factor 1.5 of the floor on 65-90 % of recordings while
 the angle noise stays below the bending on most segments. Where the noise exceeds the bending on most segments,
 kappa rests mostly on the prior and the data cannot show how uneven the branch really is: there the measured error
-was 0.71x (simulator, 1 px) to 1.83x (texture bed, white noise) the floor (medians), and the printed line says so.
+was 0.71x (simulator, 1 px) to 1.96x (texture bed, white noise) the floor (medians), and the printed line says so.
 
 Where e comes from: the node-wise noise floor (:mod:`rce_gtsam.diagnosis.noise_floor_nodewise`): the node error
 across the branch that the covariance between the rank-1 residuals of bends sharing a node implies. That is the

@@ -13,9 +13,11 @@ lengths (sim node k = the k-th node from the root), scaled so that the tip's lar
 ``tip_excursion_px`` (the real plant's ~60 px). A uniform scale of every bend keeps kappa (relative, geometric
 mean 1) unchanged. Rendering (:func:`render_frames`), per frame:
 
-* pixels near the stem (within ``inner_px`` of a segment, as it lies in this frame) follow their segment's rigid
-  motion; the segments' motions are blended at the joints (Gaussian weights of the distance to each segment,
-  ``blend_px``); between ``inner_px`` and ``outer_px`` the motion fades out, and the background stays;
+* the stem (pixels within ``inner_px`` of a segment, as it lies in this frame) follows its segments' rigid motions,
+  blended at the joints (Gaussian weights of the distance to each segment, ``blend_px``), and is laid over a
+  still background: frame 0 with the stem's band (``outer_px`` around the frame-0 chain) inpainted, so the moving
+  stem uncovers background, not a copy of itself. Between ``inner_px`` and ``outer_px`` the stem's layer fades
+  into the background (an anti-aliased edge; plant 2's stem is 6.5 px in half-width, ``inner_px`` is 8);
 * motion blur follows the pixel speed: the frame is the mean of ``n_sub`` sub-frame warps over an exposure of
   ``exposure`` frames centred on the frame's time (more sub-frames where the motion is fast, one where the branch
   is still);
@@ -185,8 +187,8 @@ def make_bed(points: np.ndarray, graph: BranchGraph, n_frames: int, seed: int, e
 class RenderSettings:
     """How :func:`render_frames` turns the motion into images (px, frames, grey levels)."""
 
-    inner_px: float = 7.0
-    outer_px: float = 13.0
+    inner_px: float = 8.0
+    outer_px: float = 10.0
     blend_px: float = 4.0
     exposure: float = 0.5
     max_sub: int = 6
@@ -204,7 +206,8 @@ def _seg_dist(px, py, a, b):
 
 
 def _warp_map(bed: Bed, q: np.ndarray, hd: np.ndarray, box, st: RenderSettings):
-    """Source coordinates (map_x, map_y) of the pixels of ``box`` for a pose given by edge headings ``hd`` (E,)."""
+    """Source coordinates (map_x, map_y) of the pixels of ``box`` for a pose given by edge headings ``hd`` (E,), and
+    the stem layer's opacity there (1 within ``inner_px`` of the posed chain, 0 beyond ``outer_px``)."""
     x0, y0, x1, y1 = box
     gx, gy = np.meshgrid(np.arange(x0, x1, dtype=np.float64), np.arange(y0, y1, dtype=np.float64))
     edges = bed.edges
@@ -236,11 +239,27 @@ def _warp_map(bed: Bed, q: np.ndarray, hd: np.ndarray, box, st: RenderSettings):
     mx, my = sx / wsum, sy / wsum
     alpha = np.clip((st.outer_px - dmin) / (st.outer_px - st.inner_px), 0.0, 1.0)
     alpha = alpha * alpha * (3 - 2 * alpha)  # smoothstep: no kink at the band's edges
-    return (alpha * mx + (1 - alpha) * gx).astype(np.float32), (alpha * my + (1 - alpha) * gy).astype(np.float32)
+    return mx.astype(np.float32), my.astype(np.float32), alpha.astype(np.float32)
 
 
-def render_frames(bed: Bed, image: np.ndarray, q: np.ndarray, settings: RenderSettings = RenderSettings()):
-    """Yield the bed's frames (H, W, 3) uint8 RGB (before compression); seeded by ``bed.seed``."""
+def still_background(bed: Bed, image: np.ndarray, q: np.ndarray, settings: RenderSettings = None) -> np.ndarray:
+    """Frame 0 (H, W, 3) with the stem's band (pixels within ``outer_px`` + 0.5 of the frame-0 chain) inpainted
+    (``cv2.inpaint``, Telea): what the moving stem uncovers."""
+    st = settings or RenderSettings()
+    h, w = image.shape[:2]
+    gx, gy = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    dmin = np.full(gx.shape, np.inf)
+    for p, c in bed.edges:
+        dmin = np.minimum(dmin, _seg_dist(gx, gy, np.asarray(q[p], float), np.asarray(q[c], float)))
+    mask = (dmin <= st.outer_px + 0.5).astype(np.uint8)
+    return cv2.inpaint(np.ascontiguousarray(image), mask, 3, cv2.INPAINT_TELEA)
+
+
+def render_frames(bed: Bed, image: np.ndarray, q: np.ndarray, settings: RenderSettings = RenderSettings(),
+                  only=None):
+    """Yield the bed's frames (H, W, 3) uint8 RGB (before compression); seeded by ``bed.seed``. ``only``: a set of
+    frame indices to render (the others yield None; every frame's noise is still drawn, so those rendered are the
+    same as in a full run)."""
     st = settings
     rng = np.random.default_rng([bed.seed, 7])
     h, w = image.shape[:2]
@@ -250,12 +269,17 @@ def render_frames(bed: Bed, image: np.ndarray, q: np.ndarray, settings: RenderSe
     x1, y1 = min(w, int(np.ceil(allxy[..., 0].max() + pad))), min(h, int(np.ceil(allxy[..., 1].max() + pad)))
     box = (x0, y0, x1, y1)
     img = image.astype(np.float32)
+    bg = still_background(bed, image, q, st).astype(np.float32)[y0:y1, x0:x1]
     F = bed.heading.shape[1]
     gain = 1 + st.flicker * rng.standard_normal(F)
     speed = np.zeros(F)
     speed[1:] = np.hypot(*np.diff(bed.true_xy, axis=1).transpose(2, 0, 1)).max(axis=0)
     speed[:-1] = np.maximum(speed[:-1], speed[1:])
     for f in range(F):
+        if only is not None and f not in only:
+            rng.standard_normal((h, w, 3), dtype=np.float32)  # keep the noise stream of a full run
+            yield None
+            continue
         n_sub = int(np.clip(np.ceil(speed[f] * st.exposure / 0.5), 1, st.max_sub))
         acc = np.zeros((y1 - y0, x1 - x0, 3), np.float32)
         for s in range(n_sub):
@@ -265,8 +289,9 @@ def render_frames(bed: Bed, image: np.ndarray, q: np.ndarray, settings: RenderSe
             f0 = min(int(np.floor(t)), F - 1)
             fr = t - f0
             hd = bed.heading[:, f0] * (1 - fr) + bed.heading[:, min(f0 + 1, F - 1)] * fr
-            mx, my = _warp_map(bed, q, hd, box, st)
-            acc += cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+            mx, my, alpha = _warp_map(bed, q, hd, box, st)
+            stem = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT)
+            acc += alpha[..., None] * stem + (1 - alpha[..., None]) * bg
         out = img.copy()
         out[y0:y1, x0:x1] = acc / n_sub
         out = out * gain[f] + st.noise_grey * rng.standard_normal(out.shape, dtype=np.float32)
