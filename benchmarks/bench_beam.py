@@ -21,7 +21,9 @@ truth on the pipeline's rest reference (per-row mean of Y - truth removed), and 
 rank-1 misfit of the noise-free response / its RMS (how large the effect is before noise).
 
 Every case's pipeline output is cached (``--cache``, default /work/cache/beam: one pickle per condition, strength,
-seed, length) so the diagnosis can be re-run without the pipeline.
+seed, length) so the diagnosis can be re-run without the pipeline. The one-node check gets its geometry as ``rce
+diagnose`` gives it; a case cached before the pipeline kept it gets it from the beam's true positions
+(:func:`with_geometry`; ``--no-geometry`` leaves it out).
 
 Every case run with a cache also leaves its outcome beside its pickle (``.outcome.json``: the verdict, the oracle,
 the rule that refused the effect's candidate, how far the branch moved; :mod:`beam_curve`). ``--curve`` runs nothing:
@@ -35,7 +37,7 @@ Measured: the ``beam_effect_free``, ``beam_effects`` and ``beam_detection`` (``-
 
 Usage: OMP_NUM_THREADS=1 python benchmarks/bench_beam.py [--seeds 5] [--first-seed 0] [--frames 450]
        [--effects none,modal,gust_front,two_sources,creep,stiffening] [--strength-mult 1[,0.5,2]] [--boot N]
-       [--cache DIR | --no-cache] [--no-oracle]
+       [--cache DIR | --no-cache] [--no-oracle] [--no-geometry]
        OMP_NUM_THREADS=1 python benchmarks/bench_beam.py --curve [--curve-frames 450,900] [--effects ...] [--cache DIR]
        [--record beam_detection]
 """
@@ -75,6 +77,24 @@ def pipeline_case(effect: str | None, seed: int, frames: int, mult: float, boot:
             "kappa_true": np.array([sim.kappa_true[tuple(e)] for e in r.edges]), "kappa": np.asarray(res.fit.kappa),
             "ci": None if res.ci is None else (np.asarray(res.ci.low), np.asarray(res.ci.high)),
             "pipeline_s": tp}
+
+
+def with_geometry(c: dict, effect, seed: int, frames: int, mult: float) -> dict:
+    """``c`` with the one-node check's geometry in its diagnosis inputs, as ``rce diagnose`` hands it over
+    (:func:`rce_gtsam.diagnosis.io.node_sensitivity_of`: each node's Jacobian at the rest pose). A case cached
+    before the pipeline kept it gets it from the beam's true positions (their median per node; the pipeline takes
+    the smoothed ones), recomputed from its seed (a fraction of a second)."""
+    if c["inputs"].get("node_sensitivity") is not None:
+        return c
+    from rce_gtsam.diagnosis.one_node import bend_jacobian
+    from rce_gtsam.sim.beam import BEAM_EFFECT_DEFAULTS, BeamConfig, simulate_beam
+
+    strength = None if effect is None else {effect: BEAM_EFFECT_DEFAULTS[effect] * mult}
+    sim = simulate_beam(BeamConfig(n_frames=frames, seed=seed, effects=(effect,) if effect else (),
+                                   effect_strength=strength))
+    rest = {int(n): np.median(sim.true_xy[i], axis=0) for i, n in enumerate(sim.tracks.node_ids)}
+    triples = [tuple(int(v) for v in t) for t in c["inputs"]["edge_nodes"]]
+    return {**c, "inputs": {**c["inputs"], "node_sensitivity": bend_jacobian(triples, rest)}}
 
 
 def sim_phys(sim) -> dict:
@@ -249,6 +269,9 @@ def main() -> int:
     ap.add_argument("--cache", default=DEFAULT_CACHE)
     ap.add_argument("--no-cache", action="store_true")
     ap.add_argument("--no-oracle", action="store_true")
+    ap.add_argument("--no-geometry", action="store_true",
+                    help="diagnose cached cases without the one-node check's geometry, as they were cached before the "
+                         "pipeline kept it (the check then drops the carrying node's bends whole)")
     ap.add_argument("--curve", action="store_true",
                     help="run nothing: summarise pass rate against strength from the case outcomes in --cache")
     ap.add_argument("--curve-frames", default=None, type=lambda v: [int(x) for x in v.split(",")],
@@ -280,6 +303,8 @@ def main() -> int:
             verdicts, right, orc, klog, cover, ratio, size, td, tp = Counter(), 0, 0, [], [], [], [], [], []
             for sd in range(a.first_seed, a.first_seed + a.seeds):
                 c = cached_case(cache, hidden, sd, a.frames, mult, a.boot)
+                if not a.no_geometry:
+                    c = with_geometry(c, hidden, sd, a.frames, mult)
                 t = time.perf_counter()
                 d = diagnose(**c["inputs"])
                 td.append(time.perf_counter() - t)
