@@ -181,3 +181,27 @@ def test_the_renderer_draws_the_beam(tmp_path):
     on = red_minus_green[mid[:, 1].round().astype(int), mid[:, 0].round().astype(int)]
     off = red_minus_green[(mid[:, 1] + 40).clip(0, 479).round().astype(int), mid[:, 0].round().astype(int)]
     assert np.median(on) > np.median(off) + 20
+
+
+def test_the_beam_bench_gives_the_one_node_check_its_geometry():
+    """bench_beam.with_geometry: a cached case without the one-node check's geometry gets each node's Jacobian at the
+    beam's rest pose (the median of its true positions), as ``rce diagnose`` hands it over; one that has it keeps it."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from bench_beam import with_geometry
+
+    from rce_gtsam.diagnosis.one_node import bend_jacobian
+
+    c = {"inputs": {"edge_nodes": [(0, 1, 2), (1, 2, 3), (2, 3, 4)]}}
+    out = with_geometry(c, None, seed=0, frames=60, mult=1.0)
+    sim = simulate_beam(BeamConfig(n_frames=60, seed=0))
+    rest = {int(n): np.median(sim.true_xy[i], axis=0) for i, n in enumerate(sim.tracks.node_ids)}
+    want = bend_jacobian([(0, 1, 2), (1, 2, 3), (2, 3, 4)], rest)
+    assert set(out["inputs"]["node_sensitivity"]) == set(want) == {0, 1, 2, 3, 4}
+    for n, a in want.items():
+        np.testing.assert_allclose(out["inputs"]["node_sensitivity"][n], a)
+    assert "node_sensitivity" not in c["inputs"]  # the cached case itself is left as it was
+    kept = {"inputs": {**c["inputs"], "node_sensitivity": {"x": 1}}}
+    assert with_geometry(kept, None, 0, 60, 1.0) is kept
