@@ -13,10 +13,14 @@ motion blur, sensor noise, flicker and H.264; videos and truth are cached in ``-
 * the physical floor: the bend-angle noise sqrt(2..6) e / L (rad) a tracker error of e px gives on the median
   segment of L px, against the RMS of the bending to measure.
 
-``--baseline REV`` also runs the default tracker (``rce_gtsam/track/lk*.py``) of that revision on the same videos (before/after).
+``--baseline REV`` also runs the default tracker (``rce_gtsam/track/lk*.py``) of that revision on the same videos
+(before/after). ``--crf`` renders the bed at other x264 compressions; ``--bound`` adds the Cramér-Rao bound of the
+node positions (white noise of the measured level) and kappa at it; ``--oracle`` an estimator that knows every
+frame's noise-free appearance, whose error is what the compression itself displaces (``texture_bound.py``).
 Needs ``../shared/data/plant_2`` beside the repository.
 
 Usage: python benchmarks/bench_texture_bed.py [--seeds 0,1,2,3,4] [--frames 300] [--baseline REV] [--n-boot 100]
+       [--crf 0,12,18,23] [--bound] [--oracle] [--record NAME]
 """
 
 from __future__ import annotations
@@ -127,6 +131,19 @@ def bound_kappa(bed, graph, per_axis_px: np.ndarray, n_boot: int, draws: int = 3
     return float(np.mean(out))
 
 
+def oracle_scores(bed, graph, E: np.ndarray, n_boot: int) -> tuple:
+    """(median |error| px, kappa log-RMSE, Spearman, truth in CI) of the oracle's tracks, the truth plus ``E`` (P, F, 2)
+    px (:func:`texture_bound.oracle_tracks`), each node's sigma its RMS error per axis (at least 0.05 px)."""
+    from rce_gtsam.tracks import Tracks
+
+    nodes = list(graph.nodes)
+    rms = np.sqrt(np.mean(E ** 2, axis=(1, 2)))
+    sig = np.broadcast_to(np.maximum(rms, 0.05)[:, None], bed.true_xy.shape[:2])
+    t = Tracks(node_ids=np.array(nodes), xy=(bed.true_xy + E)[nodes], sigma_px=np.array(sig[nodes]), source="oracle")
+    free = [n for n in nodes if n != graph.root]
+    return (float(np.median(np.hypot(*E[free].transpose(2, 0, 1)))), *kappa_scores(t, graph, bed, n_boot))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", default="0,1,2,3,4")
@@ -140,6 +157,9 @@ def main():
     ap.add_argument("--bound", action="store_true",
                     help="also the Cramér-Rao bound of the node positions on each video (texture_bound.py) and kappa "
                          "of the true tracks plus white noise at that bound")
+    ap.add_argument("--oracle", action="store_true",
+                    help="also an oracle that knows every frame's noise-free appearance (texture_bound.oracle_tracks): "
+                         "its error is what the compression itself displaces, and kappa from its tracks")
     ap.add_argument("--record", default=None, metavar="NAME",
                     help="save the per-crf summary as docs/validation/NAME.json (with --crf)")
     ap.add_argument("--cache", type=Path, default=None)
@@ -164,6 +184,7 @@ def main():
     truth_rows = {c: [] for c in conds}
     bounds = {crf: [] for crf in crfs}  # (bound median px per axis, noise grey levels, kappa log-RMSE at the bound)
     sizes = {crf: [] for crf in crfs}  # MB per 10 s of video
+    oracles = {crf: [] for crf in crfs}  # (median |error| px, kappa log-RMSE, Spearman, truth in CI)
     floor = []
     print(f"texture bed: plant 2 frame 0 inpainted, {args.frames} frames, tip excursion {args.tip_px:g} px, "
           f"seeds {seeds}, H.264 crf {crfs}; kappa: default preset, n_boot {args.n_boot}; cache {cache}")
@@ -191,6 +212,11 @@ def main():
                     b = (float(np.median(per[per > 0])), noise, bound_kappa(bed, graph, per, args.n_boot))
                     bounds[crf].append(b)
                     extra = f" {b[0]:6.3f} {b[1]:5.2f} {b[2]:7.2f}"
+                if args.oracle:
+                    from texture_bound import oracle_tracks
+                    o = oracle_scores(bed, graph, oracle_tracks(bed, cf.rgb, cf.points, path, settings), args.n_boot)
+                    oracles[crf].append(o)
+                    extra += f"  oracle {o[0]:.3f} px, kappa {o[1]:.2f}"
                 for name, cls in trackers.items():
                     with open_video(path) as src:
                         res = cls().track(src, cf.points, graph)
@@ -236,6 +262,13 @@ def main():
             print(f"  crf {crf}: noise {b[:, 1].mean():.2f} grey levels; Cramér-Rao bound {b[:, 0].mean():.3f} px per "
                   f"axis (median node); kappa log-RMSE at the bound {b[:, 2].mean():.2f} (ours "
                   f"{m['kappa_logrmse']:.2f})")
+        if args.oracle:
+            o = np.array(oracles[crf])
+            row += [round(float(o[:, 0].mean()), 3), round(float(o[:, 1].mean()), 3),
+                    round(float(100 * o[:, 3].mean()), 1)]
+            print(f"  crf {crf}: the oracle (knows each frame's noise-free appearance): error median "
+                  f"{o[:, 0].mean():.3f} px, kappa log-RMSE {o[:, 1].mean():.2f}, Spearman {o[:, 2].mean():.2f}, "
+                  f"truth in CI {100 * o[:, 3].mean():.0f} % (ours {m['kappa_logrmse']:.2f})")
         table.append(row)
     if args.record:
         from record import save_record
@@ -245,11 +278,14 @@ def main():
         if args.bound:
             cols += ["noise (grey levels RMS)", "Cramér-Rao bound (px per axis, median node)",
                      "kappa log-RMSE at the bound"]
+        if args.oracle:
+            cols += ["oracle error median (px)", "kappa log-RMSE, oracle", "truth in 95 % CI, oracle (%)"]
         save_record(args.record, title="Texture bed: what compression costs the tracker and kappa, and what any "
                                        "tracker could reach",
                     command=f"python benchmarks/bench_texture_bed.py --seeds {args.seeds} --conditions "
                             f"{args.conditions} --crf {','.join(map(str, crfs))}"
-                            + (" --bound" if args.bound else "") + f" --record {args.record}",
+                            + (" --bound" if args.bound else "") + (" --oracle" if args.oracle else "")
+                            + f" --record {args.record}",
                     description=("Plant 2's frame 0 (overlays inpainted) warped by the simulator's motion at the real "
                                  f"plant's scale (tip {args.tip_px:g} px, {args.frames} frames), blur, sensor noise "
                                  "2 grey levels, flicker, then H.264 at each crf; our tracker (default) and kappa "
@@ -258,7 +294,12 @@ def main():
                                  "node the Cramér-Rao bound of its position from the stem pixels of the noise-free "
                                  "render, with white noise of the level measured in the decoded video "
                                  "(benchmarks/texture_bound.py); kappa at the bound: the true tracks plus white "
-                                 "noise of that size."),
+                                 "noise of that size."
+                                 + (" The oracle: an estimator that knows every frame's noise-free appearance at the "
+                                    "true pose and fits the decoded frame's stem pixels with it, moved by the bed's "
+                                    "articulated model (texture_bound.oracle_tracks): its error is what the noise and "
+                                    "the compression displace; kappa from the truth plus that error." if args.oracle
+                                    else "")),
                     columns=cols, rows=table,
                     notes=[f"true tracks: kappa log-RMSE {a[:, 0].mean():.3f}, truth in CI "
                            f"{100 * a[:, 2].mean():.0f} %",

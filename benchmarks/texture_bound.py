@@ -11,7 +11,10 @@ pixel), and no unbiased estimator from that frame has a covariance below J^-1 (r
 * :func:`fisher` — J of one frame from its noise-free render;
 * :func:`frame_noise` — s (grey levels): the decoded frame minus the noise-free render after a global gain and
   offset (sensor noise plus what H.264 did to the frame);
-* :func:`node_bound` — per node, the bound's RMS per axis (px) over sampled frames.
+* :func:`node_bound` — per node, the bound's RMS per axis (px) over sampled frames;
+* :func:`oracle_offsets` / :func:`oracle_tracks` — an estimator that knows every frame's noise-free appearance:
+  its error on the decoded video is what the noise *and the compression* displace, which the bound (white noise)
+  cannot say.
 
 Gradients are OpenCV's 3x3 Sobel: on a stem profile 3 px wide it keeps 92-94 % of the information a continuous
 derivative finds, on a 1.5-px one 80-86 % (``tests/test_texture_bound.py``), so the bound errs a little high.
@@ -28,9 +31,10 @@ import cv2
 import numpy as np
 
 
-def fisher(grey: np.ndarray, xy: np.ndarray, edges, inner_px: float, blend_px: float, root: int):
-    """(J / 1 (unit noise), free parameter indices) of the node positions ``xy`` (P, 2) px in the noise-free grey
-    frame ``grey`` (float); parameters 2 i, 2 i + 1 = node i's x, y; the root's are left out."""
+def design(grey: np.ndarray, xy: np.ndarray, edges, inner_px: float, blend_px: float, root: int):
+    """(G, free, rows, cols): the change of the noise-free grey frame ``grey`` (float) per px of each free node
+    coordinate (parameters 2 i, 2 i + 1 = node i's x, y; the root's left out), one row per stem pixel (within
+    ``inner_px`` of a segment of the pose ``xy`` (P, 2) px), and those pixels' row and column indices."""
     P = xy.shape[0]
     lo = np.floor(xy.min(0) - inner_px - 2).astype(int)
     hi = np.ceil(xy.max(0) + inner_px + 2).astype(int)
@@ -52,8 +56,9 @@ def fisher(grey: np.ndarray, xy: np.ndarray, edges, inner_px: float, blend_px: f
     gx, gy, D, U, V = gx[keep], gy[keep], D[keep], U[keep], V[keep]
     w = np.exp(-0.5 * (D / blend_px) ** 2)
     w /= w.sum(1, keepdims=True)
-    ix = (cv2.Sobel(grey, cv2.CV_64F, 1, 0, ksize=3) / 8)[gy.astype(int), gx.astype(int)]
-    iy = (cv2.Sobel(grey, cv2.CV_64F, 0, 1, ksize=3) / 8)[gy.astype(int), gx.astype(int)]
+    rows, cols = gy.astype(int), gx.astype(int)
+    ix = (cv2.Sobel(grey, cv2.CV_64F, 1, 0, ksize=3) / 8)[rows, cols]
+    iy = (cv2.Sobel(grey, cv2.CV_64F, 0, 1, ksize=3) / 8)[rows, cols]
     rx, ry = iy, -ix  # R90^T g: the gradient's component along a rotation of the offset
     G = np.zeros((gx.size, 2 * P))
     for k, (p, c) in enumerate(edges):
@@ -63,7 +68,33 @@ def fisher(grey: np.ndarray, xy: np.ndarray, edges, inner_px: float, blend_px: f
         G[:, 2 * c] += wk * (u * ix + v * rx)
         G[:, 2 * c + 1] += wk * (u * iy + v * ry)
     free = [j for j in range(2 * P) if j // 2 != root]
-    return G[:, free].T @ G[:, free], free
+    return G[:, free], free, rows, cols
+
+
+def fisher(grey: np.ndarray, xy: np.ndarray, edges, inner_px: float, blend_px: float, root: int):
+    """(J / 1 (unit noise), free parameter indices) of the node positions ``xy`` (P, 2) px in the noise-free grey
+    frame ``grey`` (float); parameters 2 i, 2 i + 1 = node i's x, y; the root's are left out."""
+    G, free, _, _ = design(grey, xy, edges, inner_px, blend_px, root)
+    return G.T @ G, free
+
+
+def oracle_offsets(decoded: np.ndarray, clean: np.ndarray, xy: np.ndarray, edges, inner_px: float,
+                   blend_px: float, root: int) -> np.ndarray:
+    """(P, 2) px: where an estimator that knows the frame's noise-free appearance ``clean`` at the true pose ``xy``
+    puts each node in the ``decoded`` frame, minus the truth (0 at the root). It fits the decoded stem pixels with
+    the clean ones moved by the bed's articulated model (one Gauss-Newton step from the truth, least squares over
+    every stem pixel, after a global gain and offset): what the noise and the compression of that frame displace.
+    Under white noise its covariance is the Cramér-Rao bound's."""
+    G, free, rows, cols = design(clean, xy, edges, inner_px, blend_px, root)
+    A = np.stack([clean.ravel(), np.ones(clean.size)], 1)
+    a, b = np.linalg.lstsq(A, decoded.ravel(), rcond=None)[0]
+    r = (decoded - a * clean - b)[rows, cols]
+    # content moved by delta reads I(x - delta) ~ I(x) - grad I . delta: G's rows are +grad I, so delta = -G^+ r
+    d = -np.linalg.lstsq(G, r, rcond=None)[0]
+    out = np.zeros(xy.shape)
+    for j, col in enumerate(free):
+        out[col // 2, col % 2] = d[j]
+    return out
 
 
 def frame_noise(decoded: np.ndarray, clean: np.ndarray, xy: np.ndarray, margin_px: float = 9.0) -> float:
@@ -108,3 +139,23 @@ def node_bound(bed, image_rgb: np.ndarray, q: np.ndarray, video, settings, every
         per.append(row)
         noise.append(s)
     return np.median(np.array(per), axis=0), float(np.median(noise))
+
+
+def oracle_tracks(bed, image_rgb: np.ndarray, q: np.ndarray, video, settings) -> np.ndarray:
+    """(P, F, 2) px: :func:`oracle_offsets` in every frame of the bed ``bed`` whose video is the file ``video``
+    (the truth plus these is the oracle's tracks)."""
+    from dataclasses import replace
+
+    from rce_gtsam.sim.texture_bed import render_frames
+    from rce_gtsam.track import open_video
+
+    P, F = bed.true_xy.shape[:2]
+    out = np.zeros((P, F, 2))
+    clean = render_frames(bed, image_rgb, q, replace(settings, noise_grey=0.0, flicker=0.0))
+    with open_video(video) as src:
+        for f, (img, fr) in enumerate(zip(clean, src)):
+            out[:, f] = oracle_offsets(cv2.cvtColor(fr.image, cv2.COLOR_RGB2GRAY).astype(np.float64),
+                                       cv2.cvtColor(img, cv2.COLOR_RGB2GRAY).astype(np.float64),
+                                       bed.true_xy[:, f], bed.edges, settings.inner_px, settings.blend_px,
+                                       bed.graph.root)
+    return out

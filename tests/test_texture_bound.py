@@ -66,3 +66,22 @@ def test_frame_noise_is_the_residual_after_the_flicker():
     decoded = 1.1 * clean + 3.0 + 2.0 * rng.standard_normal(clean.shape)
     xy = np.array([[30.0, 30.0], [60.0, 50.0]])
     assert texture_bound.frame_noise(decoded, clean, xy) == pytest.approx(2.0, rel=0.08)
+
+
+def test_the_oracle_finds_a_known_displacement_and_its_scatter_under_white_noise_is_the_bound():
+    """oracle_offsets: a frame re-drawn with node c moved by 0.2 px (across) and 0.1 px (along) reads that
+    displacement; under white noise its offsets scatter as J^-1 s^2 (the bound), after a global gain and offset."""
+    p, c = np.array([20.0, 50.0]), np.array([80.0, 46.0])
+    xy = np.stack([p, c])
+    clean = _bar(p, c)
+    shift = np.array([0.1, 0.2])
+    moved = 1.05 * _bar(p, c + shift) - 2.0
+    off = texture_bound.oracle_offsets(moved, clean, xy, [(0, 1)], 6.0, 4.0, 0)
+    np.testing.assert_allclose(off[0], 0.0)  # the root is fixed
+    np.testing.assert_allclose(off[1], shift, atol=0.02)
+    rng = np.random.default_rng(5)
+    s = 2.0
+    draws = np.array([texture_bound.oracle_offsets(clean + s * rng.standard_normal(clean.shape), clean, xy,
+                                                   [(0, 1)], 6.0, 4.0, 0)[1] for _ in range(300)])
+    J, _ = texture_bound.fisher(clean, xy, [(0, 1)], 6.0, 4.0, 0)
+    np.testing.assert_allclose(draws.std(0), np.sqrt(np.diag(np.linalg.inv(J))) * s, rtol=0.15)
