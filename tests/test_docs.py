@@ -253,6 +253,11 @@ def test_the_quality_flags_and_plausibility_rules_the_pages_describe_are_the_cod
     assert named_by_both == ["nonlinear"] and "is named only where **both** its\ntests pass" in diagnosis
 
 
+def _page(name: str) -> str:
+    """The docs page ``name`` (e.g. "limits.md") with its line breaks and runs of spaces made single spaces."""
+    return " ".join((DOCS / name).read_text().split())
+
+
 def _record(name: str) -> dict:
     return json.loads((DOCS / "validation" / f"{name}.json").read_text())
 
@@ -295,7 +300,7 @@ def test_the_delay_numbers_the_pages_quote_are_the_records():
     n_oracle = sum(rows[("user path", f"{e} outdoor")][2] for e in ("delay", "dynamics"))
     clean = [r for r in lag if r[1] == "clean"]
     clean_now = sum(int(r[6].split(" / ")[1]) for r in clean)
-    limits = " ".join((DOCS / "limits.md").read_text().split())
+    limits = _page("limits.md")
     assert (f"is found in {out_now} of {sum(r[3] for r in out)} recordings; on a crisp render of the same scenes, "
             f"in {clean_now} of {sum(r[3] for r in clean)}") in limits
     assert f"On the {n_oracle} of those `outdoor` recordings where it was measured, a test that knew the true lag " \
@@ -346,7 +351,7 @@ def test_the_corrected_texture_bed_the_changelog_quotes_is_the_record():
     old = [n for n in rec["notes"] if n.startswith("on the bed before it moved the whole stem")][0]
     was_lr, was_in = re.search(r"log-RMSE ([\d.]+), truth in the 95 % CI ([\d.]+) %", old).groups()
     _, _, lo, c = _crf_rows("texture_compression")
-    log = " ".join((DOCS / "changelog.md").read_text().split())
+    log = _page("changelog.md")
     said = (f"κ from our tracks has a log-RMSE of {ours[cols.index('kappa log-RMSE (mean)')]:.2f} (was "
             f"{float(was_lr):.2f}) and its intervals hold the truth for "
             f"{round(ours[cols.index('truth in 95 % CI (%)')])} % of segments (was {round(float(was_in))} %); "
@@ -361,7 +366,7 @@ def test_the_gross_errors_the_limits_page_quotes_are_the_record():
     note = [n for n in rec["notes"] if n.startswith("squared error in errors > 1 px, default")][0]
     nodes = re.findall(r"node (\d+) (\d+) % \(sigma [\d.]+ px, \|error\|/sigma ([\d.]+)\)", note)
     share = int(nodes[0][1]) + int(nodes[1][1])
-    limits = " ".join((DOCS / "limits.md").read_text().split())
+    limits = _page("limits.md")
     said = (f"{share} % of their squared size is at two nodes, a node whose pale stem cannot be told from its "
             f"background (its σ is {float(nodes[0][2]):.1f} times too small) and the tip")
     assert said in limits, said
@@ -424,7 +429,7 @@ def test_the_kappa_floor_numbers_results_md_quotes_are_the_record():
                                         ("f", "floor, estimated e (RMS)"), ("r", "measured / floor (median)"),
                                         ("w", "within x1.5 of the floor (%)"),
                                         ("b", "segments whose angle noise exceeds the bending (%)"))}
-    text = " ".join((DOCS / "results.md").read_text().split())
+    text = _page("results.md")
     w3, w1, bed = row["simulator, white 0.3 px"], row["simulator, white 1 px"], row["texture bed, our tracks"]
     assert (f"e was estimated as {w3[c['e']]} px. κ's measured log-RMSE was {w3[c['m']]} against a floor of "
             f"{w3[c['f']]}, and within a factor 1.5 of the floor on {w3[c['w']]} % of {w3[1]} recordings") in text
@@ -445,12 +450,12 @@ def test_the_outdoor_lag_ceiling_the_pages_quote_is_the_record():
     n = {r[0]: int(r[3].split(" of ")[1]) for r in rec["rows"]}
     rms = float(re.search(r"per-axis RMS of ([0-9.]+) px", rec["notes"][0]).group(1))
     assert f"true + white {rms:g} px" in found  # the white noise is our tracker's measured size
-    limits = " ".join((DOCS / "limits.md").read_text().split())
+    limits = _page("limits.md")
     assert (f"the same recordings on the true node positions find it in {found['true']} of {n['true']}; with white "
             f"noise of {rms:g} px per axis added to them (the size of our tracker's error there, its gross errors "
             f"aside) in {found[f'true + white {rms:g} px']} of 40, about as on our tracks; with 0.16 px in "
             f"{found['true + white 0.16 px']} of 40") in limits
-    log = " ".join((DOCS / "changelog.md").read_text().split())
+    log = _page("changelog.md")
     assert (f"find it in {found['true']} of 40, with white noise of 0.16 px per axis in "
             f"{found['true + white 0.16 px']} of 40, with {rms:g} px (our tracker's error there, its gross errors "
             f"aside) in {found[f'true + white {rms:g} px']} of 40, on our tracks in {found['ours']}; our tracks with "
@@ -474,7 +479,7 @@ def test_the_texture_compression_numbers_the_limits_page_quotes_are_the_record()
     mid = {r[0]: r for r in rec["rows"]}[12]
     bound, at, ours = ("Cramér-Rao bound (px per axis, median node)", "kappa log-RMSE at the bound", "kappa log-RMSE")
     oe, ok = "oracle error median (px)", "kappa log-RMSE, oracle"
-    limits = " ".join((DOCS / "limits.md").read_text().split())
+    limits = _page("limits.md")
     said = (f"the Cramér–Rao bound of a node's position is {c(hi, bound):.3f} px per axis at the bed's compression "
             f"(x264 crf 23) and {c(lo, bound):.3f} px without loss; white noise of that size would leave κ a log-RMSE "
             f"of {c(hi, at):.2f} and {c(lo, at):.2f}. But a compressed frame's error is not white noise: an oracle "
@@ -490,11 +495,11 @@ def test_the_texture_compression_numbers_the_limits_page_quotes_are_the_record()
     assert said in limits, said
     assert c(hi, ok) > 0.2 and c(lo, ok) <= 0.2  # what the page concludes from them
     assert c(hi, ours) == _record("texture_bed")["rows"][-1][1]  # crf 23 is the bed of record texture_bed
-    own = " ".join((DOCS / "own-video.md").read_text().split())
+    own = _page("own-video.md")
     said = (f"even a tracker that knew every frame's exact appearance would leave κ a log-RMSE of {c(hi, ok):.2f} at "
             f"crf 23 and {c(lo, ok):.2f} lossless (record `texture_compression`)")
     assert said in own, said
-    log = " ".join((DOCS / "changelog.md").read_text().split())
+    log = _page("changelog.md")
     said = (f"on the texture bed {c(hi, oe):.3f} px at crf 23 against the bound's {c(hi, bound):.3f} px, and κ from "
             f"its tracks {c(hi, ok):.2f} (record `texture_compression`). A κ log-RMSE of 0.2 is out of even that "
             f"oracle's reach on that video; lossless, it reaches {c(lo, ok):.2f} and our tracker {c(lo, ours):.2f}")
@@ -518,20 +523,20 @@ def test_the_compression_numbers_the_pages_quote_are_the_record():
     assert found[28] == sum(int(r[6].split(" / ")[1]) for r in ours)
     ceiling = {r[0]: r for r in _record("user_path_lag_ceiling")["rows"]}
     assert found[28] == int(ceiling["ours"][3].split(" of ")[0])
-    limits = " ".join((DOCS / "limits.md").read_text().split())
+    limits = _page("limits.md")
     said = (f"at x264 crf 23 our tracker's median error is {err[23]:.2f} px and the lag is found in {found[23]} of 40, "
             f"at crf 18 {err[18]:.2f} px and {found[18]} of 40, against {err[28]:.2f} px and {found[28]} of 40 at "
             f"crf 28. No effect-free render was named at any of them (40 per crf)")
     assert said in limits, said
-    own = " ".join((DOCS / "own-video.md").read_text().split())
+    own = _page("own-video.md")
     said = (f"a hidden lag was found in {found[28]} of 40 recordings at x264 crf 28, {found[23]} at crf 23 and "
             f"{found[18]} at crf 18 (record `user_path_crf`)")
     assert said in own, said
-    results = " ".join((DOCS / "results.md").read_text().split())
+    results = _page("results.md")
     said = (f"our tracker's median error fell from {err[28]:.2f} px at x264 crf 28 to {err[18]:.2f} px at crf 18; "
             f"record `user_path_crf`")
     assert said in results, said
-    log = " ".join((DOCS / "changelog.md").read_text().split())
+    log = _page("changelog.md")
     tex = {r[0]: r for r in _record("texture_compression")["rows"]}
     tcols = _record("texture_compression")["columns"]
     said = (f"a hidden lag is found in {found[28]} of 40 recordings at crf 28, {found[23]} at crf 23, {found[18]} at "
