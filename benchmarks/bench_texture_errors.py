@@ -26,7 +26,7 @@ on our tracks, the share of true kappa inside the CI: which verdict tells a user
 trusted. ``--record NAME`` saves all rows as docs/validation/NAME.json.
 
 Usage: python benchmarks/bench_texture_errors.py [--seeds 0,1,2,3,4] [--conditions none,delay] [--baseline REV]
-       [--record NAME]
+       [--crf N] [--record NAME]
 """
 
 from __future__ import annotations
@@ -183,6 +183,9 @@ def main():
     ap.add_argument("--cache", type=Path, default=None)
     ap.add_argument("--record", default=None, metavar="NAME")
     ap.add_argument("--baseline", default=None, help="git revision of the default tracker to compare (before/after)")
+    ap.add_argument("--crf", type=int, default=None, metavar="N",
+                    help="the bed rendered at x264 crf N (default: the bed's, 23), e.g. 0: where the error that "
+                         "costs kappa comes from without compression")
     args = ap.parse_args()
     import tempfile
     from bench_texture_bed import PLANT, default_cache, kappa_scores
@@ -205,7 +208,8 @@ def main():
                     **trackers}
     ours: dict[str, list] = {name: [] for name in trackers}
     verdicts: dict[str, dict] = {name: {} for name in trackers}
-    settings = None
+    from rce_gtsam.sim.texture_bed import RenderSettings
+    settings = None if args.crf is None else RenderSettings(crf=args.crf)
     seeds = [int(s) for s in args.seeds.split(",")]
     conds = [() if c == "none" else (c,) for c in args.conditions.split(",")]
     table: dict[str, list] = {}
@@ -271,12 +275,14 @@ def main():
                 f"{lo:.2f}-{hi:.2f} deg of bend-angle noise against the bed's bending RMS of {bend:.2f} deg")
         print("  " + line)
         notes.append(line)
-    notes.append(PREVIOUS_BED)
+    if args.crf is None:  # the measurement the note compares with was at the bed's own compression
+        notes.append(PREVIOUS_BED)
     if args.record:
         from record import save_record
         save_record(args.record, title="Texture bed: what the default tracker's error costs kappa, and whether its CIs hold",
                     command=f"python benchmarks/bench_texture_errors.py --seeds {args.seeds} --conditions "
                             f"{args.conditions}" + (f" --baseline {args.baseline}" if args.baseline else "")
+                            + (f" --crf {args.crf}" if args.crf is not None else "")
                             + f" --record {args.record}",
                     description=__doc__.split("\n\n")[1].replace("\n", " "),
                     columns=["tracks", "kappa log-RMSE (mean)", "min", "max", "Spearman",
