@@ -258,6 +258,11 @@ def _page(name: str) -> str:
     return " ".join((DOCS / name).read_text().split())
 
 
+def _says(page: str, said: str) -> None:
+    """Assert that the docs page ``page`` says ``said`` (as flowing text, :func:`_page`)."""
+    assert said in _page(page), f"{page}: {said}"
+
+
 def _record(name: str) -> dict:
     return json.loads((DOCS / "validation" / f"{name}.json").read_text())
 
@@ -495,15 +500,12 @@ def test_the_texture_compression_numbers_the_limits_page_quotes_are_the_record()
     assert said in limits, said
     assert c(hi, ok) > 0.2 and c(lo, ok) <= 0.2  # what the page concludes from them
     assert c(hi, ours) == _record("texture_bed")["rows"][-1][1]  # crf 23 is the bed of record texture_bed
-    own = _page("own-video.md")
-    said = (f"even a tracker that knew every frame's exact appearance would leave κ a log-RMSE of {c(hi, ok):.2f} at "
-            f"crf 23 and {c(lo, ok):.2f} lossless (record `texture_compression`)")
-    assert said in own, said
-    log = _page("changelog.md")
-    said = (f"on the texture bed {c(hi, oe):.3f} px at crf 23 against the bound's {c(hi, bound):.3f} px, and κ from "
-            f"its tracks {c(hi, ok):.2f} (record `texture_compression`). A κ log-RMSE of 0.2 is out of even that "
-            f"oracle's reach on that video; lossless, it reaches {c(lo, ok):.2f} and our tracker {c(lo, ours):.2f}")
-    assert said in log, said
+    _says("own-video.md", f"even a tracker that knew every frame's exact appearance would leave κ a log-RMSE of "
+                          f"{c(hi, ok):.2f} at crf 23 and {c(lo, ok):.2f} lossless (record `texture_compression`)")
+    _says("changelog.md", f"on the texture bed {c(hi, oe):.3f} px at crf 23 against the bound's {c(hi, bound):.3f} px, "
+                          f"and κ from its tracks {c(hi, ok):.2f} (record `texture_compression`). A κ log-RMSE of 0.2 "
+                          f"is out of even that oracle's reach on that video; lossless, it reaches {c(lo, ok):.2f} and "
+                          f"our tracker {c(lo, ours):.2f}")
 
 
 def test_the_compression_numbers_the_pages_quote_are_the_record():
