@@ -115,32 +115,33 @@ def score(res, bed, graph, n_boot: int) -> dict:
             "z_p90": float(np.percentile(z, 90))}
 
 
-def bound_kappa(bed, graph, per_axis_px: np.ndarray, n_boot: int, draws: int = 3) -> float:
-    """Mean kappa log-RMSE of the true tracks plus white noise of ``per_axis_px`` (P,) px per axis per node (its
-    sigma reported with it), over ``draws`` seeded draws: kappa from a tracker at the Cramér-Rao bound."""
+def truth_plus(bed, graph, E: np.ndarray, sigma_px: np.ndarray, source: str):
+    """Tracks of the truth plus the error ``E`` (P, F, 2) px, each node reported with its sigma ``sigma_px`` (P,) px
+    (at least 0.05 px, the tracker's floor)."""
     from rce_gtsam.tracks import Tracks
 
     nodes = list(graph.nodes)
+    sig = np.broadcast_to(np.maximum(sigma_px, 0.05)[:, None], bed.true_xy.shape[:2])
+    return Tracks(node_ids=np.array(nodes), xy=(bed.true_xy + E)[nodes], sigma_px=np.array(sig[nodes]),
+                  source=source)
+
+
+def bound_kappa(bed, graph, per_axis_px: np.ndarray, n_boot: int, draws: int = 3) -> float:
+    """Mean kappa log-RMSE of the true tracks plus white noise of ``per_axis_px`` (P,) px per axis per node (its
+    sigma reported with it), over ``draws`` seeded draws: kappa from a tracker at the Cramér-Rao bound."""
     out = []
     for k in range(draws):
         rng = np.random.default_rng([bed.seed, k, 71])
-        xy = bed.true_xy + rng.standard_normal(bed.true_xy.shape) * per_axis_px[:, None, None]
-        sig = np.broadcast_to(np.maximum(per_axis_px, 0.05)[:, None], bed.true_xy.shape[:2])
-        t = Tracks(node_ids=np.array(nodes), xy=xy[nodes], sigma_px=np.array(sig[nodes]), source="bound")
-        out.append(kappa_scores(t, graph, bed, n_boot)[0])
+        E = rng.standard_normal(bed.true_xy.shape) * per_axis_px[:, None, None]
+        out.append(kappa_scores(truth_plus(bed, graph, E, per_axis_px, "bound"), graph, bed, n_boot)[0])
     return float(np.mean(out))
 
 
 def oracle_scores(bed, graph, E: np.ndarray, n_boot: int) -> tuple:
     """(median |error| px, kappa log-RMSE, Spearman, truth in CI) of the oracle's tracks, the truth plus ``E`` (P, F, 2)
     px (:func:`texture_bound.oracle_tracks`), each node's sigma its RMS error per axis (at least 0.05 px)."""
-    from rce_gtsam.tracks import Tracks
-
-    nodes = list(graph.nodes)
-    rms = np.sqrt(np.mean(E ** 2, axis=(1, 2)))
-    sig = np.broadcast_to(np.maximum(rms, 0.05)[:, None], bed.true_xy.shape[:2])
-    t = Tracks(node_ids=np.array(nodes), xy=(bed.true_xy + E)[nodes], sigma_px=np.array(sig[nodes]), source="oracle")
-    free = [n for n in nodes if n != graph.root]
+    t = truth_plus(bed, graph, E, np.sqrt(np.mean(E ** 2, axis=(1, 2))), "oracle")
+    free = [n for n in graph.nodes if n != graph.root]
     return (float(np.median(np.hypot(*E[free].transpose(2, 0, 1)))), *kappa_scores(t, graph, bed, n_boot))
 
 

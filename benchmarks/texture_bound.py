@@ -86,9 +86,7 @@ def oracle_offsets(decoded: np.ndarray, clean: np.ndarray, xy: np.ndarray, edges
     every stem pixel, after a global gain and offset): what the noise and the compression of that frame displace.
     Under white noise its covariance is the Cramér-Rao bound's."""
     G, free, rows, cols = design(clean, xy, edges, inner_px, blend_px, root)
-    A = np.stack([clean.ravel(), np.ones(clean.size)], 1)
-    a, b = np.linalg.lstsq(A, decoded.ravel(), rcond=None)[0]
-    r = (decoded - a * clean - b)[rows, cols]
+    r = after_flicker(decoded, clean)[rows, cols]
     # content moved by delta reads I(x - delta) ~ I(x) - grad I . delta: G's rows are +grad I, so delta = -G^+ r
     d = -np.linalg.lstsq(G, r, rcond=None)[0]
     out = np.zeros(xy.shape)
@@ -97,39 +95,48 @@ def oracle_offsets(decoded: np.ndarray, clean: np.ndarray, xy: np.ndarray, edges
     return out
 
 
-def frame_noise(decoded: np.ndarray, clean: np.ndarray, xy: np.ndarray, margin_px: float = 9.0) -> float:
-    """RMS (grey levels) of ``decoded`` - (a ``clean`` + b) over the branch's bounding box (grown by ``margin_px``),
-    a and b fitted over the whole frame (the flicker)."""
+def after_flicker(decoded: np.ndarray, clean: np.ndarray) -> np.ndarray:
+    """``decoded`` - (a ``clean`` + b) (grey levels), a and b fitted over the whole frame (the flicker's gain and an
+    offset): what the sensor noise and the compression left."""
     A = np.stack([clean.ravel(), np.ones(clean.size)], 1)
     a, b = np.linalg.lstsq(A, decoded.ravel(), rcond=None)[0]
-    r = decoded - a * clean - b
+    return decoded - a * clean - b
+
+
+def frame_noise(decoded: np.ndarray, clean: np.ndarray, xy: np.ndarray, margin_px: float = 9.0) -> float:
+    """RMS (grey levels) of :func:`after_flicker` over the branch's bounding box (grown by ``margin_px``)."""
+    r = after_flicker(decoded, clean)
     lo = np.maximum(np.floor(xy.min(0) - margin_px).astype(int), 0)
     hi = np.ceil(xy.max(0) + margin_px).astype(int)
     return float(np.std(r[lo[1]:hi[1], lo[0]:hi[0]]))
 
 
-def node_bound(bed, image_rgb: np.ndarray, q: np.ndarray, video, settings, every: int = 15):
-    """(P,) per node the Cramér-Rao bound's RMS per axis (px; median over every ``every``-th frame; 0 at the
-    fixed root) and the median noise level (grey levels) of the bed ``bed`` whose video is the file ``video``."""
+def clean_and_decoded(bed, image_rgb: np.ndarray, q: np.ndarray, video, settings, only=None):
+    """Yield (frame, noise-free render, decoded frame), both grey float (grey levels), of the bed ``bed`` whose
+    video is the file ``video``; ``only``: a set of frame indices (default: every frame)."""
     from dataclasses import replace
 
     from rce_gtsam.sim.texture_bed import render_frames
     from rce_gtsam.track import open_video
 
-    want = set(range(every, bed.true_xy.shape[1], every))
-    clean = {f: cv2.cvtColor(img, cv2.COLOR_RGB2GRAY).astype(np.float64)
-             for f, img in enumerate(render_frames(bed, image_rgb, q, replace(settings, noise_grey=0.0, flicker=0.0),
-                                                   only=want))
-             if f in want}
+    clean = render_frames(bed, image_rgb, q, replace(settings, noise_grey=0.0, flicker=0.0), only=only)
     with open_video(video) as src:
-        dec = {f: cv2.cvtColor(fr.image, cv2.COLOR_RGB2GRAY).astype(np.float64)
-               for f, fr in enumerate(src) if f in want}
+        for f, (img, fr) in enumerate(zip(clean, src)):
+            if only is None or f in only:
+                yield (f, cv2.cvtColor(img, cv2.COLOR_RGB2GRAY).astype(np.float64),
+                       cv2.cvtColor(fr.image, cv2.COLOR_RGB2GRAY).astype(np.float64))
+
+
+def node_bound(bed, image_rgb: np.ndarray, q: np.ndarray, video, settings, every: int = 15):
+    """(P,) per node the Cramér-Rao bound's RMS per axis (px; median over every ``every``-th frame; 0 at the
+    fixed root) and the median noise level (grey levels) of the bed ``bed`` whose video is the file ``video``."""
+    want = set(range(every, bed.true_xy.shape[1], every))
     P, root = bed.true_xy.shape[0], bed.graph.root
     per, noise = [], []
-    for f in sorted(want):
+    for f, clean, dec in clean_and_decoded(bed, image_rgb, q, video, settings, only=want):
         xy = bed.true_xy[:, f]
-        s = frame_noise(dec[f], clean[f], xy)
-        J, free = fisher(clean[f], xy, bed.edges, settings.inner_px, settings.blend_px, root)
+        s = frame_noise(dec, clean, xy)
+        J, free = fisher(clean, xy, bed.edges, settings.inner_px, settings.blend_px, root)
         C = np.linalg.inv(J) * s ** 2
         row = np.zeros(P)
         for i in range(P):
@@ -144,18 +151,8 @@ def node_bound(bed, image_rgb: np.ndarray, q: np.ndarray, video, settings, every
 def oracle_tracks(bed, image_rgb: np.ndarray, q: np.ndarray, video, settings) -> np.ndarray:
     """(P, F, 2) px: :func:`oracle_offsets` in every frame of the bed ``bed`` whose video is the file ``video``
     (the truth plus these is the oracle's tracks)."""
-    from dataclasses import replace
-
-    from rce_gtsam.sim.texture_bed import render_frames
-    from rce_gtsam.track import open_video
-
-    P, F = bed.true_xy.shape[:2]
-    out = np.zeros((P, F, 2))
-    clean = render_frames(bed, image_rgb, q, replace(settings, noise_grey=0.0, flicker=0.0))
-    with open_video(video) as src:
-        for f, (img, fr) in enumerate(zip(clean, src)):
-            out[:, f] = oracle_offsets(cv2.cvtColor(fr.image, cv2.COLOR_RGB2GRAY).astype(np.float64),
-                                       cv2.cvtColor(img, cv2.COLOR_RGB2GRAY).astype(np.float64),
-                                       bed.true_xy[:, f], bed.edges, settings.inner_px, settings.blend_px,
-                                       bed.graph.root)
+    out = np.zeros(bed.true_xy.shape)
+    for f, clean, dec in clean_and_decoded(bed, image_rgb, q, video, settings):
+        out[:, f] = oracle_offsets(dec, clean, bed.true_xy[:, f], bed.edges, settings.inner_px, settings.blend_px,
+                                   bed.graph.root)
     return out
