@@ -229,11 +229,12 @@ PAPER = Preset(name="paper")
 #:   observed frames, and 92.5 % coverage);
 #: * the posterior floor (``posterior_floor``): no interval narrower than the posterior the precision shrinkage
 #:   implies. Truth in the 95 % interval on the texture bed with our tracker's tracks 66 -> 84 % (record
-#:   ``texture_bed``, the bed before its correction; 86 % on the corrected one), with white 0.36 px node noise there 72 -> 92 %; on the simulator's effect-free tracks (900
-#:   frames) 93 -> 97 % (seeds 0-19) and 97.5 % (seeds 100-119), median interval width x1.81 -> x2.49. On the
-#:   real plants (TAPIR tracks) median U_e 1.20 / 1.21 -> 3.29 / 2.74, and kappa from disjoint thirds of the frames
-#:   scatters as the intervals allow on plant 1 (``benchmarks/bench_ci_thirds.py``: SD(z) 1.68 -> 1.41 against
-#:   1.39 for surrogates that obey the model exactly), still more than that on plant 2 (2.20 -> 1.93, null 1.46);
+#:   ``texture_bed``, the bed before its correction; 86 % on the corrected one), with white 0.36 px node noise there
+#:   72 -> 92 %; on the simulator's effect-free tracks (900 frames) 93 -> 97 % (seeds 0-19) and 97.5 % (seeds
+#:   100-119), median interval width x1.81 -> x2.49. On the real plants (TAPIR tracks) median U_e 1.20 / 1.21 -> 3.29
+#:   / 2.74, and kappa from disjoint thirds of the frames scatters as the intervals allow on plant 1
+#:   (``benchmarks/bench_ci_thirds.py``: SD(z) 1.68 -> 1.41 against 1.39 for surrogates that obey the model exactly),
+#:   still more than that on plant 2 (2.20 -> 1.93, null 1.46);
 #: * kept OFF because they did not help: the anisotropic measurement covariance (0.385) and the Huber
 #:   loss (0.278); both stay available as settings.
 #: * kept OFF, a trade: the correlated (generalised least squares) fit, ``correlated=True``. It uses

@@ -337,7 +337,8 @@ def test_the_texture_bed_coverage_the_limits_page_quotes_is_the_record():
     lr = cols.index("kappa log-RMSE (mean)")
     said = (f"with those two nodes put at their true places κ's log-RMSE stays "
             f"{row['step 1: truth + E, its two grossest nodes at the truth'][lr]:.2f} (ours: {ours[0][lr]:.2f}), and "
-            f"with every error over a pixel left out it is {row['step 1: truth + E, errors over 1 px left out'][lr]:.2f}")
+            f"with every error over a pixel left out it is "
+            f"{row['step 1: truth + E, errors over 1 px left out'][lr]:.2f}")
     assert said in limits, said
     rms = ours[0][cols.index("error RMS (px per axis)")]
     floor = [n for n in rec["notes"] if n.startswith("physical floor, this tracker's error")][0]
@@ -502,10 +503,10 @@ def test_the_texture_compression_numbers_the_limits_page_quotes_are_the_record()
     assert c(hi, ours) == _record("texture_bed")["rows"][-1][1]  # crf 23 is the bed of record texture_bed
     _says("own-video.md", f"even a tracker that knew every frame's exact appearance would leave κ a log-RMSE of "
                           f"{c(hi, ok):.2f} at crf 23 and {c(lo, ok):.2f} lossless (record `texture_compression`)")
-    _says("changelog.md", f"on the texture bed {c(hi, oe):.3f} px at crf 23 against the bound's {c(hi, bound):.3f} px, "
-                          f"and κ from its tracks {c(hi, ok):.2f} (record `texture_compression`). A κ log-RMSE of 0.2 "
-                          f"is out of even that oracle's reach on that video; lossless, it reaches {c(lo, ok):.2f} and "
-                          f"our tracker {c(lo, ours):.2f}")
+    _says("changelog.md", f"on the texture bed {c(hi, oe):.3f} px at crf 23 against the bound's "
+                          f"{c(hi, bound):.3f} px, and κ from its tracks {c(hi, ok):.2f} (record "
+                          f"`texture_compression`). A κ log-RMSE of 0.2 is out of even that oracle's reach on that "
+                          f"video; lossless, it reaches {c(lo, ok):.2f} and our tracker {c(lo, ours):.2f}")
 
 
 def test_the_compression_numbers_the_pages_quote_are_the_record():

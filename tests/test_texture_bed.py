@@ -90,7 +90,7 @@ def test_the_stem_moves_whole_over_a_still_background(bed, frames):
     """limits.md: plant 2's stem is 6.5 px in half-width (the tracker's own measurement on frame 0); the bed moves
     every pixel within ``RenderSettings.inner_px`` = 8 px of the chain rigidly, over a background with the stem
     inpainted out, so the stem's edges move with the stem and no copy of it stays at its frame-0 place."""
-    from rce_gtsam.sim.texture_bed import RenderSettings, still_background
+    from rce_gtsam.sim.texture_bed import RenderSettings, _seg_dist, still_background
 
     cf, b = bed
     res = LKTracker().track(ArraySource(frames[:2]), cf.points, cf.graph)
@@ -101,14 +101,13 @@ def test_the_stem_moves_whole_over_a_still_background(bed, frames):
             f"{RenderSettings.inner_px:g} px of its axis") in limits
     # where a node has swung furthest, if no part of the stem is then near its frame-0 place, that place shows the
     # inpainted background, not the stem
-    from rce_gtsam.sim.texture_bed import _seg_dist
-
     bg = still_background(b, cf.rgb, cf.points).astype(float)
     shown, hidden = [], []
     for node in [c for _, c in b.edges]:
         f = int(np.argmax(np.hypot(*(b.true_xy[node] - b.true_xy[node][:1]).T)))
         x0, y0 = b.true_xy[node, 0]
-        near = min(float(_seg_dist(np.array(x0), np.array(y0), b.true_xy[p, f], b.true_xy[c, f])) for p, c in b.edges)
+        near = min(float(_seg_dist(np.array(x0), np.array(y0), b.true_xy[p, f], b.true_xy[c, f]))
+                   for p, c in b.edges)
         if near < RenderSettings.outer_px + 4:
             continue
         x, y = np.round(b.true_xy[node, 0]).astype(int)

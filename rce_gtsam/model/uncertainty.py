@@ -236,10 +236,10 @@ def posterior_floor(kappa_hat: np.ndarray, placed: np.ndarray, shrinkage: np.nda
     from a kappa_hat z_hat that already holds some of the noise, they show less of it than the data have.
 
     Measured (default preset; truth in the interval, per segment): the texture bed with our tracker's tracks (10
-    cases, record ``texture_bed``, the bed before its correction; 86 % on the corrected one) 66.5 -> 84 %, with white 0.36 px node noise there 72 -> 92 %; the beam
-    simulator's effect-free branches (40, record ``beam_effect_free``) 81 -> 96 %; the simulator's effect-free tracks
-    (20 seeds, 900 frames) 93 -> 97 %, median width x1.81 -> x2.49. Returns (low, high, placed) like
-    :func:`interval_about`."""
+    cases, record ``texture_bed``, the bed before its correction; 86 % on the corrected one) 66.5 -> 84 %, with
+    white 0.36 px node noise there 72 -> 92 %; the beam simulator's effect-free branches (40, record
+    ``beam_effect_free``) 81 -> 96 %; the simulator's effect-free tracks (20 seeds, 900 frames) 93 -> 97 %, median
+    width x1.81 -> x2.49. Returns (low, high, placed) like :func:`interval_about`."""
     k = np.maximum(np.abs(np.asarray(kappa_hat, float)), EPS)
     s = np.clip(np.nan_to_num(np.asarray(shrinkage, float), nan=1.0), 0.0, 1.0)  # unknown: no floor
     half = float(special.ndtri(0.975)) * float(tau) * np.sqrt(1.0 - s) * float(factor)
