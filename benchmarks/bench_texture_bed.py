@@ -55,18 +55,21 @@ def default_cache() -> Path:
 
 def bed_case(seed: int, effects: tuple, n_frames: int, tip_px: float, cache: Path, settings=None):
     """(bed, clean frame, mp4 path), rendered once and cached. ``settings``: the bed's ``RenderSettings`` (None:
-    the default; others are cached under a tag of their rigid band, ``inner_px``/``outer_px``)."""
+    the default; others are cached under a tag of their rigid band, ``inner_px``/``outer_px``, their crf, or
+    "perfect": :meth:`~rce_gtsam.sim.texture_bed.RenderSettings.perfect`)."""
     from rce_gtsam.sim.texture_bed import RenderSettings, clean_first_frame, make_bed, write_bed_video
 
     settings = settings or RenderSettings()
     tag = f"v3_s{seed}_{'-'.join(effects) or 'none'}_f{n_frames}_tip{tip_px:g}"
     if (settings.inner_px, settings.outer_px) != (RenderSettings.inner_px, RenderSettings.outer_px):
         tag += f"_in{settings.inner_px:g}_out{settings.outer_px:g}"
-    if settings.crf != RenderSettings.crf:
+    if settings.is_perfect:
+        tag += "_perfect"
+    elif settings.crf != RenderSettings.crf:
         tag += f"_crf{settings.crf}"
-    if replace(settings, inner_px=RenderSettings.inner_px, outer_px=RenderSettings.outer_px,
-               crf=RenderSettings.crf) != RenderSettings():
-        raise ValueError(f"bed_case caches by rigid band and crf only, got {settings}")
+    plain = replace(settings, inner_px=RenderSettings.inner_px, outer_px=RenderSettings.outer_px)
+    if not (plain.is_perfect or replace(plain, crf=RenderSettings.crf) == RenderSettings()):
+        raise ValueError(f"bed_case caches by rigid band, crf and perfect rendering only, got {settings}")
     cache.mkdir(parents=True, exist_ok=True)
     path, meta = cache / f"{tag}.mp4", cache / f"{tag}.pkl"
     cf = clean_first_frame(PLANT)
@@ -115,6 +118,37 @@ def score(res, bed, graph, n_boot: int) -> dict:
             "z_p90": float(np.percentile(z, 90))}
 
 
+def true_rotations_tracker():
+    """An ``LKTracker`` whose refinement pass poses each node's articulated template with its segments' true
+    rotations (from the bed's true positions, ``TrueRotations(true_xy)``) instead of those its first-pass matches
+    imply: everything else, the first pass and the search included, as the default tracker's."""
+    import math
+
+    from rce_gtsam.track import LKTracker
+    from rce_gtsam.track.lk_measure import turn
+
+    class TrueRotations(LKTracker):
+        def __init__(self, true_xy, *a, **k):
+            super().__init__(*a, **k)
+            self.true_xy, self._frame = true_xy, 0
+
+        def _refine(self, gray0, gray, q0, est, vis, fb_max, first_done=None):
+            self._frame += 1  # the refinement pass runs once per frame after the first
+            return super()._refine(gray0, gray, q0, est, vis, fb_max, first_done)
+
+        def _refine_node(self, gray0, gray, q0, i, est, vis, fb_max):
+            t, p, cfg = self.true_xy[:, self._frame], self.parent[i], self.config
+            thetas = [turn(t[p], t[i], self._ang0[i])] if p >= 0 else []
+            thetas += [turn(t[i], t[ch], self._ang0[ch]) for ch in self.children[i]]
+            m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, self._margin, thetas)
+            if m is not None and m[1] >= cfg.min_ncc and m[2] <= fb_max:
+                xy, _, fb, s_lk = m[:4]
+                return xy, math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
+            return None
+
+    return TrueRotations
+
+
 def truth_plus(bed, graph, E: np.ndarray, sigma_px: np.ndarray, source: str):
     """Tracks of the truth plus the error ``E`` (P, F, 2) px, each node reported with its sigma ``sigma_px`` (P,) px
     (at least 0.05 px, the tracker's floor)."""
@@ -161,6 +195,12 @@ def main():
     ap.add_argument("--oracle", action="store_true",
                     help="also an oracle that knows every frame's noise-free appearance (texture_bound.oracle_tracks): "
                          "its error is what the compression itself displaces, and kappa from its tracks")
+    ap.add_argument("--perfect", action="store_true",
+                    help="also the bed rendered perfectly (no noise, flicker or blur; lossless): the tracker's own "
+                         "deterministic error (RenderSettings.perfect)")
+    ap.add_argument("--true-rotations", action="store_true",
+                    help="also our tracker with the true segment rotations posing its templates in the refinement "
+                         "pass (TrueRotations): what its rotation estimate costs")
     ap.add_argument("--record", default=None, metavar="NAME",
                     help="save the per-crf summary as docs/validation/NAME.json (with --crf)")
     ap.add_argument("--cache", type=Path, default=None)
@@ -173,14 +213,21 @@ def main():
     from rce_gtsam.tracks import Tracks
 
     cache = args.cache or default_cache()
-    trackers = {"current": LKTracker}
+    trackers = {"current": lambda bed: LKTracker()}
     tmp = tempfile.TemporaryDirectory()
     if args.baseline:
         from bench_track import baseline_tracker
-        trackers = {"baseline": baseline_tracker(args.baseline, Path(tmp.name)), **trackers}
+        base_cls = baseline_tracker(args.baseline, Path(tmp.name))
+        trackers = {"baseline": lambda bed: base_cls(), **trackers}
+    if args.true_rotations:
+        trackers["true-rot"] = lambda bed: true_rotations_tracker()(bed.true_xy)
     seeds = [int(s) for s in args.seeds.split(",")]
     conds = [() if c == "none" else (c,) for c in args.conditions.split(",")]
     crfs = [int(c) for c in args.crf.split(",")] if args.crf else [RenderSettings.crf]
+    # (label, settings) of each rendering: the crfs asked for, then the perfect one
+    renders = [(crf, RenderSettings(crf=crf)) for crf in crfs] + (
+        [("perfect", RenderSettings().perfect())] if args.perfect else [])
+    crfs = [label for label, _ in renders]
     rows = {(name, crf, c): [] for name in trackers for crf in crfs for c in conds}
     truth_rows = {c: [] for c in conds}
     bounds = {crf: [] for crf in crfs}  # (bound median px per axis, noise grey levels, kappa log-RMSE at the bound)
@@ -193,8 +240,7 @@ def main():
            f"{'visfast':>7s} {'logRMSE':>7s} {'rho':>5s} {'inCI':>5s} {'root':>5s} {'tipvis':>6s} {'tiplost':>7s} "
            f"{'z90':>5s}" + (f" {'bound':>6s} {'noise':>5s} {'bndRMSE':>7s}" if args.bound else ""))
     print(hdr)
-    for crf in crfs:
-        settings = RenderSettings(crf=crf)
+    for crf, settings in renders:
         for c in conds:
             for seed in seeds:
                 bed, cf, path = bed_case(seed, c, args.frames, args.tip_px, cache, settings)
@@ -218,12 +264,12 @@ def main():
                     o = oracle_scores(bed, graph, oracle_tracks(bed, cf.rgb, cf.points, path, settings), args.n_boot)
                     oracles[crf].append(o)
                     extra += f"  oracle {o[0]:.3f} px, kappa {o[1]:.2f}"
-                for name, cls in trackers.items():
+                for name, make in trackers.items():
                     with open_video(path) as src:
-                        res = cls().track(src, cf.points, graph)
+                        res = make(bed).track(src, cf.points, graph)
                     s = score(res, bed, graph, args.n_boot)
                     rows[(name, crf, c)].append(s)
-                    print(f"  {name:8s} {crf:3d} {'-'.join(c) or 'none':6s} {seed:4d} {s['median']:5.2f} "
+                    print(f"  {name:8s} {crf!s:>3s} {'-'.join(c) or 'none':6s} {seed:4d} {s['median']:5.2f} "
                           f"{s['p90']:5.2f} {s['max']:5.1f} {s['visible']:5.3f} {s['visible_fast']:7.3f} "
                           f"{s['kappa_logrmse']:7.2f} {s['kappa_rho']:5.2f} {s['kappa_in_ci']:5.2f} "
                           f"{s['root_median_px']:5.2f} {s['tip_visible']:6.2f} {s['tip_err_lost']:7.2f} "
@@ -244,26 +290,27 @@ def main():
               f"{a[:, 1].mean():.2f}, truth in CI {100 * a[:, 2].mean():.0f} %")
     L, bend = np.median([f[0] for f in floor]), np.mean([f[1] for f in floor])
     for name in trackers:
-        e = float(np.mean([r["median"] for c in conds for r in rows[(name, crfs[-1], c)]]))  # median error, px
+        e = float(np.mean([r["median"] for c in conds for r in rows[(name, crfs[0], c)]]))  # median error, px
         lo, hi = angle_floor_deg(e, L)
         print(f"  physical floor ({name}): error e = {e:.2f} px on the median segment L = {L:.1f} px gives "
               f"{lo:.2f}-{hi:.2f} deg of angle noise against a bending RMS of {bend:.2f} deg "
               f"(noise/signal {lo / bend:.2f}-{hi / bend:.2f})")
     table = []
-    for crf in crfs:
-        rs = [r for c in conds for r in rows[("current", crf, c)]]
+    for crf, name in [(crf, name) for crf in crfs for name in trackers if name != "baseline"]:
+        rs = [r for c in conds for r in rows[(name, crf, c)]]
         m = {k: float(np.mean([r[k] for r in rs])) for k in ("median", "p90", "kappa_logrmse", "kappa_rho",
                                                                "kappa_in_ci", "visible")}
-        row = [crf, len(rs), round(float(np.mean(sizes[crf])), 2), round(m["median"], 3), round(m["p90"], 3),
+        label = crf if name == "current" else f"{crf}, true rotations"
+        row = [label, len(rs), round(float(np.mean(sizes[crf])), 2), round(m["median"], 3), round(m["p90"], 3),
                round(100 * m["visible"], 1), round(m["kappa_logrmse"], 3), round(m["kappa_rho"], 2),
                round(100 * m["kappa_in_ci"], 1)]
-        if args.bound:
+        if args.bound and name == "current":
             b = np.array(bounds[crf])
             row += [round(float(b[:, 1].mean()), 2), round(float(b[:, 0].mean()), 3), round(float(b[:, 2].mean()), 3)]
             print(f"  crf {crf}: noise {b[:, 1].mean():.2f} grey levels; Cramér-Rao bound {b[:, 0].mean():.3f} px per "
                   f"axis (median node); kappa log-RMSE at the bound {b[:, 2].mean():.2f} (ours "
                   f"{m['kappa_logrmse']:.2f})")
-        if args.oracle:
+        if args.oracle and name == "current":
             o = np.array(oracles[crf])
             row += [round(float(o[:, 0].mean()), 3), round(float(o[:, 1].mean()), 3),
                     round(float(100 * o[:, 3].mean()), 1)]
@@ -281,11 +328,14 @@ def main():
                      "kappa log-RMSE at the bound"]
         if args.oracle:
             cols += ["oracle error median (px)", "kappa log-RMSE, oracle", "truth in 95 % CI, oracle (%)"]
-        save_record(args.record, title="Texture bed: what compression costs the tracker and kappa, and what any "
-                                       "tracker could reach",
+        title = ("Texture bed: what compression costs the tracker and kappa, and what any tracker could reach"
+                 if not args.perfect else "Texture bed: our tracker's own error, on perfectly rendered frames")
+        save_record(args.record, title=title,
                     command=f"python benchmarks/bench_texture_bed.py --seeds {args.seeds} --conditions "
-                            f"{args.conditions} --crf {','.join(map(str, crfs))}"
+                            f"{args.conditions} --crf {','.join(str(c) for c in crfs if c != 'perfect')}"
                             + (" --bound" if args.bound else "") + (" --oracle" if args.oracle else "")
+                            + (" --perfect" if args.perfect else "")
+                            + (" --true-rotations" if args.true_rotations else "")
                             + f" --record {args.record}",
                     description=("Plant 2's frame 0 (overlays inpainted) warped by the simulator's motion at the real "
                                  f"plant's scale (tip {args.tip_px:g} px, {args.frames} frames), blur, sensor noise "
@@ -300,7 +350,13 @@ def main():
                                     "true pose and fits the decoded frame's stem pixels with it, moved by the bed's "
                                     "articulated model (texture_bound.oracle_tracks): its error is what the noise and "
                                     "the compression displace; kappa from the truth plus that error." if args.oracle
-                                    else "")),
+                                    else "")
+                                 + (" 'perfect': the same bed with no sensor noise, flicker or blur, H.264 lossless "
+                                    "(RenderSettings.perfect): what our tracker still gets wrong there is its own, "
+                                    "deterministic error." if args.perfect else "")
+                                 + (" 'true rotations': our tracker with the true segment rotations posing its "
+                                    "templates in its refinement pass (TrueRotations in this script): what its "
+                                    "rotation estimate costs." if args.true_rotations else "")),
                     columns=cols, rows=table,
                     notes=[f"true tracks: kappa log-RMSE {a[:, 0].mean():.3f}, truth in CI "
                            f"{100 * a[:, 2].mean():.0f} %",

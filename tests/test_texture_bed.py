@@ -126,3 +126,23 @@ def test_rendering_some_frames_gives_the_same_frames(bed, frames):
     assert len(part) == len(frames) and part[0] is None and part[39] is None
     np.testing.assert_array_equal(part[3], frames[3])
     np.testing.assert_array_equal(part[40], frames[40])
+
+
+def test_perfect_rendering_has_nothing_but_the_motion(bed):
+    """``RenderSettings.perfect()``: no noise, flicker or blur, lossless. Its frames do not depend on the noise
+    stream (another bed seed, the same motion, gives the same frames), and the default bed's differ from them by
+    its noise and flicker; the default bed is not perfect."""
+    from dataclasses import replace
+
+    from rce_gtsam.sim.texture_bed import RenderSettings
+
+    cf, b = bed
+    st = RenderSettings().perfect()
+    assert st.is_perfect and st.crf == 0 and not RenderSettings().is_perfect
+    a = list(render_frames(b, cf.rgb, cf.points, settings=st, only={0, 30}))
+    c = list(render_frames(replace(b, seed=b.seed + 1), cf.rgb, cf.points, settings=st, only={0, 30}))
+    np.testing.assert_array_equal(a[30], c[30])
+    np.testing.assert_array_equal(a[0], c[0])
+    noisy = list(render_frames(b, cf.rgb, cf.points, only={0}))[0]
+    # frame 0 of the default bed: the same pose, plus 2 grey levels of noise and a little flicker
+    assert 1.5 < np.std(noisy.astype(float) - a[0].astype(float)) < 4.0

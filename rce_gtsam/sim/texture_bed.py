@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -195,6 +195,16 @@ class RenderSettings:
     noise_grey: float = 2.0
     flicker: float = 0.015
     crf: int = 23
+
+    def perfect(self) -> "RenderSettings":
+        """The same bed with nothing between the motion and the pixels: no sensor noise, no flicker, no motion blur
+        (one warp at the frame's time) and lossless H.264 (crf 0). What a tracker still gets wrong there is its
+        own, deterministic error."""
+        return replace(self, noise_grey=0.0, flicker=0.0, exposure=0.0, max_sub=1, crf=0)
+
+    @property
+    def is_perfect(self) -> bool:
+        return self == self.perfect()
 
 
 def _seg_dist(px, py, a, b):
