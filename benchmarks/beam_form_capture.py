@@ -3,7 +3,8 @@
 Per cached beam case (``bench_beam.py`` pickles in ``--cache``): the rank-1 model and the rank-1 model with each form
 (``--forms``; default: the candidate the effect is counted right by, :data:`rce_gtsam.sim.beam.DIAGNOSIS_NAME`, first
 name) are fitted to the *noise-free* response (on the pipeline's rest reference, unit weights, the preset's compliance
-config, the form started from the rank-1 fit as the oracle's clean fit is: :func:`rce_gtsam.diagnosis.oracle.oracle_test`).
+config, the form started from the rank-1 fit as the oracle's clean fit is:
+:func:`rce_gtsam.diagnosis.oracle.oracle_test`).
 Printed (degrees, RMS over entries): the rank-1 fit's residual, each form's residual and the share of the rank-1
 residual's power it captures, 1 - (rf / r1)^2; the same for the best rank-2 approximation of the (row-centred) response,
 a bound for any form that adds one shared time course (a second excitation, a mode); the captured part
@@ -122,9 +123,10 @@ def main() -> int:
                     command=f"python benchmarks/beam_form_capture.py --cache DIR --effects "
                             f"{a.effects} --frames {a.frames} --seeds {a.seeds}"
                             + (f" --forms {a.forms}" if a.forms else "") + f" --record {a.record}",
-                    description=("Noise-free beam responses (the cached bench_beam.py cases) fitted by the rank-1 model "
-                                 "and by the rank-1 model with each candidate form, started from the rank-1 fit as the "
-                                 "oracle's clean fit is. 'captured': the share of the rank-1 residual's power the form "
+                    description=("Noise-free beam responses (the cached bench_beam.py cases) fitted by the rank-1 "
+                                 "model and by the rank-1 model with each candidate form, started from the rank-1 "
+                                 "fit as the oracle's clean fit is. 'captured': the share of the rank-1 residual's "
+                                 "power the form "
                                  "removes (median and range over seeds); 'rank 2': the same for the best rank-2 "
                                  "approximation, a bound for any form that adds one shared time course; 'captured / "
                                  "noise': the captured part's RMS against the angle noise the diagnosis sees it "

@@ -336,10 +336,10 @@ def test_the_beam_form_capture_numbers_the_diagnosis_page_quotes_are_the_record(
     med = {f: [r[col["captured (%, median)"]] for r in rec["rows"] if r[col["form"]] == f]
            for f in ("dynamics", "resonances")}
     r2 = [r[col["rank 2 (%, median)"]] for r in rec["rows"]]
+    dyn, res = med["dynamics"], med["resonances"]
     _says("diagnosis.md", f"(a rank-2 fit takes {round(min(r2))} to {round(max(r2))} % of it), but the graded form "
-                          f"captures a median {round(min(med['dynamics']))} to {round(max(med['dynamics']))} % of it by "
-                          f"strength and the per-joint form {round(min(med['resonances']))} to "
-                          f"{round(max(med['resonances']))} %")
+                          f"captures a median {round(min(dyn))} to {round(max(dyn))} % of it by strength and the "
+                          f"per-joint form {round(min(res))} to {round(max(res))} %")
     det = _record("beam_detection")
     dc = {n: i for i, n in enumerate(det["columns"])}
     modal = [r for r in det["rows"] if r[dc["effect"]] == "modal"]
