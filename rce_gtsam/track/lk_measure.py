@@ -124,18 +124,23 @@ class Measurement:
         return ((qx + (m[1] - c), qy + (m[2] - c)), m[3], m[4], m[5], m[6], wsum,
                 ((qx + (m[7] - c), qy + (m[8] - c)) if m[9] else None))
 
+    def _refine_thetas(self, i, est, vis) -> list:
+        """The rotations since frame 0 (radians) of node i's incident segments, in ``self._inc[i]``'s order, from
+        the positions ``est`` (P, 2) px: the parent segment's, then each child's (a child not visible in ``vis``
+        is taken to continue its parent segment)."""
+        p, ang0 = self.parent[i], self._ang0
+        tp = turn(est[p], est[i], ang0[i]) if p >= 0 else 0.0
+        thetas = [tp] if p >= 0 else []
+        for ch in self.children[i]:
+            thetas.append(turn(est[i], est[ch], ang0[ch]) if vis[ch] else tp)
+        return thetas
+
     def _refine_node(self, gray0, gray, q0, i, est, vis, fb_max):
         """Re-match of visible node i with segment rotations from ``est`` (this frame's matches; the nodes before
         i in ``self.order`` already re-matched): ``(xy, sigma px)``, or None when the re-match fails (no match,
         correlation below ``min_ncc`` or forward-backward error above ``fb_max``)."""
         cfg = self.config
-        p = self.parent[i]
-        ang0 = self._ang0
-        tp = turn(est[p], est[i], ang0[i]) if p >= 0 else 0.0
-        thetas = [tp] if p >= 0 else []
-        for ch in self.children[i]:
-            thetas.append(turn(est[i], est[ch], ang0[ch]) if vis[ch] else tp)
-        m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, self._margin, thetas)
+        m = self._anchor(gray0, gray, i, q0[i], est[i], 0.0, self._margin, self._refine_thetas(i, est, vis))
         if m is not None and m[1] >= cfg.min_ncc and m[2] <= fb_max:
             xy, _, fb, s_lk = m[:4]
             return xy, math.sqrt(s_lk ** 2 + (fb / 2) ** 2 + cfg.sigma_floor_px ** 2)
