@@ -4,14 +4,10 @@ angles, and the placement in the image (pixels, x right, y down; angles in degre
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..graph import BranchGraph
-
-if TYPE_CHECKING:
-    from .simulate import SimulationConfig
 
 
 def turning_angles_deg(xy: np.ndarray, node_ids, bends) -> np.ndarray:
@@ -27,10 +23,10 @@ def turning_angles_deg(xy: np.ndarray, node_ids, bends) -> np.ndarray:
     return np.degrees(np.arctan2(cross, dot))
 
 
-def build_graph(cfg: "SimulationConfig", rng: np.random.Generator) -> tuple[BranchGraph, dict[tuple[int, int], float]]:
-    """Topology and the rest turning angle (degrees) of every non-root edge."""
-    n = cfg.n_nodes
-    if cfg.branch_layout == "chain":
+def build_graph(n: int, layout: str, rng: np.random.Generator) -> tuple[BranchGraph, dict[tuple[int, int], float]]:
+    """Topology of ``n`` nodes (``layout`` ``"chain"`` or ``"tree"``: see
+    :class:`~rce_gtsam.sim.simulate.SimulationConfig`) and the rest turning angle (degrees) of every non-root edge."""
+    if layout == "chain":
         edges = [(i, i + 1) for i in range(n - 1)]
         side: list[tuple[int, int]] = []
     else:

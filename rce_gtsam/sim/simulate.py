@@ -50,45 +50,7 @@ from .bend_laws import (EFFECT_DEFAULTS, EFFECT_FORMS, EFFECT_MEANING, EFFECTS, 
 from .kinematics import (build_graph, root_distances, forward_kinematics, place_in_image,  # noqa: F401
                          turning_angles_deg)
 from .three_d import GEOMETRIC_EFFECTS, Scene3D, Truth3D
-from .tracker_noise import add_tracker_noise  # noqa: F401
-
-
-@dataclass(frozen=True)
-class NoiseConfig:
-    """Tracker-like noise on node positions (what TAPIR gives on real footage). Units: pixels, frames.
-
-    sigma_across_px: white-noise 1-sigma perpendicular to the branch at the root; it grows linearly to
-        ``sigma_across_px * tip_factor`` at the tip (real TAPIR residuals on the two plants: 0.15-1.0 px,
-        growing toward the tip).
-    along_ratio: white-noise sigma along the branch / sigma across it (trackers slide along a featureless
-        stem; brief: ~3; the two real plants show 1.4-2.3 in high-pass residuals).
-    tip_factor: noise multiplier at the tip relative to the root (linear in normalised root distance).
-    drift_px: stationary 1-sigma of the slow AR(1) drift along the branch (across: drift_px / along_ratio).
-    drift_time_s: correlation time of the drift in seconds.
-    gap_rate: expected number of occlusion gaps per node per 30 s at mid-branch; the rate grows
-        linearly from 0.2x at the root to 1.8x at the tip (distal nodes pass behind leaves more often).
-    gap_median_frames, gap_max_frames: gap lengths are log-normal (sigma_log 1.1) with this median,
-        clipped to [1, gap_max_frames] — many 1-3 frame dropouts and a few of tens of frames, as in the
-        real tracks (about 2 % of rows missing).
-    jump_prob: probability per observation that a jump (outlier) starts there.
-    jump_px: (min, max) jump magnitude in pixels; a jump lasts 1-3 frames.
-    emit_sigma: if True, tracks carry a per-observation ``sigma_px`` (the isotropic-equivalent white-noise
-        sigma of that node) and ``tracks.csv`` gets a ``sigma_px`` column.
-    enabled: False = noise-free tracks (positions exactly true_xy, no gaps).
-    """
-
-    sigma_across_px: float = 0.25
-    along_ratio: float = 3.0
-    tip_factor: float = 1.8
-    drift_px: float = 0.2
-    drift_time_s: float = 2.0
-    gap_rate: float = 5.0
-    gap_median_frames: float = 2.0
-    gap_max_frames: int = 50
-    jump_prob: float = 0.001
-    jump_px: tuple[float, float] = (3.0, 8.0)
-    emit_sigma: bool = False
-    enabled: bool = True
+from .tracker_noise import NoiseConfig, add_tracker_noise  # noqa: F401
 
 
 @dataclass(frozen=True)
@@ -301,7 +263,7 @@ def simulate(config: SimulationConfig = SimulationConfig()) -> Simulation:
     ss = np.random.SeedSequence(config.seed)
     r_geom, r_kappa, r_z, r_eff, r_noise, r_place = (np.random.default_rng(s) for s in ss.spawn(6))
     F = config.n_frames
-    graph, rest = build_graph(config, r_geom)
+    graph, rest = build_graph(config.n_nodes, config.branch_layout, r_geom)
     lo, hi = config.segment_px
     mid, half = (np.log(lo) + np.log(hi)) / 2, (np.log(hi) - np.log(lo)) / 2
     lengths = {e: float(np.exp(np.clip(r_geom.normal(mid, half / 1.5), mid - half, mid + half))) for e in graph.edges}
