@@ -62,6 +62,31 @@ def test_flagged_segments_are_dashed_and_labelled_on_the_overlay(result):
     plt.close("all")
 
 
+def test_flag_labels_never_print_over_each_other_or_the_node_ids():
+    """Every segment of a 30-node branch with 8-12 px segments flagged (as on plant 2's crowded top): each label
+    that is drawn has room of its own, every segment is still dashed, and the legend says that labels are drawn
+    where there is room."""
+    from rce_gtsam import analyze
+    from rce_gtsam.sim.simulate import SimulationConfig, simulate
+    from rce_gtsam.viz.overlays import fig_overlay
+    sim = simulate(SimulationConfig(n_nodes=30, n_frames=120, segment_px=(8.0, 12.0), seed=3))
+    crowded = analyze(sim.tracks, sim.graph, n_boot=0)
+    edges = list(crowded.response.edges)
+    fig = fig_overlay(crowded, crowded.kappa, "kappa", "RdYlBu_r", log=True, flags={e: "poor_fit" for e in edges})
+    ax = fig.axes[0]
+    fig.draw_without_rendering()
+    flag_labels = [t for t in ax.texts if t.get_text() == "poor_fit"]
+    flag_boxes = [t.get_window_extent() for t in flag_labels]
+    id_boxes = [t.get_window_extent() for t in ax.texts if t.get_text().isdigit()]
+    assert len(id_boxes) == 30
+    assert not [(a, b) for i, a in enumerate(flag_boxes) for b in flag_boxes[i + 1:] + id_boxes if a.overlaps(b)]
+    assert 0 < len(flag_labels) < len(edges)
+    assert len([c for c in ax.collections if c.get_gid() == "flagged"][0].get_segments()) == len(edges)
+    assert "labelled where there is room" in ax.get_legend().get_texts()[0].get_text()
+    import matplotlib.pyplot as plt
+    plt.close("all")
+
+
 @pytest.mark.parametrize("status,reason,words", [
     ("noise", None, "at the noise floor"), ("misses", None, "more than noise"),
     ("inconclusive", "too_uncertain", "too short"), ("inconclusive", "floor_bounded", "only bounded")])

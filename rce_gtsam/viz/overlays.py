@@ -80,11 +80,11 @@ def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.nda
         lc = LineCollection(segs[ok], cmap=cmap, norm=norm, linewidths=6, capstyle="round", zorder=3)
         lc.set_array(v[ok])
         ax.add_collection(lc)
-        _mark_flagged(ax, segs, edges, flags or {})
+        flag_texts = _mark_flagged(ax, segs, edges, flags or {})
         ax.scatter(xy[:, 0], xy[:, 1], s=9, c="white", edgecolors="k", linewidths=0.5, zorder=5)
         r = row[result.graph.root]
         ax.scatter([xy[r, 0]], [xy[r, 1]], s=40, facecolors="none", edgecolors="#1a9850", linewidths=1.5, zorder=6)
-        _label_nodes(ax, xy, ids, edges, row)
+        node_texts = _label_nodes(ax, xy, ids, edges, row)
         ax.set_xlim(x0, x1)
         ax.set_ylim(y1, y0)
         ax.set_aspect("equal")
@@ -95,6 +95,7 @@ def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.nda
         extend = "max" if (not log and ok.any() and v[ok].max() > norm.vmax) else "neither"
         cb = fig.colorbar(lc, ax=ax, shrink=0.85, pad=0.02, extend=extend)
         cb.set_label(label)
+        _flag_legend(ax, len(flag_texts), _drop_overlapping(fig, node_texts, flag_texts))
         if log:
             from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
             ticks = [t * 10.0 ** k for k in range(-3, 3) for t in (1, 2, 5) if norm.vmin <= t * 10.0 ** k <= norm.vmax]
@@ -104,38 +105,67 @@ def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.nda
     return fig
 
 
-def _mark_flagged(ax, segs: np.ndarray, edges, flags: dict) -> None:
-    """A dashed line down the middle of each flagged segment, its first flag beside it (on the side
-    opposite the node labels), and a legend entry saying what the dashes mean."""
+def _mark_flagged(ax, segs: np.ndarray, edges, flags: dict) -> list:
+    """A dashed line down the middle of each flagged segment and its first flag beside it (on the side
+    opposite the node labels); returns those labels (:func:`_drop_overlapping` thins them where they crowd)."""
     import matplotlib.patheffects as pe
     from matplotlib.collections import LineCollection
-    from matplotlib.lines import Line2D
     idx = [i for i, e in enumerate(edges) if flags.get(e, "ok") != "ok"]
     if not idx:
-        return
+        return []
     # black dashes with a white rim read on every colour of the scale, pale or dark
     dashes = LineCollection(segs[idx], colors="0.05", linewidths=1.4, linestyles=(0, (2.0, 1.6)), zorder=4,
                             path_effects=[pe.withStroke(linewidth=2.6, foreground="white")])
     dashes.set_gid("flagged")
     ax.add_collection(dashes)
+    texts = []
     for i in idx:
         (xa, ya), (xb, yb) = segs[i]
         d = np.array([xb - xa, yb - ya])
         n = np.array([d[1], -d[0]]) / (np.linalg.norm(d) or 1.0)  # the other side from _label_nodes' offset
-        ax.annotate(flags[edges[i]].split("+")[0], ((xa + xb) / 2, (ya + yb) / 2),
-                    xytext=(14 * n[0], -14 * n[1]), textcoords="offset points", ha="center", va="center",
-                    fontsize=5, color="0.35", style="italic", zorder=7,
-                    path_effects=[pe.withStroke(linewidth=1.8, foreground="white")])
-    ax.legend(handles=[Line2D([], [], color="0.4", lw=5, solid_capstyle="butt"),
-                       Line2D([], [], color="0.05", lw=1.4, ls=(0, (2.0, 1.6)),
-                              path_effects=[pe.withStroke(linewidth=2.6, foreground="white")])][1:],
-              labels=[f"flagged: κ not ok ({len(idx)} segments; quality column)"], loc="lower left", fontsize=6,
-              frameon=True, framealpha=0.85)
+        texts.append(ax.annotate(flags[edges[i]].split("+")[0], ((xa + xb) / 2, (ya + yb) / 2),
+                                 xytext=(14 * n[0], -14 * n[1]), textcoords="offset points", ha="center",
+                                 va="center", fontsize=5, color="0.35", style="italic", zorder=7,
+                                 path_effects=[pe.withStroke(linewidth=1.8, foreground="white")]))
+    return texts
 
 
-def _label_nodes(ax, xy: np.ndarray, ids, edges, row) -> None:
+def _drop_overlapping(fig, keep: list, candidates: list) -> int:
+    """Remove each of ``candidates`` (text artists, in order) whose box on the figure overlaps a text of ``keep``
+    or a candidate kept before it; returns how many were removed. Where segments are short and mostly flagged
+    their labels would print over each other and over the node ids ("poor_fitpoor_fit"); the dashes still mark
+    every flagged segment, and the quality column names each flag."""
+    if not candidates:
+        return 0
+    fig.draw_without_rendering()  # lays the texts out, so their boxes are the saved figure's
+    boxes = [t.get_window_extent() for t in keep]
+    removed = 0
+    for t in candidates:
+        box = t.get_window_extent()
+        if any(box.overlaps(b) for b in boxes):
+            t.remove()
+            removed += 1
+        else:
+            boxes.append(box)
+    return removed
+
+
+def _flag_legend(ax, n_flagged: int, n_unlabelled: int) -> None:
+    """The legend entry saying what the dashes mean (none without flagged segments)."""
+    if not n_flagged:
+        return
+    import matplotlib.patheffects as pe
+    from matplotlib.lines import Line2D
+    where = "; labelled where there is room" if n_unlabelled else ""
+    ax.legend(handles=[Line2D([], [], color="0.05", lw=1.4, ls=(0, (2.0, 1.6)),
+                              path_effects=[pe.withStroke(linewidth=2.6, foreground="white")])],
+              labels=[f"flagged: κ not ok ({n_flagged} segments; quality column{where})"], loc="lower left",
+              fontsize=6, frameon=True, framealpha=0.85)
+
+
+def _label_nodes(ax, xy: np.ndarray, ids, edges, row) -> list:
     """Each node's id beside it (the ids the tables and the diagnosis name), 12 pt off the branch across
-    the node's own segments, in dark text with a white halo that reads on any photo."""
+    the node's own segments, in dark text with a white halo that reads on any photo; returns the labels."""
     import matplotlib.patheffects as pe
     tangent = np.zeros_like(xy)
     for p, c in edges:  # a node's direction: the sum of its segments' unit vectors (root -> tip)
@@ -143,15 +173,17 @@ def _label_nodes(ax, xy: np.ndarray, ids, edges, row) -> None:
         d = d / (np.linalg.norm(d) or 1.0)
         tangent[row[p]] += d
         tangent[row[c]] += d
+    texts = []
     for (x, y), t, nid in zip(xy, tangent, ids):
         if not (np.isfinite(x) and np.isfinite(y)):
             continue
         n = np.array([-t[1], t[0]]) / (np.linalg.norm(t) or 1.0)  # perpendicular, image coordinates (y down)
         if not n.any():
             n = np.array([1.0, 0.0])
-        ax.annotate(str(int(nid)), (x, y), xytext=(12 * n[0], -12 * n[1]), textcoords="offset points",
-                    ha="center", va="center", fontsize=6, color="0.1", zorder=7,
-                    path_effects=[pe.withStroke(linewidth=2, foreground="white")])
+        texts.append(ax.annotate(str(int(nid)), (x, y), xytext=(12 * n[0], -12 * n[1]),
+                                 textcoords="offset points", ha="center", va="center", fontsize=6, color="0.1",
+                                 zorder=7, path_effects=[pe.withStroke(linewidth=2, foreground="white")]))
+    return texts
 
 
 #: Overlay files, and those that need kappa's confidence intervals (both: the flags they mark include the
