@@ -114,14 +114,47 @@ def test_delay_z_step_is_the_exact_least_squares_solution():
 
 
 def test_dynamics_closed_form_discretisation_in_every_damping_regime():
-    from rce_gtsam.effects.dynamics import _bank
+    from rce_gtsam.effects.dynamics import _bank, conv_length
     rng = np.random.default_rng(0)
     u = np.cumsum(rng.standard_normal(150)) * 0.1
     u -= u[0]
+    L = conv_length(150)
     for w, zeta in [(0.05, 0.03), (0.5, 1.0), (1.0, 1.5), (6.0, 2.0)]:
         fr, H = _bank((w,), zeta, 150)
-        y = np.fft.irfft(np.fft.rfft(u, 300) * H[0], 300)[:150]
+        y = np.fft.irfft(np.fft.rfft(u, L) * H[0], L)[:150]
         assert np.allclose(y, oscillator_response(u, w, zeta), atol=1e-9)
+
+
+@pytest.mark.parametrize("T", [150, 590, 1104])
+def test_dynamics_filter_and_its_adjoint_are_exact_at_the_fast_fft_length(T):
+    """The filters run as FFT convolutions of length conv_length(T) (2^a 3^b 5^c >= 2T - 1), not 2T: the
+    result is the direct convolution with the impulse response (plus the free response), the adjoint is its
+    transpose, and the z step's preconditioner still gets the frequency response on the 2T grid."""
+    from types import SimpleNamespace
+
+    from rce_gtsam.effects.dynamics import Dynamics, _impulse, conv_length
+    assert conv_length(T) >= 2 * T - 1 and set(_prime_factors(conv_length(T))) <= {2, 3, 5}
+    rng = np.random.default_rng(T)
+    eff = Dynamics()
+    view = SimpleNamespace(s=np.linspace(0, 1, 4), T=T)
+    state = eff._state((np.log(0.4), np.log(0.1), 0.2))
+    X, R = rng.standard_normal((4, T)), rng.standard_normal((4, T))
+    h = _impulse(*eff._key(state, view))
+    free = 1.0 - np.cumsum(h, axis=1)
+    direct = np.stack([np.convolve(X[e], h[e])[:T] for e in range(4)]) + X[:, :1] * free
+    assert np.allclose(eff.apply(X, state, view), direct, atol=1e-10)
+    assert np.isclose(np.sum(eff.apply(X, state, view) * R), np.sum(X * eff.apply_T(R, state, view)), rtol=1e-10)
+    assert np.allclose(eff.transfer(state, view, 2 * T), np.fft.rfft(h, 2 * T, axis=1), atol=1e-12)
+
+
+def _prime_factors(n: int) -> list[int]:
+    out, k = [], 2
+    while n > 1:
+        while n % k == 0:
+            out.append(k)
+            n //= k
+        k += 1
+    return out
 
 
 def test_memory_frames_reach_back_of_fitted_terms():

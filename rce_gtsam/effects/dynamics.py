@@ -69,19 +69,42 @@ def _foh_coeffs(omega: np.ndarray, zeta: float) -> tuple[np.ndarray, np.ndarray]
     return b, a
 
 
-@lru_cache(maxsize=256)
-def _bank(omegas: tuple, zeta: float, T: int):
-    """Per-edge filters over a record of T frames: (free responses (E, T), frequency responses (E, T + 1)).
+def conv_length(T: int) -> int:
+    """FFT length of the filters' linear convolution over T frames: the smallest 2^a 3^b 5^c >= 2T - 1 (any
+    length from 2T - 1 on is exact; a prime factor such as 59 in 2T = 1180, plant 2's 590 frames, makes each
+    FFT ~2x slower, and these FFTs are most of a dynamics fit's time)."""
+    from scipy.fft import next_fast_len
 
-    The impulse response h_e over the record is computed by lfilter; the filter is then applied as a linear
-    convolution with h_e through zero-padded FFTs of length 2T (exact, and one batched FFT for all edges).
-    The free response from a unit initial steady state is 1 - cumsum(h_e): static gain 1 means the steady
-    state minus the step response."""
+    return next_fast_len(2 * T - 1, real=True)
+
+
+@lru_cache(maxsize=256)
+def _impulse(omegas: tuple, zeta: float, T: int) -> np.ndarray:
+    """(E, T) impulse response h_e of every edge's filter over a record of T frames (lfilter)."""
     b, a = _foh_coeffs(np.array(omegas), zeta)
     imp = np.zeros(T)
     imp[0] = 1.0
-    h = np.stack([signal.lfilter(b[e], a[e], imp) for e in range(len(omegas))])
-    return 1.0 - np.cumsum(h, axis=1), np.fft.rfft(h, 2 * T, axis=1)
+    return np.stack([signal.lfilter(b[e], a[e], imp) for e in range(len(omegas))])
+
+
+@lru_cache(maxsize=256)
+def _bank(omegas: tuple, zeta: float, T: int):
+    """Per-edge filters over a record of T frames: (free responses (E, T), frequency responses
+    (E, conv_length(T) // 2 + 1)).
+
+    The filter is applied as a linear convolution with the impulse response h_e (:func:`_impulse`) through
+    zero-padded FFTs of :func:`conv_length` (exact, and one batched FFT for all edges). The free response from
+    a unit initial steady state is 1 - cumsum(h_e): static gain 1 means the steady state minus the step
+    response."""
+    h = _impulse(omegas, zeta, T)
+    return 1.0 - np.cumsum(h, axis=1), np.fft.rfft(h, conv_length(T), axis=1)
+
+
+@lru_cache(maxsize=64)
+def _spectrum(omegas: tuple, zeta: float, T: int, n_fft: int) -> np.ndarray:
+    """(E, n_fft // 2 + 1) rfft of the impulse responses on a grid of length ``n_fft`` (the z step's
+    preconditioner asks for 2T)."""
+    return np.fft.rfft(_impulse(omegas, zeta, T), n_fft, axis=1)
 
 
 class Dynamics(Effect):
@@ -118,31 +141,35 @@ class Dynamics(Effect):
         lr, lt = np.log(scalar(p["omega_root"])), np.log(scalar(p["omega_tip"]))
         return np.exp((1 - s) * lr + s * lt)
 
-    def _stack(self, state, view):
-        """(free responses (E, T), frequency responses (E, T + 1)) of every edge's filter."""
+    def _key(self, state, view) -> tuple:
+        """(omegas, zeta, T): the cache key of every edge's filter."""
         om = self.omegas(state, view.s)
-        zeta = scalar(state["params"]["zeta"])
-        return _bank(tuple(round(float(w), 12) for w in om), round(zeta, 12), view.T)
+        return tuple(round(float(w), 12) for w in om), round(scalar(state["params"]["zeta"]), 12), view.T
+
+    def _stack(self, state, view):
+        """(free responses (E, T), frequency responses (E, conv_length(T) // 2 + 1)) of every edge's filter."""
+        return _bank(*self._key(state, view))
 
     def apply(self, X, state, view):
         # the filter as a convolution with its impulse response, all edges in one FFT (exact: zero padding
-        # to 2T makes it linear), plus the free response of the initial steady state x[0]
+        # to at least 2T - 1 makes it linear), plus the free response of the initial steady state x[0]
         T = X.shape[1]
+        L = conv_length(T)
         fr, Hf = self._stack(state, view)
-        return np.fft.irfft(np.fft.rfft(X, 2 * T, axis=1) * Hf, 2 * T, axis=1)[:, :T] + X[:, :1] * fr
+        return np.fft.irfft(np.fft.rfft(X, L, axis=1) * Hf, L, axis=1)[:, :T] + X[:, :1] * fr
 
     def apply_T(self, R, state, view):
         T = R.shape[1]
+        L = conv_length(T)
         fr, Hf = self._stack(state, view)
-        out = np.fft.irfft(np.fft.rfft(R, 2 * T, axis=1) * np.conj(Hf), 2 * T, axis=1)[:, :T]
+        out = np.fft.irfft(np.fft.rfft(R, L, axis=1) * np.conj(Hf), L, axis=1)[:, :T]
         out[:, 0] += np.sum(fr * R, axis=1)
         return out
 
     def transfer(self, state, view, n_fft: int):
         """Frequency response of each edge's filter on the rfft grid of length ``n_fft`` (E, n_fft//2 + 1)."""
-        if n_fft != 2 * view.T:
-            raise ValueError("transfer is tabulated for n_fft = 2 T")
-        return self._stack(state, view)[1]
+        key = self._key(state, view)
+        return self._stack(state, view)[1] if n_fft == conv_length(view.T) else _spectrum(*key, n_fft)
 
     @staticmethod
     def _state(p):
