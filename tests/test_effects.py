@@ -129,7 +129,8 @@ def test_dynamics_closed_form_discretisation_in_every_damping_regime():
 def test_dynamics_filter_and_its_adjoint_are_exact_at_the_fast_fft_length(T):
     """The filters run as FFT convolutions of length conv_length(T) (2^a 3^b 5^c >= 2T - 1), not 2T: the
     result is the direct convolution with the impulse response (plus the free response), the adjoint is its
-    transpose, and the z step's preconditioner still gets the frequency response on the 2T grid."""
+    transpose, and the z step's preconditioner still gets the frequency response on the 2T grid. The shortcuts
+    (one FFT of a broadcast z, the adjoint's sum over edges in the frequency domain) give the same values."""
     from types import SimpleNamespace
 
     from rce_gtsam.effects.dynamics import Dynamics, _impulse, conv_length
@@ -145,6 +146,11 @@ def test_dynamics_filter_and_its_adjoint_are_exact_at_the_fast_fft_length(T):
     assert np.allclose(eff.apply(X, state, view), direct, atol=1e-10)
     assert np.isclose(np.sum(eff.apply(X, state, view) * R), np.sum(X * eff.apply_T(R, state, view)), rtol=1e-10)
     assert np.allclose(eff.transfer(state, view, 2 * T), np.fft.rfft(h, 2 * T, axis=1), atol=1e-12)
+    # z broadcast to every edge (one forward FFT) and the adjoint summed over edges (one inverse FFT)
+    z = X[0]
+    assert np.allclose(eff.apply(np.broadcast_to(z, (4, T)), state, view), eff.apply(np.tile(z, (4, 1)), state, view),
+                       atol=1e-12)
+    assert np.allclose(eff.apply_T_sum(R, state, view), eff.apply_T(R, state, view).sum(axis=0), atol=1e-10)
 
 
 def _prime_factors(n: int) -> list[int]:

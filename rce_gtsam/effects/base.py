@@ -158,6 +158,12 @@ class Effect:
         """Operator effects: the transpose (adjoint) of :meth:`apply`, row by row."""
         return R
 
+    def apply_T_sum(self, R: np.ndarray, state: dict, view: "FitView") -> np.ndarray:
+        """Operator effects: ``apply_T(R).sum(axis=0)``, (T,), the z step's adjoint when this is the model's only
+        operator; override where the sum is cheaper than the rows (:class:`~.dynamics.Dynamics`: one inverse FFT
+        instead of one per edge)."""
+        return self.apply_T(R, state, view).sum(axis=0)
+
     def output(self, U: np.ndarray, state: dict, kappa: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Output effects: g(U) and g'(U) elementwise for U = kappa * x (degrees); ``kappa`` (E,) for maps
         that also depend on each edge's gain on its own (a reference pose, :class:`~.nonlinear.Nonlinear`)."""

@@ -156,7 +156,9 @@ class Dynamics(Effect):
         T = X.shape[1]
         L = conv_length(T)
         fr, Hf = self._stack(state, view)
-        return np.fft.irfft(np.fft.rfft(X, L, axis=1) * Hf, L, axis=1)[:, :T] + X[:, :1] * fr
+        # z broadcast to every edge (the usual input, FitView.transform): one forward FFT, not one per edge
+        Xf = np.fft.rfft(X[0], L)[None, :] if X.strides[0] == 0 else np.fft.rfft(X, L, axis=1)
+        return np.fft.irfft(Xf * Hf, L, axis=1)[:, :T] + X[:, :1] * fr
 
     def apply_T(self, R, state, view):
         T = R.shape[1]
@@ -164,6 +166,15 @@ class Dynamics(Effect):
         fr, Hf = self._stack(state, view)
         out = np.fft.irfft(np.fft.rfft(R, L, axis=1) * np.conj(Hf), L, axis=1)[:, :T]
         out[:, 0] += np.sum(fr * R, axis=1)
+        return out
+
+    def apply_T_sum(self, R, state, view):
+        # the sum over edges taken in the frequency domain: one inverse FFT instead of one per edge
+        T = R.shape[1]
+        L = conv_length(T)
+        fr, Hf = self._stack(state, view)
+        out = np.fft.irfft(np.sum(np.fft.rfft(R, L, axis=1) * np.conj(Hf), axis=0), L)[:T]
+        out[0] += float(np.sum(fr * R))
         return out
 
     def transfer(self, state, view, n_fft: int):

@@ -46,9 +46,11 @@ class FitView:
     def transform_T(self, R: np.ndarray, states=None) -> np.ndarray:
         """Adjoint of :meth:`transform`: sum over edges of L_e^T r_e, (T,)."""
         states = self.states if states is None else states
-        for eff, st in reversed(list(zip(self.effects, states))):
-            if eff.kind == "operator":
-                R = eff.apply_T(R, st, self)
+        ops = [(eff, st) for eff, st in zip(self.effects, states) if eff.kind == "operator"]
+        if len(ops) == 1:  # the usual case: one operator, whose adjoint may sum over edges more cheaply
+            return ops[0][0].apply_T_sum(R, ops[0][1], self)
+        for eff, st in reversed(ops):
+            R = eff.apply_T(R, st, self)
         return R.sum(axis=0)
 
     def parts(self, states=None, kappa=None, z=None, skip_additive: int | None = None):
