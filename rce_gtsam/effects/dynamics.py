@@ -143,8 +143,8 @@ class Dynamics(Effect):
 
     def _key(self, state, view) -> tuple:
         """(omegas, zeta, T): the cache key of every edge's filter."""
-        om = self.omegas(state, view.s)
-        return tuple(round(float(w), 12) for w in om), round(scalar(state["params"]["zeta"]), 12), view.T
+        om = np.round(np.asarray(self.omegas(state, view.s), float), 12)  # one vectorised rounding per call
+        return tuple(om.tolist()), round(scalar(state["params"]["zeta"]), 12), view.T
 
     def _stack(self, state, view):
         """(free responses (E, T), frequency responses (E, conv_length(T) // 2 + 1)) of every edge's filter."""
