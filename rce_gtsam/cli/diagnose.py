@@ -38,6 +38,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..diagnosis.io import diagnose_result, diagnosis_for_viz, diagnosis_json, parse_effect_names, \
         write_json_atomic
+    from ..diagnosis.parallel import default_workers
     from ..errors import InputError
     from ..pipeline import analyze
 
@@ -62,7 +63,8 @@ def run(args: argparse.Namespace) -> int:
                                                                          "tracks": str(args.tracks)},
                          progress=lambda s: s != "bootstrap" and bar.start(s))
         bar.start("diagnosis")
-        diag = diagnose_result(result, effects=names, seed=args.seed, n_folds=args.folds)
+        diag = diagnose_result(result, effects=names, seed=args.seed, n_folds=args.folds,
+                               workers=default_workers())
         data = cli_wording_json(diagnosis_json(diag, result))
         view = cli_wording_json(diagnosis_for_viz(diag, result)) if (args.figures or args.rerun) else None
         # write every optional output first, the JSON last: a failure leaves no partial set of new files

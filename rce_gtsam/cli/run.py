@@ -53,6 +53,7 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
     import tempfile
 
     from ..diagnosis.io import diagnose_result, diagnosis_for_viz, diagnosis_json, parse_effect_names
+    from ..diagnosis.parallel import default_workers
     from ..graph import load_graph
     from ..kappa_report import kappa_after_verdict
     from ..pipeline import ANALYSIS_STEPS, analyze
@@ -113,7 +114,7 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
             bar.start("diagnosis")
             t_diag = time.perf_counter()
             diagnosis = diagnose_result(result, effects=candidates,
-                                        seed=args.seed if args.seed is not None else 0)
+                                        seed=args.seed if args.seed is not None else 0, workers=default_workers())
             # the named effect's kappa intervals belong to the diagnosis stage, not to "write"
             result = dataclasses.replace(result, kappa_choice=kappa_after_verdict(result, diagnosis))
             t_diag = time.perf_counter() - t_diag

@@ -41,6 +41,7 @@ from .misfit import resolve_effects, residual_statistics, worst_edges_and_frames
 from .noise_floor import NoiseFloor
 from .one_node import OneNodeCheck, carrying_node, gain_window, node_id, one_node_text, projected_row, rows_without
 from .own_family import own_test_significant
+from .parallel import map_candidates
 from .result import CandidateResult, Diagnosis  # noqa: F401 (re-exported)
 from .settings import BLOCK_LENGTH, N_FOLDS, RESOLUTION
 from .sysid import residual_analysis
@@ -53,7 +54,7 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
              alpha: float = 0.05, edge_labels=None, frames=None, edge_nodes=None,
              config: ComplianceConfig | None = None, noise_floor: NoiseFloor | None = None,
              resolution: float = RESOLUTION, outside_domain: tuple[str, ...] = (),
-             check_one_node: bool = True, node_sensitivity: dict | None = None) -> Diagnosis:
+             check_one_node: bool = True, node_sensitivity: dict | None = None, workers: int = 1) -> Diagnosis:
     """Diagnose which physical effect the rank-1 model misses.
 
     Y: (E, T) bend response in degrees (NaN = missing/outlier); weights: (E, T) >= 0 or None;
@@ -82,6 +83,8 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     (:func:`~rce_gtsam.diagnosis.one_node.bend_jacobian`); with it the one-node check keeps, of the carrying node's
     bends, what no displacement of that node can move (:func:`~rce_gtsam.diagnosis.one_node.projected_row`); without
     it, it leaves them out.
+    workers: processes the candidates' fits and tests are spread over (:mod:`~rce_gtsam.diagnosis.parallel`; the
+    same diagnosis as serially, 1 = serial).
     """
     Y, W, s = validate_inputs(Y, weights, root_distance)
     E, T = Y.shape
@@ -100,14 +103,14 @@ def diagnose(Y, weights=None, root_distance=None, effects=None, n_folds: int | N
     node_disjoint = split is not None
     halves = split if node_disjoint else edge_halves(s, seed)
     # 2. evidence: full fits first (the CV buffer must cover the longest memory any fitted term has)
-    fulls = full_fits(base_model, base, cands, Y, W, s, halves)
+    fulls = full_fits(base_model, base, cands, Y, W, s, halves, workers)
     h = heldout_setting(base_model, base, fulls, Y, W, s, blocks, halves, node_disjoint, block_length, seed)
     stats_all = residual_statistics(base, cands)
     # an effect read from another channel (own_family: OutOfPlane's lengths) has its own level, outside the family
     lv = decision.levels(alpha, len({e.verdict_name for e in cands if not e.own_family}), h.n_used)
     results = []
-    for eff, model, full, starts in fulls:
-        ev = candidate_evidence(h, eff, model, full, starts, lv)
+    evidence = map_candidates(candidate_evidence, [(h, *f, lv) for f in fulls], workers)
+    for (eff, model, full, starts), ev in zip(fulls, evidence):
         # 3. decision, per candidate: significant (with the drift checks where it asks for them), supported
         route = decision.significance_route(ev.tests, lv, both=eff.needs_both_tests, excitation=eff.score_excitation)
         extra, sig = ev.numbers, route is not None

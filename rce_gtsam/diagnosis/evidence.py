@@ -22,7 +22,8 @@ from scipy import stats
 
 from ..model import ModelFit
 from ..model.series import loss_difference_test
-from ..model.starts import solve_from_starts
+from ..model.starts import alternative_starts, choose_start, solve_from_starts, start_from
+from .parallel import map_candidates
 from .drift_pattern import drift_pattern_result, drift_pattern_test
 from .encompassing import encompassing_result, encompassing_test
 from .heldout import fold_t_result, frame_loss, heldout_errors, paired_t
@@ -79,16 +80,21 @@ class HeldoutSetting:
         return self._shared[0]
 
 
-def full_fits(base_model, base: ModelFit, effects, Y, W, s, halves) -> list:
+def full_fits(base_model, base: ModelFit, effects, Y, W, s, halves, workers: int = 1) -> list:
     """Each candidate's fit on all frames, from the converged baseline: [(effect, model, fit, starts)], several
     starts where the effect proposes them, the one that predicts one row set from the other's excitation best
     kept (:func:`rce_gtsam.model.starts.solve_from_starts`: a local search can end in an optimum that fits noise).
-    The full fit is the only place an effect's shared parameters are fitted; fold refits start from it."""
+    The full fit is the only place an effect's shared parameters are fitted; fold refits start from it.
+    ``workers``: processes the fits are spread over (:func:`~rce_gtsam.diagnosis.parallel.map_candidates`): every
+    candidate's plain fit, then every alternative start of every candidate, each a task of its own."""
+    start = (base.kappa.copy(), base.z.copy(), {})
+    models = [base_model + eff for eff in effects]
+    plain = map_candidates(start_from, [(m, Y, W, s, start, FULL_ITER) for m in models], workers)
+    alts = [(i, alt) for i, (m, f) in enumerate(zip(models, plain)) for alt in alternative_starts(m, f, start)]
+    refits = map_candidates(start_from, [(models[i], Y, W, s, alt, FULL_ITER) for i, alt in alts], workers)
     out = []
-    for eff in effects:
-        model = base_model + eff
-        full, starts = solve_from_starts(model, Y, W, s, halves, start=(base.kappa.copy(), base.z.copy(), {}),
-                                         max_iter=FULL_ITER)
+    for i, (eff, model) in enumerate(zip(effects, models)):
+        full, starts = choose_start([plain[i]] + [f for (j, _), f in zip(alts, refits) if j == i], halves)
         out.append((eff, model, full, starts))
     return out
 

@@ -108,19 +108,20 @@ def diagnosis_baseline(result, seed: int = 0):
             node_disjoint_split(s, shared_node_matrix(s, nodes), seed, edge_nodes=nodes))
 
 
-def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = None):
+def diagnose_result(result, effects=None, seed: int = 0, n_folds: int | None = None, workers: int = 1):
     """Diagnose the rank-1 model of an analysis: which physical effect does it miss?
 
     Runs :func:`rce_gtsam.diagnosis.diagnose.diagnose` on the analysis (:func:`diagnose_inputs`).
     ``effects``: candidate names (``"a,b"`` or a sequence; default every registered effect); ``seed``: seed of the stratified
     edge split; ``n_folds``: cross-validation blocks (default: diagnose's N_FOLDS, 16). Under a preset whose
     settings lie outside the domain the diagnosis is calibrated on (the ``paper`` preset:
-    :mod:`rce_gtsam.diagnosis.domain`) it names no effect and its status reads ``"uncalibrated"``.
+    :mod:`rce_gtsam.diagnosis.domain`) it names no effect and its status reads ``"uncalibrated"``. ``workers``:
+    processes the candidates are spread over (the same diagnosis; :mod:`rce_gtsam.diagnosis.parallel`).
     Returns a :class:`~rce_gtsam.diagnosis.result.Diagnosis`.
     """
     from .diagnose import diagnose
 
-    return diagnose(**diagnose_inputs(result, effects, seed, n_folds))
+    return diagnose(**diagnose_inputs(result, effects, seed, n_folds), workers=workers)
 
 
 def diagnosis_json(diagnosis, result=None) -> dict:

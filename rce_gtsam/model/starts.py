@@ -64,19 +64,36 @@ def solve_from_starts(model, Y, W, s, halves, start=None, max_iter: int | None =
 
     The lowest in-sample fit is the maximum-likelihood one, which the cross-prediction criterion can pass over
     for a more damped one (see the module's note): the diagnosis' test between two forms of one lag also tries
-    it (:func:`rce_gtsam.diagnosis.evidence.form_test`)."""
+    it (:func:`rce_gtsam.diagnosis.evidence.form_test`). The same steps, spread over processes:
+    :func:`alternative_starts`, :func:`start_from` and :func:`choose_start`."""
     fit = model.solve(Y, W, s, start=start, max_iter=max_iter)
-    alternatives = []
+    alternatives = alternative_starts(model, fit, start)
+    fits = [fit] + [model.solve(Y, W, s, start=alt, max_iter=max_iter) for alt in alternatives]
+    return choose_start(fits, halves)
+
+
+def alternative_starts(model, fit, start=None) -> list[tuple]:
+    """The starts (kappa, z, states) of the refits :func:`solve_from_starts` makes after the plain ``fit``: each
+    effect's alternative states (the others' as fitted), from ``start``'s kappa and z (else the fit's)."""
+    k0, z0 = (start[0], start[1]) if start is not None else (fit.kappa, fit.z)
+    out = []
     for i, eff in enumerate(model.effects):
         for alt in eff.alternative_starts(fit.states[i]):
             states = {e.name: st for e, st in zip(model.effects, fit.states)}
             states[eff.name] = alt
-            alternatives.append(states)
-    if not alternatives:
-        return fit, {}
-    k0, z0 = (start[0], start[1]) if start is not None else (fit.kappa, fit.z)
-    fits = [fit] + [model.solve(Y, W, s, start=(np.array(k0, float), np.array(z0, float), states),
-                                max_iter=max_iter) for states in alternatives]
+            out.append((np.array(k0, float), np.array(z0, float), states))
+    return out
+
+
+def start_from(model, Y, W, s, start, max_iter: int | None = None):
+    """``model.solve`` from ``start``: one fit of :func:`solve_from_starts` (a function, to be sent to a process)."""
+    return model.solve(Y, W, s, start=start, max_iter=max_iter)
+
+
+def choose_start(fits: list, halves) -> tuple:
+    """(fit, record) of :func:`solve_from_starts` from its fits, the plain one first."""
+    if len(fits) == 1:
+        return fits[0], {}
     errors = [cross_prediction_error(f, halves) for f in fits]
     best = int(np.argmin(errors))
     lowest = int(np.argmin([f.wsse for f in fits]))
