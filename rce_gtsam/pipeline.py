@@ -296,8 +296,11 @@ def analyze(tracks: Tracks | str | Path, graph: BranchGraph | str | Path, preset
     step = progress or (lambda _name: None)
     from .diagnosis.io import parse_effect_names
     effects = parse_effect_names(effects, source="effects") or ()
-    from .effects import make
-    needs_more = [n for n in effects if not make(n).available]  # reads more than the bends (out_of_plane: lengths)
+    if effects:  # the effects (and scipy.signal, scipy.stats with them: 0.9 s) only when some are asked for
+        from .effects import make
+        needs_more = [n for n in effects if not make(n).available]  # reads more than the bends (out_of_plane)
+    else:
+        needs_more = []
     if needs_more:
         from .errors import InputError
         raise InputError("effects", f"{', '.join(needs_more)} reads more of the recording than the bend angles and "
