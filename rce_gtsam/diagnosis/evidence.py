@@ -87,10 +87,12 @@ def full_fits(base_model, base: ModelFit, effects, Y, W, s, halves, workers: int
     The full fit is the only place an effect's shared parameters are fitted; fold refits start from it.
     ``workers``: processes the fits are spread over (:func:`~rce_gtsam.diagnosis.parallel.map_candidates`): every
     candidate's plain fit, then every alternative start of every candidate, each a task of its own."""
-    start = (base.kappa.copy(), base.z.copy(), {})
+    def start():  # each fit its own copy of the baseline (a fit may change its start in place)
+        return base.kappa.copy(), base.z.copy(), {}
+
     models = [base_model + eff for eff in effects]
-    plain = map_candidates(start_from, [(m, Y, W, s, start, FULL_ITER) for m in models], workers)
-    alts = [(i, alt) for i, (m, f) in enumerate(zip(models, plain)) for alt in alternative_starts(m, f, start)]
+    plain = map_candidates(start_from, [(m, Y, W, s, start(), FULL_ITER) for m in models], workers)
+    alts = [(i, alt) for i, (m, f) in enumerate(zip(models, plain)) for alt in alternative_starts(m, f, start())]
     refits = map_candidates(start_from, [(models[i], Y, W, s, alt, FULL_ITER) for i, alt in alts], workers)
     out = []
     for i, (eff, model) in enumerate(zip(effects, models)):
