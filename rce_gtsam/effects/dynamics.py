@@ -160,27 +160,30 @@ class Dynamics(Effect):
         Xf = np.fft.rfft(X[0], L)[None, :] if X.strides[0] == 0 else np.fft.rfft(X, L, axis=1)
         return np.fft.irfft(Xf * Hf, L, axis=1)[:, :T] + X[:, :1] * fr
 
-    def apply_T(self, R, state, view):
-        T = R.shape[1]
-        L = conv_length(T)
+    def _adjoint(self, R, state, view):
+        """(the rows' adjoint spectra rfft(r_e) conj(H_e) (E, L // 2 + 1), the free responses times R (E, T), whose
+        sum goes to frame 0, L): what :meth:`apply_T` and :meth:`apply_T_sum` transform back and sum."""
+        L = conv_length(R.shape[1])
         fr, Hf = self._stack(state, view)
-        out = np.fft.irfft(np.fft.rfft(R, L, axis=1) * np.conj(Hf), L, axis=1)[:, :T]
-        out[:, 0] += np.sum(fr * R, axis=1)
+        return np.fft.rfft(R, L, axis=1) * np.conj(Hf), fr * R, L
+
+    def apply_T(self, R, state, view):
+        spectra, free, L = self._adjoint(R, state, view)
+        out = np.fft.irfft(spectra, L, axis=1)[:, :R.shape[1]]
+        out[:, 0] += np.sum(free, axis=1)
         return out
 
     def apply_T_sum(self, R, state, view):
         # the sum over edges taken in the frequency domain: one inverse FFT instead of one per edge
-        T = R.shape[1]
-        L = conv_length(T)
-        fr, Hf = self._stack(state, view)
-        out = np.fft.irfft(np.sum(np.fft.rfft(R, L, axis=1) * np.conj(Hf), axis=0), L)[:T]
-        out[0] += float(np.sum(fr * R))
+        spectra, free, L = self._adjoint(R, state, view)
+        out = np.fft.irfft(np.sum(spectra, axis=0), L)[:R.shape[1]]
+        out[0] += float(np.sum(free))
         return out
 
     def transfer(self, state, view, n_fft: int):
         """Frequency response of each edge's filter on the rfft grid of length ``n_fft`` (E, n_fft//2 + 1)."""
         key = self._key(state, view)
-        return self._stack(state, view)[1] if n_fft == conv_length(view.T) else _spectrum(*key, n_fft)
+        return _bank(*key)[1] if n_fft == conv_length(view.T) else _spectrum(*key, n_fft)
 
     @staticmethod
     def _state(p):
