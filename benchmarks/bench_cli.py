@@ -71,15 +71,16 @@ def export_revision(rev: str, dest: Path) -> tuple[list[str], dict]:
 
 
 def same_numbers(a, b, rtol: float = 1e-6) -> bool:
-    """True when two JSON values agree: the same keys, strings and flags, every number to ``rtol`` relative
-    (keys that name a time or seconds are not compared)."""
+    """True when two JSON values agree: the same keys, strings and flags, every number to ``rtol`` relative, NaN
+    where the other is NaN (keys that name seconds, the run's timings, are not compared)."""
     if isinstance(a, dict) and isinstance(b, dict):
-        return a.keys() == b.keys() and all(same_numbers(a[k], b[k], rtol) for k in a
-                                            if "time" not in k and "second" not in k)
+        return a.keys() == b.keys() and all(same_numbers(a[k], b[k], rtol) for k in a if "second" not in k)
     if isinstance(a, list) and isinstance(b, list):
         return len(a) == len(b) and all(same_numbers(x, y, rtol) for x, y in zip(a, b))
     if isinstance(a, float) or isinstance(b, float):
-        return isinstance(a, (int, float)) and isinstance(b, (int, float)) and abs(a - b) <= rtol * max(abs(a), 1e-9)
+        if not (isinstance(a, (int, float)) and isinstance(b, (int, float))):
+            return False
+        return (a != a and b != b) or abs(a - b) <= rtol * max(abs(a), 1e-9)  # x != x: NaN
     return a == b
 
 

@@ -5,22 +5,15 @@ from __future__ import annotations
 
 import json
 import multiprocessing as mp
-
-import numpy as np
+import sys
+from pathlib import Path
 
 from _effect_data import synth
 from rce_gtsam.diagnosis.diagnose import diagnose
 from rce_gtsam.diagnosis.parallel import default_workers, map_candidates
 
-
-def _numbers_equal(a, b) -> bool:
-    if isinstance(a, dict):
-        return a.keys() == b.keys() and all(_numbers_equal(a[k], b[k]) for k in a if "second" not in k)
-    if isinstance(a, list):
-        return len(a) == len(b) and all(_numbers_equal(x, y) for x, y in zip(a, b))
-    if isinstance(a, float):
-        return np.isclose(a, b, rtol=1e-9, atol=1e-12) or (np.isnan(a) and np.isnan(b))
-    return a == b
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from bench_cli import same_numbers  # noqa: E402 - the comparison bench_cli --baseline makes
 
 
 def test_two_workers_give_the_serial_diagnosis():
@@ -32,7 +25,7 @@ def test_two_workers_give_the_serial_diagnosis():
     serial, parallel = diagnose(Y, **kw), diagnose(Y, **kw, workers=2)
     assert serial.verdict == parallel.verdict == "delay"
     a, b = (json.loads(json.dumps(d.as_dict(), default=float)) for d in (serial, parallel))
-    assert _numbers_equal(a, b)
+    assert same_numbers(a, b, rtol=1e-9)
     assert serial.report() == parallel.report()
 
 
