@@ -62,9 +62,18 @@ def out_of_plane_text(diag) -> str:
         return (" Out-of-plane swing is not tested here (no segment lengths); depth (a RealSense recording) or a "
                 "second camera view would settle it.")
     p, a = c.extra["length_p"], c.extra.get("alpha", 0.01)
-    return (f" The segment lengths' test for out-of-plane swing gives p = {p:.2g} against its level {a:g}"
-            + (": the lengths share no course beyond tracking noise at that level" if p > a else "")
-            + "; depth (a RealSense recording) would measure the swing.")
+    g, ga = c.extra.get("length_agreement_p"), c.extra.get("agreement_alpha", 0.01)
+    if p > a:
+        why = ": the lengths share no course beyond tracking noise at that level"
+    elif g is not None and g > ga:
+        why = (f", but neighbouring segments do not change together as a swing's do (agreement of their loadings "
+               f"{c.extra.get('length_agreement', float('nan')):+.2f}, p = {g:.2g} against {ga:g}): a course the "
+               f"tracked nodes share, each with a part of its own (compression, lighting, an error that follows the "
+               f"motion), gives such lengths too")
+    else:
+        why = ""
+    return (f" The segment lengths' test for out-of-plane swing gives p = {p:.2g} against its level {a:g}{why}; "
+            "depth (a RealSense recording) would measure the swing.")
 
 
 def beside_own_text(diag: Diagnosis) -> str:

@@ -4,9 +4,10 @@ family the bend-residual tests share.
 An effect read from another channel than the bend residuals (OutOfPlane: the segments' lengths) brings its own
 test at its own level (:meth:`~rce_gtsam.effects.Effect.own_family_test`): it takes no share of the diagnosis'
 alpha, so the other candidates' thresholds are what they were without it, and a diagnosis' nominal family-wise
-false-alarm rate is alpha + that level. Such a candidate is *significant* when its own test is and its held-out
-error on its own channel falls, *supported* when
-besides its fit is plausible (the held-out change is reported, not required), and it is the
+false-alarm rate is alpha + that level. Such a candidate is *significant* when its own test is, its held-out
+error on its own channel falls and, where it has one, its signature holds (a swing's neighbouring segments change
+together: :func:`signature_holds`), *supported* when besides its fit is plausible (the held-out change is
+reported, not required), and it is the
 verdict where no bend-residual candidate is supported, or where the bend verdict, refitted beside its term, no
 longer lowers the held-out error significantly and its time course is this term's
 (:func:`~rce_gtsam.diagnosis.verdict.choose_with_own_last`,
@@ -22,6 +23,7 @@ and the verdict's order are the decision's.
 
 from __future__ import annotations
 
+from .swing_signature import ALPHA_AGREE
 
 
 def own_test_significant(eff, base, seed: int, extra: dict) -> bool:
@@ -43,4 +45,14 @@ def own_test_significant(eff, base, seed: int, extra: dict) -> bool:
     own = own or {}
     p_wo = own.get("length_p_without_node", float("nan"))
     holds = not (p_wo == p_wo) or p_wo <= own.get("alpha", 1.0)
-    return bool(own and own["p"] <= own["alpha"] and own.get("heldout_gain_pct", 1.0) > 0.0 and holds)
+    return bool(own and own["p"] <= own["alpha"] and own.get("heldout_gain_pct", 1.0) > 0.0 and holds
+                and signature_holds(own))
+
+
+def signature_holds(own: dict) -> bool:
+    """Whether an own-family test's record shows the effect's signature where it reports one: for OutOfPlane,
+    neighbouring segments' loadings on the shared length course agree (:mod:`~rce_gtsam.diagnosis.swing_signature`:
+    a course the tracked nodes share, each with a part of its own, gives node-disjoint segments a course too, but
+    neighbouring loadings that disagree). True where the record has no such test."""
+    p = own.get("length_agreement_p")
+    return p is None or p <= own.get("agreement_alpha", ALPHA_AGREE)

@@ -175,6 +175,7 @@ class OutOfPlane(Effect):
         g = (R0 * w[None, :]).sum(axis=1) / np.maximum(sww, 1e-12)
         return {"length_p": test.p, "length_statistic": test.statistic, "length_null_median": test.null_median,
                 "length_same_sign_share": test.same_sign_share, "length_tip_growth": test.tip_growth,
+                "length_agreement": test.agreement, "length_agreement_p": test.agreement_p,
                 "length_heldout_gain_pct": test.heldout_gain_pct,
                 "rms_residual_on_course_deg": float(np.sqrt(np.mean(g ** 2)))}
 
@@ -193,10 +194,12 @@ class OutOfPlane(Effect):
         too few segments for two node-disjoint sets). ``fit``: the rank-1 baseline (unused: the course and the test
         use the excitation the effect was made with, the same baseline's)."""
         from ..diagnosis.length_channel import ALPHA_OOP
+        from ..diagnosis.swing_signature import ALPHA_AGREE
         test = self.length_test(seed)
         if test is None:
             return None
-        return {"p": test.p, "alpha": ALPHA_OOP, "heldout_gain_pct": test.heldout_gain_pct, **test.as_dict()}
+        return {"p": test.p, "alpha": ALPHA_OOP, "agreement_alpha": ALPHA_AGREE,
+                "heldout_gain_pct": test.heldout_gain_pct, **test.as_dict()}
 
     def explain(self, summary: dict, statistics: dict) -> str:
         return (f"The segments' lengths in the image share a course beyond the in-plane bending (length-channel "
@@ -204,7 +207,9 @@ class OutOfPlane(Effect):
                 f"{statistics.get('length_statistic', 0):.1f} against a null median "
                 f"{statistics.get('length_null_median', 0):.1f}; {100 * statistics.get('length_same_sign_share', 0):.0f} % "
                 f"of the segments change with one sign, rank correlation of the change with root distance "
-                f"{statistics.get('length_tip_growth', 0):+.2f}); predicting each segment's held-out frames from "
+                f"{statistics.get('length_tip_growth', 0):+.2f}; neighbouring segments' loadings agree at "
+                f"{statistics.get('length_agreement', 0):+.2f}, p = {statistics.get('length_agreement_p', 1.0):.2g} "
+                f"against node parts: a swing adds up from the root); predicting each segment's held-out frames from "
                 f"the course of the segments it shares no node with lowers their length error by "
                 f"{statistics.get('length_heldout_gain_pct', float('nan')):.1f} %; that course adds "
                 f"{statistics.get('rms_residual_on_course_deg', 0):.2f} deg RMS to the bend residuals.")
