@@ -142,7 +142,9 @@ def real(a) -> None:
         print(f"  {plant}: length test p {x.get('p')}, statistic {x.get('length_statistic', float('nan')):.0f} "
               f"(null median {x.get('length_null_median', float('nan')):.0f}), same-sign share "
               f"{x.get('length_same_sign_share', float('nan')):.2f}, tip growth "
-              f"{x.get('length_tip_growth', float('nan')):+.2f}; held-out RMSE change with the term "
+              f"{x.get('length_tip_growth', float('nan')):+.2f}, neighbouring segments' agreement "
+              f"{x.get('length_agreement', float('nan')):+.2f} (p {x.get('length_agreement_p', float('nan')):.3g}); "
+              f"held-out RMSE change with the term "
               f"{c.improvement_pct:+.2f} %; held-out length error change "
               f"{-x.get('length_heldout_gain_pct', float('nan')):+.1f} %; verdict {d.verdict}, status {d.status}",
               flush=True)
@@ -159,7 +161,9 @@ def real(a) -> None:
                    f"{-x.get('length_heldout_gain_without_node_pct', float('nan')):+.1f} %")
         print("   " + without[2:])
         nf = d.noise_floor.as_dict() if d.noise_floor is not None else {}
-        rows.append([f"{plant.replace('_', ' ')} (TAPIR tracks)", f"length test p {x.get('p')}",
+        rows.append([f"{plant.replace('_', ' ')} (TAPIR tracks)",
+                     f"length test p {x.get('p')}; neighbouring segments' agreement "
+                     f"{x.get('length_agreement', float('nan')):+.2f} (p {x.get('length_agreement_p', float('nan')):.3g})",
                      d.verdict if d.verdict is not None and d.verdict == OutOfPlane.name else "not named",
                      f"held-out length error {-x.get('length_heldout_gain_pct', float('nan')):+.1f} %{without}"
                      + (f"; unexplained {b['unexplained']:.2f} +/- {b['unexplained_se']:.2f} deg^2 before, "

@@ -17,8 +17,10 @@ Columns: recordings; the length test fires (p <= 0.01); both fire (what naming n
 these are false alarms); the median agreement of neighbouring loadings where the length test fires (about +1 for a
 swing, -1/2 for node parts of a shared course).
 
+With ``--verdicts`` also the user path's verdicts (``rce diagnose``'s diagnosis) with and without the signature.
+
 Usage: OMP_NUM_THREADS=1 python benchmarks/bench_swing_signature.py [--seeds 20] [--frames 450]
-       [--families none,slide,gust_occlusion,speed_error,lag,coloured_along,drift] [--user-path DIR]
+       [--families none,slide,gust_occlusion,speed_error,lag,coloured_along,drift] [--user-path DIR [--verdicts]]
        [--bed-seeds 0,1,2,3,4] [--record swing_signature]
 """
 
@@ -74,19 +76,53 @@ def simulator(a) -> list:
     return rows
 
 
-def user_path(cache: Path) -> list:
-    """Rows from bench_user_path.py's case folders in ``cache`` (tracks through the default preset, no bootstrap)."""
+def user_path(cache: Path, verdicts: bool = False) -> tuple[list, list]:
+    """Rows from bench_user_path.py's case folders in ``cache`` (tracks through the default preset, no bootstrap),
+    and with ``verdicts`` the diagnosis' verdicts with and without the signature, where the length test fires (it
+    changes nothing elsewhere): rows [condition, cases, named out_of_plane without / with, other verdicts]."""
     from rce_gtsam.pipeline import analyze
 
     groups: dict = {}
+    named: dict = {}
     for d in sorted(cache.iterdir()):
         tracks, graph = d / "run" / "tracks.csv", d / "sim" / "graph.json"
         if not (tracks.is_file() and graph.is_file()):
             continue
         effect, render = d.name.split("_f")[0].rsplit("_", 1)
-        groups.setdefault((effect, render), []).append(length_test(analyze(tracks, graph, n_boot=0)))
-    return [row("user path (our tracker)", f"{'planar' if e == 'none' else 'swing'}, {e}, {r} render", t)
+        t = length_test(analyze(tracks, graph, n_boot=0))
+        groups.setdefault((effect, render), []).append(t)
+        if verdicts:
+            named.setdefault((effect, render), []).append(verdict_pair(tracks, graph, t))
+    rows = [row("user path (our tracker)", f"{'planar' if e == 'none' else 'swing'}, {e}, {r} render", t)
             for (e, r), t in sorted(groups.items())]
+    vrows = []
+    for (e, r), pairs in sorted(named.items()):
+        before = sum(b == "out_of_plane" for b, _ in pairs)
+        after = sum(a == "out_of_plane" for _, a in pairs)
+        other = sorted({a for _, a in pairs if a not in (None, "out_of_plane")})
+        vrows.append([f"{'planar' if e == 'none' else 'swing'}, {r} render", len(pairs), f"{before} / {after}",
+                      ", ".join(other) or "-"])
+        print(f"  verdicts, {vrows[-1][0]:24s} out_of_plane named without / with the signature: {vrows[-1][2]} of "
+              f"{len(pairs)}; other verdicts (with): {vrows[-1][3]}", flush=True)
+    return rows, vrows
+
+
+def verdict_pair(tracks: Path, graph: Path, test) -> tuple:
+    """(verdict without the signature, verdict with it) of ``rce diagnose``'s diagnosis (two workers) of a case; where
+    the length test does not fire the two are the same and only one is run."""
+    from unittest import mock
+
+    from rce_gtsam.diagnosis.io import diagnose_result
+    from rce_gtsam.diagnosis.length_channel import ALPHA_OOP
+    from rce_gtsam.pipeline import analyze
+
+    res = analyze(tracks, graph)
+    after = diagnose_result(res, workers=2).verdict
+    if test is None or test.p > ALPHA_OOP:
+        return after, after
+    with mock.patch("rce_gtsam.diagnosis.own_family.signature_holds", lambda own: True):
+        before = diagnose_result(res, workers=2).verdict
+    return before, after
 
 
 def texture_bed(seeds: list[int]) -> list:
@@ -123,6 +159,8 @@ def main(argv=None) -> None:
     ap.add_argument("--frames", type=int, default=450)
     ap.add_argument("--families", default="none,slide,gust_occlusion,speed_error,lag,coloured_along,drift")
     ap.add_argument("--user-path", type=Path, default=None, help="bench_user_path.py's --cache folder")
+    ap.add_argument("--verdicts", action="store_true",
+                    help="with --user-path: the diagnosis' verdicts with and without the signature (rce diagnose)")
     ap.add_argument("--bed-seeds", default="", help="texture bed seeds, e.g. 0,1,2,3,4 (needs ../shared)")
     ap.add_argument("--skip-simulator", action="store_true")
     ap.add_argument("--record", default=None, metavar="NAME")
@@ -134,8 +172,10 @@ def main(argv=None) -> None:
 
     print(f"length test p <= {ALPHA_OOP}; neighbouring loadings agree, p <= {ALPHA_AGREE}")
     rows = [] if a.skip_simulator else simulator(a)
+    vrows = []
     if a.user_path:
-        rows += user_path(a.user_path)
+        up, vrows = user_path(a.user_path, a.verdicts)
+        rows += up
     if a.bed_seeds:
         rows += texture_bed([int(s) for s in a.bed_seeds.split(",")])
     if a.record:
@@ -149,10 +189,16 @@ def main(argv=None) -> None:
                                  f"against node parts of a shared course): both are what naming out_of_plane needs "
                                  f"first, so on planar recordings 'both' counts false alarms; the median agreement "
                                  f"where the length test fires (about +1 for a swing, -1/2 for node parts). "
-                                 f"Simulator: {a.frames} frames, {a.seeds} seeds per row. User path: rce simulate --video then our tracker, 450 frames. Texture bed: "
-                                 f"real plant texture warped by known planar motion, H.264 crf 23, 300 frames."),
+                                 f"Simulator: {a.frames} frames, {a.seeds} seeds per row. User path: rce simulate "
+                                 f"--video then our tracker, 450 frames, the cases of 'python "
+                                 f"benchmarks/bench_user_path.py --cache DIR --seeds 10 --first-seed 160 --effects "
+                                 f"none,out_of_plane --renders clean,outdoor' (seeds no rule was written on). "
+                                 f"Texture bed: real plant texture warped by known planar motion, H.264 crf 23, 300 "
+                                 f"frames."),
                     columns=["source", "condition", "recordings", "length test fires", "both fire",
-                             "agreement where the length test fires (median)"], rows=rows)
+                             "agreement where the length test fires (median)"], rows=rows,
+                    notes=[f"user path, the diagnosis' verdict ({r[0]}, {r[1]} renders): out_of_plane named {r[2]} "
+                           f"without / with the signature; other verdicts with it: {r[3]}" for r in vrows])
 
 
 if __name__ == "__main__":

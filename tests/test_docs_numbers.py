@@ -345,3 +345,37 @@ def test_the_beam_form_capture_numbers_the_diagnosis_page_quotes_are_the_record(
     modal = [r for r in det["rows"] if r[dc["effect"]] == "modal"]
     share = lambda cell: int(cell.split(" of ")[0]) / int(cell.split(" of ")[1])  # noqa: E731
     assert modal and all(share(r[dc["right"]]) < 0.9 and share(r[dc["oracle"]]) < 0.9 for r in modal)
+
+
+def test_the_swing_signature_numbers_the_changelog_quotes_are_the_record():
+    """The changelog's counts for the swing's signature (record ``swing_signature``): the length test and both tests
+    on the texture bed and the user's path's effect-free renders, the verdicts there with and without the signature,
+    and both tests on the simulator's swings."""
+    rec = _record("swing_signature")
+    col = {n: i for i, n in enumerate(rec["columns"])}
+    count = lambda cell: int(cell.split(" of ")[0])  # noqa: E731
+
+    def total(source, prefix, column):
+        rows = [r for r in rec["rows"]
+                if r[col["source"]].startswith(source) and r[col["condition"]].startswith(prefix)]
+        return sum(count(r[col[column]]) for r in rows), sum(r[col["recordings"]] for r in rows)
+
+    bed_fire, bed_n = total("texture bed", "planar", "length test fires")
+    bed_both, _ = total("texture bed", "planar", "both fire")
+    up_fire, up_n = total("user path", "planar", "length test fires")
+    up_both, _ = total("user path", "planar", "both fire")
+    verdicts = {}
+    for note in rec["notes"]:
+        m = re.search(r"\((\w+), (\w+) render, (\d+) renders\): out_of_plane named (\d+) / (\d+)", note)
+        kind, _, n, before, after = m.groups()
+        v = verdicts.setdefault(kind, [0, 0, 0])
+        v[0], v[1], v[2] = v[0] + int(n), v[1] + int(before), v[2] + int(after)
+    sims = {r[col["condition"]]: r[col["both fire"]] for r in rec["rows"] if r[col["source"]] == "simulator tracks"}
+    said = (f"on the texture bed's planar recordings the length test fired on {bed_fire} of {bed_n} and both now "
+            f"fire on {bed_both}; on {up_n} effect-free renders of the user's path the length test fired on {up_fire} "
+            f"and both fire on {up_both}, and `out_of_plane` was named on {verdicts['planar'][1]} without the "
+            f"signature and is named on {verdicts['planar'][2]} with it; of {verdicts['swing'][0]} rendered swings it "
+            f"is named on {verdicts['swing'][2]} ({verdicts['swing'][1]} without the signature); on the simulator's "
+            f"swings both fire on {sims['swing, plane tilted 30 deg']} with the branch plane tilted 30° and on "
+            f"{sims['swing, plane in the image']} in the image plane")
+    assert said in " ".join((DOCS / "changelog.md").read_text().split()), said
