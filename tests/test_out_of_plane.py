@@ -16,25 +16,16 @@ import pytest
 from rce_gtsam import effects
 from rce_gtsam.diagnosis.diagnose import diagnose
 from rce_gtsam.diagnosis.io import diagnose_result
-from rce_gtsam.diagnosis.length_channel import ALPHA_OOP, LengthChannel, out_of_plane_test, swing_course
+from rce_gtsam.diagnosis.length_channel import ALPHA_OOP, out_of_plane_test, swing_course
 from rce_gtsam.effects.out_of_plane import OutOfPlane
 from rce_gtsam.model import ResponseModel
 from rce_gtsam.pipeline import analyze
 from rce_gtsam.sim.artifacts import ArtifactConfig
 from rce_gtsam.sim.simulate import SimulationConfig, simulate
 
+from length_fixtures import chain_channel, smooth_course
+
 SMALL = dict(n_nodes=12, n_frames=300)
-
-
-def _smooth(rng, T, width=15):
-    x = np.convolve(rng.standard_normal(T + 4 * width), np.ones(width) / width, mode="same")[2 * width:-2 * width]
-    return x / x.std()
-
-
-def _chain_channel(rel: np.ndarray) -> LengthChannel:
-    S, T = rel.shape
-    return LengthChannel(rel=rel, length_px=np.full(S, 20.0), segments=[(i, i + 1) for i in range(S)],
-                         root_distance=np.arange(1, S + 1) / S, frames=np.arange(T))
 
 
 def test_length_test_tells_a_shared_course_from_node_wise_errors():
@@ -42,24 +33,24 @@ def test_length_test_tells_a_shared_course_from_node_wise_errors():
     removed or stay within a set; a course common to every segment (a swing) is found."""
     rng = np.random.default_rng(0)
     S, T = 14, 400
-    z, w = _smooth(rng, T), _smooth(rng, T)
+    z, w = smooth_course(rng, T), smooth_course(rng, T)
     node_err = rng.standard_normal((S + 1, 1)) * 0.02 * z[None] + 0.01 * rng.standard_normal((S + 1, T))
     nodewise = np.diff(node_err, axis=0)  # each segment: its child's error minus its parent's
-    null = out_of_plane_test(_chain_channel(nodewise), z, seed=0)
-    swing = out_of_plane_test(_chain_channel(nodewise + 0.004 * np.arange(1, S + 1)[:, None] * w[None]), z, seed=0)
+    null = out_of_plane_test(chain_channel(nodewise), z, seed=0)
+    swing = out_of_plane_test(chain_channel(nodewise + 0.004 * np.arange(1, S + 1)[:, None] * w[None]), z, seed=0)
     assert null is not None and null.p > 0.05
     assert swing.p <= ALPHA_OOP and swing.same_sign_share == 1.0 and swing.tip_growth > 0.5
     # held out: the other set's course predicts a set's lengths where there is a swing, and not otherwise
     assert swing.heldout_gain_pct > 30.0 and null.heldout_gain_pct < 2.0
     # the course it estimates is the shared one
-    assert abs(np.corrcoef(swing_course(_chain_channel(nodewise + 0.004 * np.arange(1, S + 1)[:, None] * w[None]),
+    assert abs(np.corrcoef(swing_course(chain_channel(nodewise + 0.004 * np.arange(1, S + 1)[:, None] * w[None]),
                                         z), w)[0, 1]) > 0.9
 
 
 def test_without_lengths_the_term_is_zero_and_never_named():
     rng = np.random.default_rng(1)
     E, T = 8, 300
-    z = _smooth(rng, T)
+    z = smooth_course(rng, T)
     kappa = np.exp(rng.normal(0, 0.4, E))
     Y = kappa[:, None] * z[None] + 0.2 * rng.standard_normal((E, T))
     eff = effects.make("out_of_plane")
@@ -77,12 +68,12 @@ def _swing_and_second(rng, second: float):
     (the lengths carry w too, growing toward the tip) and, with ``second`` > 0, a second excitation v independent
     of w with its own mode shape."""
     E, T = 12, 450
-    z, w, v = _smooth(rng, T), _smooth(rng, T), _smooth(rng, T)
+    z, w, v = smooth_course(rng, T), smooth_course(rng, T), smooth_course(rng, T)
     kappa = np.exp(rng.normal(0, 0.4, E))
     g, m = 0.6 * rng.standard_normal(E), second * rng.standard_normal(E)
     Y = kappa[:, None] * z[None] + g[:, None] * w[None] + m[:, None] * v[None] + 0.2 * rng.standard_normal((E, T))
     rel = 0.004 * np.arange(1, E + 2)[:, None] * w[None] + 0.01 * rng.standard_normal((E + 1, T))
-    return Y, _chain_channel(rel), z
+    return Y, chain_channel(rel), z
 
 
 def test_with_lengths_the_term_predicts_the_bending_and_keeps_the_others_alpha():

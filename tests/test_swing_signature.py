@@ -10,23 +10,13 @@ the root, and neighbouring segments change together.
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
-from rce_gtsam.diagnosis.length_channel import ALPHA_OOP, LengthChannel, out_of_plane_test
+from rce_gtsam.diagnosis.length_channel import ALPHA_OOP, out_of_plane_test
 from rce_gtsam.diagnosis.own_family import own_test_significant, signature_holds
 from rce_gtsam.diagnosis.swing_signature import ALPHA_AGREE, MIN_PAIRS, agreement, node_parts, rank_growth
 from rce_gtsam.effects.out_of_plane import OutOfPlane
 
-
-def _smooth(rng, T, width=15):
-    x = np.convolve(rng.standard_normal(T + 4 * width), np.ones(width) / width, mode="same")[2 * width:-2 * width]
-    return x / x.std()
-
-
-def _chain_channel(rel: np.ndarray) -> LengthChannel:
-    S, T = rel.shape
-    return LengthChannel(rel=rel, length_px=np.full(S, 20.0), segments=[(i, i + 1) for i in range(S)],
-                         root_distance=np.arange(1, S + 1) / S, frames=np.arange(T))
+from length_fixtures import chain_channel, smooth_course
 
 
 def _common_node_error(rng, S, T, course):
@@ -73,13 +63,13 @@ def test_a_course_the_nodes_share_fires_the_length_test_but_is_not_a_swing():
     for seed in range(10):
         rng = np.random.default_rng(seed)
         S, T = 16, 450
-        z, course = _smooth(rng, T), _smooth(rng, T)
+        z, course = smooth_course(rng, T), smooth_course(rng, T)
         common = _common_node_error(rng, S, T, course)
         swing = np.diff(0.005 * rng.standard_normal((S + 1, T)), axis=0) + 0.002 * np.arange(1, S + 1)[:, None] * course
-        t_common = out_of_plane_test(_chain_channel(common), z, seed=0)
+        t_common = out_of_plane_test(chain_channel(common), z, seed=0)
         fired += t_common.p <= ALPHA_OOP and t_common.heldout_gain_pct > 0
-        named_common += own_test_significant(OutOfPlane(_chain_channel(common), z), None, 0, {})
-        named_swing += own_test_significant(OutOfPlane(_chain_channel(swing), z), None, 0, {})
+        named_common += own_test_significant(OutOfPlane(chain_channel(common), z), None, 0, {})
+        named_swing += own_test_significant(OutOfPlane(chain_channel(swing), z), None, 0, {})
     assert fired == 10 and named_common <= 2 and named_swing == 10
 
 
