@@ -5,8 +5,8 @@ node keep a course in common. A swing out of the image plane gives them one, but
 *time course* the nodes share while each node takes its own part of it: frame-wide compression or lighting
 changes, or motion that every node's error follows. On real texture with known planar motion (the texture bed,
 H.264 at crf 23) the length test fired at p <= 0.01 on 4 of 10 recordings, and on the user's path (``rce simulate
---video``, our tracker) on about one effect-free render in ten. What tells the two apart is how the course loads
-along the branch.
+--video``, our tracker) on 2 of 20 effect-free renders (record ``swing_signature``; 8 of 120 on earlier seeds).
+What tells the two apart is how the course loads along the branch.
 
 **Physics.** A segment's elevation out of the branch plane adds up from the root, chi_e(t) = sum over the joints
 from the root to e of kappa_o_j z_o(t), so neighbouring segments swing together and their length changes
