@@ -379,3 +379,18 @@ def test_the_swing_signature_numbers_the_changelog_quotes_are_the_record():
             f"swings both fire on {sims['swing, plane tilted 30 deg']} with the branch plane tilted 30° and on "
             f"{sims['swing, plane in the image']} in the image plane")
     assert said in " ".join((DOCS / "changelog.md").read_text().split()), said
+
+
+def test_the_swing_naming_the_limits_page_quotes_is_the_record():
+    """limits.md: out_of_plane named on the user path's rendered swings (all, and the outdoor renders) and on its
+    planar renders, with the signature (record ``swing_signature``'s verdict notes)."""
+    named = {}
+    for note in _record("swing_signature")["notes"]:
+        m = re.search(r"\((\w+), (\w+) render, (\d+) renders\): out_of_plane named \d+ / (\d+)", note)
+        named[(m.group(1), m.group(2))] = (int(m.group(4)), int(m.group(3)))
+    swing = [v for k, v in named.items() if k[0] == "swing"]
+    planar = [v for k, v in named.items() if k[0] == "planar"]
+    _says("limits.md", f"it named {sum(a for a, _ in swing)} of {sum(n for _, n in swing)} swings, "
+                       f"{named[('swing', 'outdoor')][0]} of the {named[('swing', 'outdoor')][1]} rendered with the "
+                       f"`outdoor` preset, and none of {sum(n for _, n in planar)} planar branches")
+    assert sum(a for a, _ in planar) == 0
