@@ -139,12 +139,12 @@ def real(a) -> None:
         x = c.extra
         b = d.budget.as_dict() if d.budget is not None else {}
         after = budget_after(d, c) if d.budget is not None else None
+        agree = (f"neighbouring segments' agreement {x.get('length_agreement', float('nan')):+.2f} "
+                 f"(p {x.get('length_agreement_p', float('nan')):.3g})")
         print(f"  {plant}: length test p {x.get('p')}, statistic {x.get('length_statistic', float('nan')):.0f} "
               f"(null median {x.get('length_null_median', float('nan')):.0f}), same-sign share "
               f"{x.get('length_same_sign_share', float('nan')):.2f}, tip growth "
-              f"{x.get('length_tip_growth', float('nan')):+.2f}, neighbouring segments' agreement "
-              f"{x.get('length_agreement', float('nan')):+.2f} (p {x.get('length_agreement_p', float('nan')):.3g}); "
-              f"held-out RMSE change with the term "
+              f"{x.get('length_tip_growth', float('nan')):+.2f}, {agree}; held-out RMSE change with the term "
               f"{c.improvement_pct:+.2f} %; held-out length error change "
               f"{-x.get('length_heldout_gain_pct', float('nan')):+.1f} %; verdict {d.verdict}, status {d.status}",
               flush=True)
@@ -162,8 +162,7 @@ def real(a) -> None:
         print("   " + without[2:])
         nf = d.noise_floor.as_dict() if d.noise_floor is not None else {}
         rows.append([f"{plant.replace('_', ' ')} (TAPIR tracks)",
-                     f"length test p {x.get('p')}; neighbouring segments' agreement "
-                     f"{x.get('length_agreement', float('nan')):+.2f} (p {x.get('length_agreement_p', float('nan')):.3g})",
+                     f"length test p {x.get('p')}; {agree}",
                      d.verdict if d.verdict is not None and d.verdict == OutOfPlane.name else "not named",
                      f"held-out length error {-x.get('length_heldout_gain_pct', float('nan')):+.1f} %{without}"
                      + (f"; unexplained {b['unexplained']:.2f} +/- {b['unexplained_se']:.2f} deg^2 before, "

@@ -36,8 +36,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .result import TestResult
-
 #: sign-flip draws of the null (p resolution 1/1000)
 N_FLIPS = 999
 #: the agreement test's level: the length test's own (ALPHA_OOP). Both must hold to name a swing, so a course the
@@ -45,12 +43,6 @@ N_FLIPS = 999
 ALPHA_AGREE = 0.01
 #: fewer (parent, child) pairs of segments with loadings than this: no test (p = 1: no signature can be seen)
 MIN_PAIRS = 4
-
-NULL = ("the segments' loadings on the shared length course are differences of independent, sign-symmetric node "
-        "parts: the parts, added up from the root, get random signs")
-CALIBRATION = ("benchmarks/bench_swing_signature.py: planar recordings whose length test fires (simulator artifact "
-               "families, user-path renders, texture bed) against swings (simulator, user-path renders)")
-
 
 def node_parts(segments, loadings: np.ndarray) -> tuple[list, np.ndarray]:
     """(nodes, parts): each node's part of the loadings, added up along ``segments`` [(parent, child)] from the
@@ -95,11 +87,6 @@ def agreement(segments, loadings: np.ndarray, seed: int = 0, n_flips: int = N_FL
     signs = np.random.default_rng(seed).choice([-1.0, 1.0], size=(n_flips, len(nodes)))
     flipped = signs[:, C] * parts[C] - signs[:, P] * parts[P]
     return a, float((1 + np.sum(stat(flipped) >= a - 1e-12)) / (1 + n_flips))
-
-
-def agreement_result(a: float, p: float, alpha: float = ALPHA_AGREE) -> TestResult:
-    """The agreement test read at ``alpha``, in the diagnosis' test shape."""
-    return TestResult("swing_agreement", float(a), float(p), float(alpha), NULL, CALIBRATION)
 
 
 def rank_growth(root_distance: np.ndarray, loadings: np.ndarray) -> float:
