@@ -12,7 +12,6 @@ import numpy as np
 
 from ..model import render_fit_report
 from .result import Diagnosis, complexity, score_is_significant
-from .swing_signature import ALPHA_AGREE
 
 
 def calibrated_note(diag) -> str:
@@ -63,7 +62,7 @@ def out_of_plane_text(diag) -> str:
         return (" Out-of-plane swing is not tested here (no segment lengths); depth (a RealSense recording) or a "
                 "second camera view would settle it.")
     p, a = c.extra["length_p"], c.extra.get("alpha", 0.01)
-    g, ga = c.extra.get("length_agreement_p"), c.extra.get("agreement_alpha", ALPHA_AGREE)
+    g, ga = c.extra.get("length_agreement_p"), c.extra.get("agreement_alpha", 0.01)
     if p > a:
         why = ": the lengths share no course beyond tracking noise at that level"
     elif g is not None and g > ga:
