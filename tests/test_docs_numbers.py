@@ -381,16 +381,39 @@ def test_the_swing_signature_numbers_the_changelog_quotes_are_the_record():
     assert said in " ".join((DOCS / "changelog.md").read_text().split()), said
 
 
+def _swing_naming() -> dict:
+    """Record ``user_path_swing_naming`` summed over its seed blocks: {(hidden effect, render): (cases, named first,
+    named now, found first, found now)}."""
+    out: dict = {}
+    for eff, ren, _grp, n, first, now, found, _names in _record("user_path_swing_naming")["rows"]:
+        f1, f2 = (0, 0) if found == "-" else map(int, found.split(" / "))
+        c = out.get((eff, ren), (0, 0, 0, 0, 0))
+        out[(eff, ren)] = (c[0] + n, c[1] + int(first.split(" of ")[0]), c[2] + int(now.split(" of ")[0]),
+                           c[3] + f1, c[4] + f2)
+    return out
+
+
 def test_the_swing_naming_the_limits_page_quotes_is_the_record():
-    """limits.md: out_of_plane named on the user path's rendered swings (all, and the outdoor renders) and on its
-    planar renders, with the signature (record ``swing_signature``'s verdict notes)."""
-    named = {}
-    for note in _record("swing_signature")["notes"]:
-        m = re.search(r"\((\w+), (\w+) render, (\d+) renders\): out_of_plane named \d+ / (\d+)", note)
-        named[(m.group(1), m.group(2))] = (int(m.group(4)), int(m.group(3)))
-    swing = [v for k, v in named.items() if k[0] == "swing"]
-    planar = [v for k, v in named.items() if k[0] == "planar"]
-    _says("limits.md", f"it named {sum(a for a, _ in swing)} of {sum(n for _, n in swing)} swings, "
-                       f"{named[('swing', 'outdoor')][0]} of the {named[('swing', 'outdoor')][1]} rendered with the "
-                       f"`outdoor` preset, and none of {sum(n for _, n in planar)} planar branches")
-    assert sum(a for a, _ in planar) == 0
+    """limits.md: out_of_plane named on the user path's rendered swings (all, and the outdoor renders) and verdicts on
+    its planar renders (record ``user_path_swing_naming``, the current diagnosis)."""
+    r = _swing_naming()
+    swing = [v for k, v in r.items() if k[0] == "out_of_plane"]
+    planar = [v for k, v in r.items() if k[0] == "none"]
+    out = r[("out_of_plane", "outdoor")]
+    _says("limits.md", f"it named {sum(v[4] for v in swing)} of {sum(v[0] for v in swing)} swings, {out[4]} of the "
+                       f"{out[0]} rendered with the `outdoor` preset, and `out_of_plane` on none of "
+                       f"{sum(v[0] for v in planar)} planar branches")
+    assert all("out_of_plane" not in row[7] for row in _record("user_path_swing_naming")["rows"]
+               if row[0] == "none")
+
+
+def test_the_swing_naming_the_changelog_quotes_is_the_record():
+    """The changelog's entry on the held-out length gain: rendered swings named before / after, and the planar
+    renders' verdicts (record ``user_path_swing_naming``)."""
+    r = _swing_naming()
+    swing = [v for k, v in r.items() if k[0] == "out_of_plane"]
+    planar = [v for k, v in r.items() if k[0] == "none"]
+    _says("changelog.md", f"`out_of_plane` named on {sum(v[3] for v in swing)} of {sum(v[0] for v in swing)} "
+                          f"rendered swings before and {sum(v[4] for v in swing)} now")
+    _says("changelog.md", f"{sum(v[2] for v in planar)} of {sum(v[0] for v in planar)} effect-free renders got a "
+                          f"verdict")
