@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from rce_gtsam.track import LKTracker, match_kernels as mk
+from rce_gtsam.track.kernels_match import band_rows
 
 from track_fixtures import rendered_simulation
 
@@ -58,6 +59,48 @@ def test_segment_ncc_samples_like_remap(rng):
         np.testing.assert_allclose(mk.segment_ncc(img, x0, y0, ex, ey, uu, vv, st, True), ref, atol=2e-3)
 
 
+def _stem_image(rng, angle: float, width: float = 3.0):
+    """A 160x120 textured background with a bright stem from (60, 70) at ``angle`` (radians), blurred, as uint8."""
+    img = rng.integers(60, 140, (120, 160)).astype(np.float32)
+    yy, xx = np.mgrid[0:120, 0:160]
+    along = (xx - 60) * math.cos(angle) + (yy - 70) * math.sin(angle)
+    across = -(xx - 60) * math.sin(angle) + (yy - 70) * math.cos(angle)
+    img[(np.abs(across) < width / 2) & (along > -3) & (along < 45)] = 230
+    return cv2.GaussianBlur(img, (0, 0), 1.0).astype(np.uint8)
+
+
+def test_segment_search_coarse_to_fine_finds_the_exhaustive_peak(rng):
+    """The segment search evaluates every third rotation and climbs from the two best (``stride`` 3, the
+    default): it must find the rotation, the child's position and the peak the exhaustive search (``stride`` 1)
+    finds, which is numpy's argmax of :func:`segment_ncc` refined by a parabola. A stem of 3 px and one of 1.5 px
+    turned by random angles, searched from random priors within the span."""
+    ln, h = 30.0, 8
+    uu = np.arange(0.0, ln + 0.5, 1.0, dtype=np.float32)
+    vv = np.arange(-2.0, 3.0, dtype=np.float32)
+    span, step = math.atan2(2 * h, ln), 0.5 / ln
+    offs = np.arange(-span, span + step / 2, step)
+    for width in (3.0, 1.5):
+        ref = _stem_image(rng, 0.0, width)
+        mx = (60 + uu[None, :] + 0 * vv[:, None]).astype(np.float32)
+        my = (70 + 0 * uu[None, :] + vv[:, None]).astype(np.float32)
+        st = cv2.remap(ref, mx, my, cv2.INTER_LINEAR).astype(np.float32)
+        st = (st - st.mean()) / np.sqrt(((st - st.mean()) ** 2).sum())
+        for _ in range(25):
+            turn = rng.uniform(-0.3, 0.3)
+            img = _stem_image(np.random.default_rng(1), turn, width)
+            prior = turn + rng.uniform(-0.8, 0.8) * span
+            args = (img, 60.0, 70.0, prior, offs, 0.0, step, ln, 0.0, uu, vv, st, True)
+            exhaustive, fast = mk.segment_search(*args, 1), mk.segment_search(*args, 3)
+            assert fast == exhaustive
+            ang = prior + offs
+            ncc = mk.segment_ncc(img, 60.0, 70.0, np.cos(ang).astype(np.float32), np.sin(ang).astype(np.float32),
+                                 uu, vv, st, True)
+            k = int(np.argmax(ncc))
+            assert exhaustive[3] == ncc[k] and abs(exhaustive[2] - ang[k]) <= step / 2 + 1e-12
+            if abs(turn - prior) < span - 2 * step:  # the stem within the searched rotations: found
+                assert exhaustive[2] == pytest.approx(turn, abs=1.5 * step)
+
+
 def test_articulated_template_is_warp_affine_composite(rng):
     """Two segments' bands rotated by their own angles about the node, composited by weight."""
     gray = cv2.GaussianBlur(rng.integers(0, 256, (100, 100)).astype(np.uint8), (0, 0), 1.0)
@@ -81,12 +124,13 @@ def test_articulated_template_is_warp_affine_composite(rng):
         wacc += w
         imgs.append(im)
     ref = np.where(wacc > 1e-3, acc / np.maximum(wacc, 1e-3), imgs[0])
-    crop, tmpl, wts, wsum = mk.articulated_template(gray, px, py, thetas, bands, 0, 0.0, h, margin, True)
+    rows = band_rows(bands)
+    crop, tmpl, wts, wsum = mk.articulated_template(gray, px, py, thetas, bands, rows, 0, 0.0, h, margin, True)
     assert np.abs(crop - ref).max() <= 1.0 + 1e-4 and np.mean(np.abs(crop - ref) > 0.01) < 0.01  # rounding ties
     np.testing.assert_allclose(wts, np.minimum(wacc, 1)[margin:-margin, margin:-margin], atol=1e-4)
     np.testing.assert_array_equal(tmpl, crop[margin:-margin, margin:-margin])
     assert wsum == pytest.approx(float(wts.sum()), rel=1e-5)
-    *_, wts_full, n = mk.articulated_template(gray, px, py, thetas, bands, 0, 1e9, h, margin, True)
+    *_, wts_full, n = mk.articulated_template(gray, px, py, thetas, bands, rows, 0, 1e9, h, margin, True)
     assert (wts_full == 1).all() and n == (2 * h + 1) ** 2  # too few band pixels: the full patch
 
 

@@ -4,7 +4,8 @@
 * :func:`weighted_ncc` -- ``cv2.matchTemplate(img, tmpl, cv2.TM_CCOEFF_NORMED, mask=wts)``;
 * :func:`match_node` -- one node's measurement: correlation peak and the best peak outside h/2 of it, parabolic
   sub-pixel peak, forward LK from it and the forward-backward error;
-* :func:`articulated_template` -- a node's frame-0 neighbourhood posed per incident segment;
+* :func:`articulated_template` -- a node's frame-0 neighbourhood posed per incident segment (:func:`band_rows`: the
+  band's extent per row, computed once per node);
   :func:`match_articulated` -- that template and :func:`match_node` in one call.
 
 Positions in pixels of the crop passed in (pixel centres at integers); correlations dimensionless.
@@ -179,11 +180,24 @@ def match_node(cur, tmpl, wts, prev, r, h, c_prev):
     return out
 
 
+def band_rows(bands: np.ndarray) -> np.ndarray:
+    """(S, n, 2) int64: for each band of ``bands`` (S, n, n) and each row, the first and last column of non-zero
+    weight (n + 5 and -5 for a row with none): :func:`articulated_template` skips a bilinear tap block that lies
+    off them, since its weight would be exactly 0 (a third less time on a thin branch's band)."""
+    nz = bands != 0
+    any_ = nz.any(axis=2)
+    n = bands.shape[2]
+    first = np.where(any_, nz.argmax(axis=2), n + 5)
+    last = np.where(any_, n - 1 - nz[:, :, ::-1].argmax(axis=2), -5)
+    return np.stack([first, last], axis=2).astype(np.int64)
+
+
 @njit(cache=True, nogil=True)
-def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, round_out):
+def articulated_template(gray0, px, py, thetas, bands, rows, bg, min_band, h, margin, round_out):
     """Frame-0 neighbourhood of a node at (px, py), posed per incident segment.
 
-    Segment s's band ``bands[s]`` (centred on the node) and the frame-0 image are rotated about the node by
+    Segment s's band ``bands[s]`` (centred on the node; ``rows`` = :func:`band_rows` of it) and the frame-0 image are
+    rotated about the node by
     ``thetas[s]`` (radians) -- ``cv2.warpAffine`` with bilinear sampling, replicated borders for the image
     (rounded to integers when ``round_out``: a uint8 image) and zeros outside the band -- and composited by
     weight; where no band reaches, segment ``bg``'s rotated image. Returns ``(crop, tmpl, wts, wsum)``: the
@@ -224,7 +238,10 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
                 jx, jy = int(fbx), int(fby)
                 ax, ay = bx - fbx, by - fby
                 w = 0.0
-                if band_in:
+                if band_in and ((rows[s, jy, 1] < jx or rows[s, jy, 0] > jx + 1)
+                                and (rows[s, jy + 1, 1] < jx or rows[s, jy + 1, 0] > jx + 1)):
+                    pass  # the four taps are off the band (``rows``): w is exactly 0 without reading them
+                elif band_in:
                     o = np.uint64((s * bs + jy) * bs + jx)
                     w += (1 - ax) * (1 - ay) * fb[o]
                     w += ax * (1 - ay) * fb[o + one]
@@ -279,14 +296,15 @@ def articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, 
 
 
 @njit(cache=True, nogil=True)
-def match_articulated(gray0, px, py, thetas, bands, bg, min_band, h, margin, round_out, cur, r, qx, qy):
+def match_articulated(gray0, px, py, thetas, bands, rows, bg, min_band, h, margin, round_out, cur, r, qx, qy):
     """:func:`articulated_template` of the node at (px, py) in ``gray0``, then :func:`match_node` of it in
     ``cur`` (the search crop, any dtype, centred on (qx, qy) in the frame) within r px, in one call.
 
     Returns ``(ok, x, y, ncc, fb, s_lk, second, x2, y2, has_second, wsum)``: :func:`match_node`'s results with the
     match (x, y) and the second peak (x2, y2) in frame pixels, and the template weight sum ``wsum``.
     """
-    prev, tmpl, wts, wsum = articulated_template(gray0, px, py, thetas, bands, bg, min_band, h, margin, round_out)
+    prev, tmpl, wts, wsum = articulated_template(gray0, px, py, thetas, bands, rows, bg, min_band, h, margin,
+                                                 round_out)
     curf = np.empty(cur.shape, np.float32)
     curf[:] = cur
     m = match_node(curf, tmpl, wts, prev, r, h, float(h + margin))

@@ -207,7 +207,8 @@ class Frame0Setup:
 
     def _node_stack(self, i):
         """Node i's articulated-template inputs for :func:`~rce_gtsam.track.match_kernels.articulated_template`
-        but the rotations: ``(bands (S, n, n), background segment, smallest band weight sum)``, S = its incident
+        but the rotations: ``(bands (S, n, n), their extent per row (``band_rows``), background segment, smallest band
+        weight sum)``, S = its incident
         segments, the parent's first (``self._inc[i]``), or None for a node on no segment.
 
         The template is *articulated*: each incident segment's band of the frame-0 image is rotated about the node
@@ -221,4 +222,7 @@ class Frame0Setup:
         # fewer pixels than a 2-px-wide strip: use the full patch -- except at a tip, whose band is short
         # by construction (one segment, the thinnest stem), down to _TIP_MIN_BAND_PX
         min_band = _TIP_MIN_BAND_PX if i in self._tips else 4 * (2 * self.h + 1)
-        return np.stack([self._seg_band[(sp, sc, i)] for sp, sc in keys]), bg, float(min_band)
+        from .kernels_match import band_rows
+
+        bands = np.stack([self._seg_band[(sp, sc, i)] for sp, sc in keys])
+        return bands, band_rows(bands), bg, float(min_band)
