@@ -70,3 +70,32 @@ def test_run_to_a_log_prints_plain_progress_lines_and_times_the_diagnosis(sim, t
     quiet = main(["run", *_args(sim), "--out", str(tmp_path / "q"), "--candidates", "offset", "--bootstrap", "0",
                   "--no-figures", "--quiet"])
     assert quiet == 0 and capsys.readouterr().err == ""
+
+
+def test_run_says_first_when_the_trackers_kernels_must_be_compiled(sim, tmp_path, capsys, monkeypatch):
+    """The first run on a machine compiles the tracker's numba kernels before its first frame (17 s of silence in a
+    fresh clone's ``make demo``): the run says so first, and only then. The check reads numba's real cache: empty
+    (NUMBA_CACHE_DIR pointing at an empty folder, in a fresh process) it reports the kernels missing; after a run
+    has tracked, present."""
+    import os
+    import subprocess
+    import sys
+
+    from rce_gtsam.track import match_kernels
+
+    probe = "from rce_gtsam.track.match_kernels import compiled_on_this_machine as c; print(c())"
+    cold = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                          env={**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "empty_cache")})
+    assert cold.stdout.strip() == "False", cold.stderr
+    monkeypatch.delenv("RCE_PROGRESS", raising=False)
+    args = [*_args(sim), "--candidates", "offset", "--bootstrap", "0", "--no-figures", "--max-frames", "80"]
+    assert main(["run", *args, "--out", str(tmp_path / "warm")]) == 0
+    assert match_kernels.compiled_on_this_machine()  # the run above compiled (or loaded) them
+    assert "compiling the tracker's kernels" not in capsys.readouterr().err
+    monkeypatch.setattr(match_kernels, "compiled_on_this_machine", lambda: False)
+    assert main(["run", *args, "--out", str(tmp_path / "cold")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    first_tracking = next(i for i, ln in enumerate(err) if ln.startswith("rce run: tracking "))
+    assert "rce run: compiling the tracker's kernels: once on this machine" in err[first_tracking - 1], err
+    assert main(["run", *args, "--out", str(tmp_path / "quiet"), "--quiet"]) == 0
+    assert capsys.readouterr().err == ""

@@ -44,4 +44,18 @@ from .kernels_sampling import sample_patch, weighted_lk
 from .kernels_segment import segment_ncc, segment_search
 
 __all__ = ["sample_patch", "weighted_lk", "weighted_ncc", "match_node", "articulated_template", "match_articulated",
-           "segment_ncc", "segment_search", "chromaticity", "chroma_mask"]
+           "segment_ncc", "segment_search", "chromaticity", "chroma_mask", "compiled_on_this_machine"]
+
+#: the kernels the tracker calls from Python (each compiles its callees into its own cached code)
+_ENTRY_POINTS = (match_articulated, match_node, segment_search, chromaticity, chroma_mask)
+
+
+def compiled_on_this_machine() -> bool:
+    """Whether numba's cache already holds compiled code for every kernel the tracker calls from Python, for their
+    current source. When not, the first ``track`` compiles them (tens of seconds; the CLI says so first). Reads
+    numba's cache index (``FunctionCache``; an index written for an older source counts as none); True where that
+    cannot be read (numba's internals changed): then nothing is announced."""
+    try:
+        return all(bool(k._cache._cache_file._load_index()) for k in _ENTRY_POINTS)
+    except Exception:  # noqa: BLE001 -- private numba API: never let a progress note break tracking
+        return True
