@@ -82,7 +82,8 @@ def run_track(args: argparse.Namespace) -> int:
     how = result.info.get("how")
     if how is not None and vis.any():
         from ..track.lk import HOW
-        parts = [f"{100 * float((how == k).sum()) / vis.sum():.1f} % {HOW[k]}" for k in (1, 2, 3, 4, 5) if (how == k).any()]
+        parts = [f"{100 * float((how == k).sum()) / vis.sum():.1f} % {HOW[k]}" for k in (1, 2, 3, 4, 5)
+                 if (how == k).any()]
         if parts:
             print("of the visible point-frames, not a plain frame-0 match: " + ", ".join(parts))
     print_visibility(vis)
