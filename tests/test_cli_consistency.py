@@ -70,9 +70,29 @@ def test_cli_wording_names_the_command():
     from rce_gtsam.cli.wording import cli_wording
     from rce_gtsam.effects import CANDIDATES
     for name, factory in CANDIDATES.items():  # the two phrasings the diagnosis' explanations use
-        for text in (f"so... Fit the model with {factory.__name__}() (lag grows)", f"x. Fit with {factory.__name__}();"):
+        for text in (f"so... Fit the model with {factory.__name__}() (lag grows)",
+                     f"x. Fit with {factory.__name__}();"):
             out = cli_wording(text)
             assert "()" not in out and f"rce analyze TRACKS GRAPH --effects {name}`" in out
+
+
+def test_run_wording_says_the_extended_kappa_is_already_written():
+    """``rce run`` fits the named effect's model itself and writes its kappa (kappa_<effect>): the verdict's advice to
+    fit it and read kappa from the extended fit then says where that kappa is, instead of a second command."""
+    from rce_gtsam.cli.wording import cli_wording
+    import inspect
+
+    from rce_gtsam.diagnosis import explain
+    from rce_gtsam.effects import CANDIDATES
+    assert "and read kappa from the extended fit." in inspect.getsource(explain)  # the sentence the run rewrites
+    for name, factory in CANDIDATES.items():
+        text = (f"What it means: lags. Fit the model with {factory.__name__}() and read kappa from the extended "
+                "fit. Next.")
+        out = cli_wording(text, written=f"kappa_{name}")
+        assert "rce analyze" not in out and "()" not in out
+        assert f"This run fitted it: kappa from the extended fit, with its own intervals, is kappa_{name} in " \
+               "compliance_summary.csv. Next." in out
+        assert f"--effects {name}`" in cli_wording(text)  # rce diagnose writes no extended kappa: the command
 
 
 @pytest.fixture(scope="module")

@@ -118,7 +118,8 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
             # the named effect's kappa intervals belong to the diagnosis stage, not to "write"
             result = dataclasses.replace(result, kappa_choice=kappa_after_verdict(result, diagnosis))
             t_diag = time.perf_counter() - t_diag
-            view = cli_wording_json(diagnosis_for_viz(diagnosis, result))
+            written = _extended_column(result)
+            view = cli_wording_json(diagnosis_for_viz(diagnosis, result), written)
             if live:
                 live.diagnosis(view)
                 live.close()
@@ -128,7 +129,7 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
             def write_tracks(_result, tmp: Path) -> dict:
                 shutil.copyfile(tracks_csv, tmp / "tracks.csv")
                 (tmp / "diagnosis.json").write_text(
-                    json.dumps(cli_wording_json(diagnosis_json(diagnosis, result)), indent=1) + "\n")
+                    json.dumps(cli_wording_json(diagnosis_json(diagnosis, result), written), indent=1) + "\n")
                 return {}
 
             bar.start("write")
@@ -150,7 +151,7 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
     t.update({"imports": t["imports"] - t_track, "track": t_track, **{k: t.pop(k) for k in list(t)[1:]}})
     print(format_summary(result))
     print()
-    print(cli_wording(diagnosis.report()))
+    print(cli_wording(diagnosis.report(), _extended_column(result)))
     print("\n" + read_together(result, diagnosis))
     if text_3d:
         print("\n" + text_3d)
@@ -159,6 +160,12 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
         print(f"\nwrote Rerun recording {args.rerun} (open it with: {open_command(args.rerun)})")
     print(f"\nwrote {len(files)} files to {args.out}/")
     return quality_exit_code(result, "run")
+
+
+def _extended_column(result) -> str | None:
+    """The compliance_summary.csv column holding the named effect's kappa this run fitted, or None."""
+    choice = getattr(result, "kappa_choice", None)
+    return choice.column if choice is not None and choice.effect is not None and choice.kappa is not None else None
 
 
 def read_together(result, diagnosis) -> str:

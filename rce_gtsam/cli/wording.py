@@ -12,14 +12,21 @@ import re
 import sys
 
 _FIT_WITH = re.compile(r"Fit (?:the model )?with (\w+)\(\)")
+_FIT_AND_READ = re.compile(r"Fit (?:the model )?with (\w+)\(\) and read kappa from the extended fit\.")
 
 
-def cli_wording(text: str) -> str:
-    """``text`` with every "Fit [the model] with Name()" replaced by the ``rce analyze --effects`` command."""
+def cli_wording(text: str, written: str | None = None) -> str:
+    """``text`` with every "Fit [the model] with Name()" replaced by the ``rce analyze --effects`` command; with
+    ``written`` (the compliance_summary.csv column this command wrote the extended model's kappa to, ``rce run``),
+    "Fit the model with Name() and read kappa from the extended fit." says so instead: no second command."""
     if not text or "()" not in text:
         return text
     from ..effects import CANDIDATES
     name_of = {factory.__name__: name for name, factory in CANDIDATES.items()}
+    if written:
+        text = _FIT_AND_READ.sub(lambda m: (f"This run fitted it: kappa from the extended fit, with its own "
+                                            f"intervals, is {written} in compliance_summary.csv."
+                                            if m.group(1) in name_of else m.group(0)), text)
 
     def repl(m: re.Match) -> str:
         name = name_of.get(m.group(1))
@@ -27,11 +34,12 @@ def cli_wording(text: str) -> str:
     return _FIT_WITH.sub(repl, text)
 
 
-def cli_wording_json(data: dict) -> dict:
-    """The diagnosis JSON / figure mapping with its ``explanation`` and ``report`` texts in CLI wording."""
+def cli_wording_json(data: dict, written: str | None = None) -> dict:
+    """The diagnosis JSON / figure mapping with its ``explanation`` and ``report`` texts in CLI wording
+    (``written``: see :func:`cli_wording`)."""
     for key in ("explanation", "report"):
         if isinstance(data.get(key), str):
-            data[key] = cli_wording(data[key])
+            data[key] = cli_wording(data[key], written)
     return data
 
 
