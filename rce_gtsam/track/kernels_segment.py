@@ -11,19 +11,13 @@ import math
 import numpy as np
 from numba import njit
 
-from .kernels_sampling import bilinear
-
-#: sha256 (first 16 hex digits) of each kernel file this module's compiled functions call into. numba's cache
-#: checks only a function's own file (numba issue 1833), so an edit there must change this file too, or its
-#: cached kernels keep the old code; ``tests/test_track_kernels.py`` checks the digests.
-CALLS_INTO = {"kernels_sampling.py": "902913666eddb75f"}
-
 
 @njit(cache=True, nogil=True)
 def _angle_ncc(src, W, ox0, oy0, x0, y0, ca, sa, uu, vv, strip, round_out, cu, su):
     """:func:`segment_ncc` at one rotation (``ca``, ``sa``: its float32 cosine and sine) from the flat float64 disc
     ``src`` of :func:`_disc` (row length W, pixel (x, y) of the image at ``(y - oy0) * W + x - ox0``): every bilinear
-    tap lies in it, so no border handling and no per-tap conversion. ``cu``, ``su``: (U,) float32 scratch."""
+    tap lies in it, the image's border replicated there, so no per-tap border handling or conversion. ``cu``, ``su``:
+    (U,) float32 scratch."""
     V, U = vv.shape[0], uu.shape[0]
     fx0, fy0 = np.float32(x0), np.float32(y0)
     one, uw = np.uint64(1), np.uint64(W)  # unsigned flat indices: no negative-index wraparound code per tap
@@ -36,11 +30,13 @@ def _angle_ncc(src, W, ox0, oy0, x0, y0, ca, sa, uu, vv, strip, round_out, cu, s
         sv = sa * v
         cv = ca * v
         for iu in range(U):
-            mx = float((cu[iu] - sv) + fx0)
-            my = float((su[iu] + cv) + fy0)
+            # in the disc's own pixels, where every tap is >= 0: int() is floor, and the shift by whole pixels is
+            # exact, so the weights are those of the image's own coordinates
+            mx = float((cu[iu] - sv) + fx0) - ox0
+            my = float((su[iu] + cv) + fy0) - oy0
             ix, iy = int(mx), int(my)
             fx, fy = mx - ix, my - iy
-            o = np.uint64((iy - oy0) * W + (ix - ox0))
+            o = np.uint64(iy * W + ix)
             p = ((1 - fx) * (1 - fy) * src[o] + fx * (1 - fy) * src[o + one]
                  + (1 - fx) * fy * src[o + uw] + fx * fy * src[o + uw + one])
             if round_out:
@@ -53,48 +49,24 @@ def _angle_ncc(src, W, ox0, oy0, x0, y0, ca, sa, uu, vv, strip, round_out, cu, s
 
 
 @njit(cache=True, nogil=True)
-def _angle_ncc_border(img, x0, y0, ca, sa, uu, vv, strip, round_out, cu, su):
-    """:func:`_angle_ncc` sampling the image itself, with replicated borders (a strip reaching over its edge)."""
-    V, U = vv.shape[0], uu.shape[0]
-    fx0, fy0 = np.float32(x0), np.float32(y0)
-    s1 = s2 = d = 0.0
-    for iu in range(U):
-        cu[iu] = ca * uu[iu]
-        su[iu] = sa * uu[iu]
-    for iv in range(V):
-        v = vv[iv]
-        sv = sa * v
-        cv = ca * v
-        for iu in range(U):
-            p = bilinear(img, float((cu[iu] - sv) + fx0), float((su[iu] + cv) + fy0))
-            if round_out:
-                p = math.floor(p + 0.5)
-            p -= 128.0
-            s1 += p
-            s2 += p * p
-            d += p * strip[iv, iu]
-    return d / (math.sqrt(max(s2 - s1 * s1 / (V * U), 0.0)) + 1e-6)
-
-
-@njit(cache=True, nogil=True)
 def _disc(img, x0, y0, uu, vv):
-    """The disc a strip hinged at (x0, y0) sweeps, copied once as float64 when it lies inside ``img`` with a 2-px
-    margin: ``(inside, flat disc, row length, x0 of the disc, y0 of the disc)``; else ``(False, empty, 0, 0, 0)``."""
+    """The square a strip hinged at (x0, y0) sweeps (with a 2-px margin), copied once as float64, the image's border
+    replicated where it reaches over the edge (as ``bilinear`` does per tap): ``(flat disc, row length, x0 of the
+    disc, y0 of the disc)``."""
     H, W = img.shape
     reach = 0.0  # farthest sample from (x0, y0)
     for iu in range(uu.shape[0]):
         for iv in range(vv.shape[0]):
             reach = max(reach, math.sqrt(float(uu[iu]) ** 2 + float(vv[iv]) ** 2))
-    if not (x0 - reach - 2 >= 0 and y0 - reach - 2 >= 0 and x0 + reach + 2 < W - 1 and y0 + reach + 2 < H - 1):
-        return False, np.empty(0), 0, 0, 0
     ox0, oy0 = int(math.floor(x0 - reach - 2)), int(math.floor(y0 - reach - 2))
     ww = int(math.ceil(x0 + reach + 2)) + 2 - ox0
     hh = int(math.ceil(y0 + reach + 2)) + 2 - oy0
     loc = np.empty(hh * ww)
     for y in range(hh):
+        yy = min(max(oy0 + y, 0), H - 1)
         for x in range(ww):
-            loc[y * ww + x] = img[oy0 + y, ox0 + x]
-    return True, loc, ww, ox0, oy0
+            loc[y * ww + x] = img[yy, min(max(ox0 + x, 0), W - 1)]
+    return loc, ww, ox0, oy0
 
 
 @njit(cache=True, nogil=True)
@@ -107,29 +79,23 @@ def segment_ncc(img, x0, y0, ex, ey, uu, vv, strip, round_out):
     """
     A, U = ex.shape[0], uu.shape[0]
     out = np.empty(A)
-    inside, loc, ww, ox0, oy0 = _disc(img, x0, y0, uu, vv)
+    loc, ww, ox0, oy0 = _disc(img, x0, y0, uu, vv)
     cu = np.empty(U, np.float32)
     su = np.empty(U, np.float32)
     for a in range(A):
-        if inside:
-            out[a] = _angle_ncc(loc, ww, ox0, oy0, x0, y0, ex[a], ey[a], uu, vv, strip, round_out, cu, su)
-        else:
-            out[a] = _angle_ncc_border(img, x0, y0, ex[a], ey[a], uu, vv, strip, round_out, cu, su)
+        out[a] = _angle_ncc(loc, ww, ox0, oy0, x0, y0, ex[a], ey[a], uu, vv, strip, round_out, cu, su)
     return out
 
 
 @njit(cache=True, nogil=True)
-def _evaluate(idx, ncc, done, phis, a0, img, inside, loc, ww, ox0, oy0, xp, yp, uu, vv, strip, round_out, cu, su):
+def _evaluate(idx, ncc, done, phis, a0, loc, ww, ox0, oy0, xp, yp, uu, vv, strip, round_out, cu, su):
     """``ncc[a]`` for every rotation index a in ``idx`` not ``done`` yet (see :func:`segment_search`)."""
     for a in idx:
         if done[a]:
             continue
         ang = a0 + phis[a]
         ca, sa = np.float32(math.cos(ang)), np.float32(math.sin(ang))
-        if inside:
-            ncc[a] = _angle_ncc(loc, ww, ox0, oy0, xp, yp, ca, sa, uu, vv, strip, round_out, cu, su)
-        else:
-            ncc[a] = _angle_ncc_border(img, xp, yp, ca, sa, uu, vv, strip, round_out, cu, su)
+        ncc[a] = _angle_ncc(loc, ww, ox0, oy0, xp, yp, ca, sa, uu, vv, strip, round_out, cu, su)
         done[a] = True
 
 
@@ -160,12 +126,12 @@ def segment_search(img, xp, yp, phi_prev, offs, a0, step, v0x, v0y, uu, vv, stri
         phis[a] = phi_prev + offs[a]
     ncc = np.full(A, -np.inf)
     done = np.zeros(A, np.bool_)
-    inside, loc, ww, ox0, oy0 = _disc(img, xp, yp, uu, vv)
+    loc, ww, ox0, oy0 = _disc(img, xp, yp, uu, vv)
     cu = np.empty(uu.shape[0], np.float32)
     su = np.empty(uu.shape[0], np.float32)
     coarse = np.arange(0, A, stride)
-    _evaluate(coarse, ncc, done, phis, a0, img, inside, loc, ww, ox0, oy0, xp, yp, uu, vv, strip, round_out, cu, su)
-    _evaluate(np.array([A - 1]), ncc, done, phis, a0, img, inside, loc, ww, ox0, oy0, xp, yp, uu, vv, strip,
+    _evaluate(coarse, ncc, done, phis, a0, loc, ww, ox0, oy0, xp, yp, uu, vv, strip, round_out, cu, su)
+    _evaluate(np.array([A - 1]), ncc, done, phis, a0, loc, ww, ox0, oy0, xp, yp, uu, vv, strip,
               round_out, cu, su)
     k1 = k2 = -1  # the two best coarse local maxima
     for a in range(A):
@@ -188,7 +154,7 @@ def segment_search(img, xp, yp, phi_prev, offs, a0, step, v0x, v0y, uu, vv, stri
         c = start
         while True:  # climb on the full grid
             lo, hi = max(c - stride, 0), min(c + stride, A - 1)
-            _evaluate(np.arange(lo, hi + 1), ncc, done, phis, a0, img, inside, loc, ww, ox0, oy0, xp, yp, uu, vv,
+            _evaluate(np.arange(lo, hi + 1), ncc, done, phis, a0, loc, ww, ox0, oy0, xp, yp, uu, vv,
                       strip, round_out, cu, su)
             best = lo
             for a in range(lo, hi + 1):
@@ -204,7 +170,7 @@ def segment_search(img, xp, yp, phi_prev, offs, a0, step, v0x, v0y, uu, vv, stri
     # twice the climbing reach around the winner and climb again
     while True:
         lo, hi = max(k - 2 * stride, 0), min(k + 2 * stride, A - 1)
-        _evaluate(np.arange(lo, hi + 1), ncc, done, phis, a0, img, inside, loc, ww, ox0, oy0, xp, yp, uu, vv,
+        _evaluate(np.arange(lo, hi + 1), ncc, done, phis, a0, loc, ww, ox0, oy0, xp, yp, uu, vv,
                   strip, round_out, cu, su)
         best = k
         for a in range(lo, hi + 1):
