@@ -73,7 +73,7 @@ def test_site_builds_strict_with_every_page_and_generated_content(site):
     assert (site / "img" / "review.png").is_file() and "img/review.png" in (site / "own-video.html").read_text()
     for fig in ("compliance", "kappa_overlay", "residuals", "heldout_error", "variance_budget", "residual_analysis",
                 "effect_before_after", "smoothing", "motion", "excitation", "bending_fit", "uncertainty_overlay",
-                "residuals_diagnosis"):
+                "residuals_diagnosis", "kappa_to_report"):
         assert f"generated/analysis/{fig}.png" in results and (site / "generated" / "analysis" / f"{fig}.png").is_file()
     for effect in ("delay", "dynamics", "second_mode", "offset", "nonlinear"):
         assert (site / "generated" / "signatures" / f"{effect}.png").is_file()

@@ -88,6 +88,26 @@ def test_diagnosis_figures(analysis, tmp_path):
         _png_ok(p, min_bytes=5_000)
 
 
+def test_kappa_to_report_figure_only_with_the_named_effects_kappa(analysis, tmp_path):
+    """``rce run`` fits the named effect's model and its kappa is the one to report: kappa_to_report.png draws it
+    beside the rank-1 kappa, and only when the result carries it (``kappa_choice`` with an effect and a kappa)."""
+    import dataclasses
+
+    from rce_gtsam.kappa_report import KappaChoice
+    from rce_gtsam.viz import write_diagnosis_figures
+    _, result = analysis
+    diag = {"baseline": {"heldout_rmse": 1.0}, "verdict": "delay",
+            "candidates": [{"effect": "delay", "heldout_rmse": 0.7}]}
+    k = np.asarray(result.fit.kappa, float)
+    for choice, drawn in ((None, False), (KappaChoice(None, "rank-1", "no verdict"), False),
+                          (KappaChoice("delay", "rank-1 + delay", "named", tuple(result.response.edges), k * 1.2,
+                                       k * 0.8, k * 1.7), True)):
+        r = dataclasses.replace(result, kappa_choice=choice)
+        files = write_diagnosis_figures(diag, tmp_path / str(drawn) / str(choice is None), result=r)
+        assert ("kappa_to_report.png" in files) == drawn
+    _png_ok(files["kappa_to_report.png"], min_bytes=5_000)
+
+
 def test_variance_budget_figure(tmp_path):
     """variance_budget.png from diagnosis.json's budget: a row worse than no model (R^2 < 0), a row whose floor
     is only a lower bound, a negative unexplained part, and an added effect."""

@@ -96,11 +96,13 @@ def signature_figures(out_dir: Path, n_nodes: int = 14, n_frames: int = 600, see
     return written
 
 
-def kappa_to_report_example(data: Path, candidates: str = "delay,offset,second_mode", n_rows: int = 6) -> str:
+def kappa_to_report_example(data: Path, candidates: str = "delay,offset,second_mode", n_rows: int = 6,
+                            figure_dir: Path | None = None) -> str:
     """What ``rce run`` adds after a verdict, on ``data/sample_delay`` analysed and diagnosed as :data:`STEPS` do
     (the same candidates and seed): a table of the first ``n_rows`` segments with the rank-1 ``kappa`` beside
     ``kappa_<effect>`` and the ``report`` column of compliance_summary.csv (:func:`rce_gtsam.kappa_report.add_to_summary`),
-    and the printed "Read together:" line (:func:`rce_gtsam.cli.run.read_together`). Markdown."""
+    and the printed "Read together:" line (:func:`rce_gtsam.cli.run.read_together`). Markdown. With ``figure_dir``,
+    also ``kappa_to_report.png`` there, as ``rce run`` draws it (:func:`rce_gtsam.viz.figures.fig_kappa_to_report`)."""
     import dataclasses
     import textwrap
 
@@ -112,6 +114,11 @@ def kappa_to_report_example(data: Path, candidates: str = "delay,offset,second_m
     result = analyze(data / "sample_delay" / "tracks.csv", data / "sample_delay" / "graph.json")
     diagnosis = diagnose_result(result, effects=candidates, seed=0)
     result = dataclasses.replace(result, kappa_choice=kappa_after_verdict(result, diagnosis))
+    if figure_dir is not None:
+        from rce_gtsam.viz.figures import fig_kappa_to_report
+        from rce_gtsam.viz.style import save_png
+        figure_dir.mkdir(parents=True, exist_ok=True)
+        save_png(fig_kappa_to_report(result), figure_dir / "kappa_to_report.png")
     col = result.kappa_choice.column
     df = result.summary().dropna(subset=["kappa"]).head(n_rows)
     ci = lambda lo, hi: f"[{lo:.2f}, {hi:.2f}]"  # noqa: E731
@@ -179,7 +186,7 @@ def on_config(config):
 def on_files(files, config):
     work = _state["work"]
     _state["outputs"] = _run_steps(config, work)
-    _state["kappa_to_report"] = kappa_to_report_example(work / "data")
+    _state["kappa_to_report"] = kappa_to_report_example(work / "data", figure_dir=work / "out" / "analysis" / "figures")
     signature_figures(work / "signatures")
     generated = {f"generated/{name}/{p.name}": p for name in ("analysis",)
                  for p in sorted((work / "out" / name / "figures").glob("*.png"))}

@@ -373,11 +373,67 @@ def fig_before_after(Y, pred_before, pred_after, frames, labels, effect: str, n:
     return fig
 
 
+def fig_kappa_to_report(result):
+    """The κ to report after a verdict (``result.kappa_choice``: the model with the named effect, its 95 % CI, zone
+    colours) beside the rank-1 κ and its CI (grey, open), per segment root -> tip, log scale: what
+    ``compliance_summary.csv``'s ``kappa_<effect>`` and ``kappa`` columns hold."""
+    from matplotlib.lines import Line2D
+
+    choice, resp = result.kappa_choice, result.response
+    E = len(resp.edges)
+    at = {tuple(e): i for i, e in enumerate(choice.edges)}
+    idx = [at.get(tuple(e)) for e in resp.edges]
+    pick = lambda a: np.array([np.nan if (i is None or a is None) else a[i] for i in idx], float)  # noqa: E731
+    k_ext, lo_ext, hi_ext = pick(choice.kappa), pick(choice.ci_low), pick(choice.ci_high)
+    lo1 = result.ci.low if result.ci is not None else np.full(E, np.nan)
+    hi1 = result.ci.high if result.ci is not None else np.full(E, np.nan)
+    zones = np.array([result.geometry.zone[c] for _, c in resp.edges])
+    labels = [f"{j}→{c}" for j, c in resp.edges]
+    x = np.arange(E, dtype=float)
+    with _style() as plt:
+        fig, ax = plt.subplots(figsize=(FIG_WIDTH_IN, 2.9))
+        fixed_margins(fig, left=0.55, top=0.3, bottom=0.4 + 0.055 * max(len(s) for s in labels))
+        ax.axhline(1.0, color="0.4", ls="--", lw=0.8, zorder=1)
+        k1 = np.asarray(result.fit.kappa, float)
+        ok = np.isfinite(k1)
+        yerr = np.vstack([np.maximum(k1 - lo1, 0.0), np.maximum(hi1 - k1, 0.0)])
+        yerr = np.where(np.isfinite(yerr), yerr, 0.0)
+        ax.errorbar(x[ok] - 0.17, k1[ok], yerr=yerr[:, ok], fmt="o", mfc="white", color="0.55", ms=3.2,
+                    elinewidth=0.8, capsize=1.2, zorder=2)
+        _errorbars(ax, x + 0.17, k_ext, lo_ext, hi_ext, zones)
+        ax.set_yscale("log")
+        # as fig_compliance: every CI, at most a factor 10 beyond the kappa values, head-room for the legend
+        kv = np.r_[k1, k_ext]
+        kv = kv[np.isfinite(kv) & (kv > 0)]
+        kmin, kmax = (kv.min(), kv.max()) if kv.size else (1.0, 1.0)
+        his, los = np.r_[hi1, hi_ext], np.r_[lo1, lo_ext]
+        top = min(np.nanmax(np.r_[his[np.isfinite(his)], kmax]) * 1.3, kmax * 10)
+        bot = max(np.nanmin(np.r_[los[np.isfinite(los) & (los > 0)], kmin]) / 1.3, kmin / 10)
+        ax.set_ylim(bot, top * 4.0)
+        _log_ticks(ax)
+        ax.set_xticks(x, labels, rotation=90, fontsize=6 if E > 15 else 7)
+        ax.set_xlim(-0.7, E - 0.3)
+        ax.set_xlabel("segment (parent→child), root → tip")
+        ax.set_ylabel("relative compliance κ (log scale)")
+        ax.set_title(f"κ to report: the model with {choice.effect} ({choice.column}), beside the rank-1 κ; 95 % CI")
+        ax.grid(axis="x", visible=False)
+        ax.legend(handles=[Line2D([], [], marker="o", ls="", color="#333333", ms=4, label=f"with {choice.effect}"),
+                           Line2D([], [], marker="o", ls="", mfc="white", color="0.55", ms=4, label="rank-1")],
+                  loc="upper left", ncol=2, handletextpad=0.2, columnspacing=0.8)
+    return fig
+
+
+def _has_kappa_to_report(result) -> bool:
+    choice = getattr(result, "kappa_choice", None)
+    return choice is not None and choice.effect is not None and choice.kappa is not None
+
+
 def write_diagnosis_figures(diagnosis, out_dir: str | Path, result=None) -> dict[str, Path]:
     """Write ``heldout_error.png`` and, when the diagnosis carries them, ``residuals_diagnosis.png``
     (``residuals`` (E, T) degrees), ``effect_before_after.png`` (``after_prediction`` (E, T), with
-    ``result`` for the observed data and the rank-1 prediction), ``variance_budget.png`` (``budget``) and
-    ``residual_analysis.png``."""
+    ``result`` for the observed data and the rank-1 prediction), ``variance_budget.png`` (``budget``),
+    ``residual_analysis.png`` and, when ``result`` carries the named effect's κ (``kappa_choice``, as ``rce run``
+    fits it), ``kappa_to_report.png`` (:func:`fig_kappa_to_report`)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = {"heldout_error.png": _save(fig_heldout(diagnosis), out / "heldout_error.png")}
@@ -415,4 +471,6 @@ def write_diagnosis_figures(diagnosis, out_dir: str | Path, result=None) -> dict
                   else [str(i) for i in range(ra.xcorr.shape[0])])
         written["residual_analysis.png"] = _save(fig_residual_analysis(ra, labels, fps=30.0),
                                                  out / "residual_analysis.png")
+    if result is not None and _has_kappa_to_report(result):
+        written["kappa_to_report.png"] = _save(fig_kappa_to_report(result), out / "kappa_to_report.png")
     return written
