@@ -91,8 +91,11 @@ def test_run_says_first_when_the_trackers_kernels_must_be_compiled(sim, tmp_path
     args = [*_args(sim), "--candidates", "offset", "--bootstrap", "0", "--no-figures", "--max-frames", "80"]
     assert main(["run", *args, "--out", str(tmp_path / "warm")]) == 0
     assert match_kernels.compiled_on_this_machine()  # the run above compiled (or loaded) them
+    # only kernels every such track calls: a fallback (match_node) no clip has needed yet must not make every
+    # later run announce a compilation
+    assert match_kernels.match_node not in match_kernels.kernels_called()
     assert "compiling the tracker's kernels" not in capsys.readouterr().err
-    monkeypatch.setattr(match_kernels, "compiled_on_this_machine", lambda: False)
+    monkeypatch.setattr(match_kernels, "compiled_on_this_machine", lambda kernels=None: False)
     assert main(["run", *args, "--out", str(tmp_path / "cold")]) == 0
     err = capsys.readouterr().err.splitlines()
     first_tracking = next(i for i, ln in enumerate(err) if ln.startswith("rce run: tracking "))

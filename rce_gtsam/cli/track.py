@@ -136,7 +136,7 @@ def track_with_progress(tracker, src, points, graph, max_frames: int | None, sho
     ``on_frame(index, xy, visible)`` gets each frame's result (live streaming)."""
     bar = None
     total = src.n_frames if max_frames is None else min(max_frames, src.n_frames or max_frames)
-    if show and _kernels_to_compile(tracker):
+    if show and _kernels_to_compile(tracker, graph):
         from .progress import progress_line
         progress_line(command, "compiling the tracker's kernels: once on this machine, tens of seconds")
     if show == "lines":
@@ -152,14 +152,16 @@ def track_with_progress(tracker, src, points, graph, max_frames: int | None, sho
             bar.close()
 
 
-def _kernels_to_compile(tracker) -> bool:
-    """Whether ``tracker`` is the default tracker and its compiled kernels are not in numba's cache yet (its first
-    frames then wait for the compiler)."""
+def _kernels_to_compile(tracker, graph) -> bool:
+    """Whether ``tracker`` is the default tracker and the compiled kernels it calls on every clip (with ``graph``
+    or without) are not in numba's cache yet (its first frames then wait for the compiler)."""
     from ..track import LKTracker
     if not isinstance(tracker, LKTracker):
         return False
-    from ..track.match_kernels import compiled_on_this_machine
-    return not compiled_on_this_machine()
+    from ..track import match_kernels
+    cfg = tracker.config
+    return not match_kernels.compiled_on_this_machine(
+        match_kernels.kernels_called(graph is not None and cfg.mask_to_branch, cfg.mask_off_colour))
 
 
 class _LineProgress:

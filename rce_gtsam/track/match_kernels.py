@@ -44,18 +44,25 @@ from .kernels_sampling import sample_patch, weighted_lk
 from .kernels_segment import segment_ncc, segment_search
 
 __all__ = ["sample_patch", "weighted_lk", "weighted_ncc", "match_node", "articulated_template", "match_articulated",
-           "segment_ncc", "segment_search", "chromaticity", "chroma_mask", "compiled_on_this_machine"]
+           "segment_ncc", "segment_search", "chromaticity", "chroma_mask", "compiled_on_this_machine", "kernels_called"]
 
-#: the kernels the tracker calls from Python (each compiles its callees into its own cached code)
-_ENTRY_POINTS = (match_articulated, match_node, segment_search, chromaticity, chroma_mask)
+def kernels_called(with_graph: bool = True, colour_mask: bool = True) -> tuple:
+    """The kernels a default track calls from Python on every clip (each compiles its callees into its own cached
+    code): with a branch graph (and ``LKConfig.mask_to_branch``) the articulated match and the segment search, plus the
+    colour mask's two (``LKConfig.mask_off_colour``); without one the whole-patch match. ``match_node`` is also a
+    fallback of the graph path, compiled on its first use there."""
+    if not with_graph:
+        return (match_node,)
+    return (match_articulated, segment_search) + ((chromaticity, chroma_mask) if colour_mask else ())
 
 
-def compiled_on_this_machine() -> bool:
-    """Whether numba's cache already holds compiled code for every kernel the tracker calls from Python, for their
-    current source. When not, the first ``track`` compiles them (tens of seconds; the CLI says so first). Reads
-    numba's cache index (``FunctionCache``; an index written for an older source counts as none); True where that
-    cannot be read (numba's internals changed): then nothing is announced."""
+def compiled_on_this_machine(kernels: tuple | None = None) -> bool:
+    """Whether numba's cache already holds compiled code, for its current source, of every kernel in ``kernels``
+    (default: :func:`kernels_called` of a default track with a graph). When not, the first track that calls them
+    compiles them (tens of seconds; the CLI says so first). Reads numba's cache index (``FunctionCache``; an index
+    written for an older source counts as none); True where that cannot be read (numba's internals changed): then
+    nothing is announced."""
     try:
-        return all(bool(k._cache._cache_file._load_index()) for k in _ENTRY_POINTS)
+        return all(bool(k._cache._cache_file._load_index()) for k in (kernels or kernels_called()))
     except Exception:  # noqa: BLE001 -- private numba API: never let a progress note break tracking
         return True
