@@ -42,6 +42,11 @@ class KappaChoice:
         """The compliance_summary.csv column to read: ``kappa`` (rank-1) or ``kappa_<effect>``."""
         return "kappa" if self.effect is None else f"kappa_{self.effect}"
 
+    @property
+    def fitted(self) -> bool:
+        """Whether an effect is named and its model's κ was fitted (the ``kappa_<effect>`` columns hold it)."""
+        return self.effect is not None and self.kappa is not None
+
     def as_dict(self) -> dict:
         out = {"model": self.model, "column": self.column, "reason": self.reason, "effect": self.effect}
         if self.kappa is not None:

@@ -118,7 +118,7 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
             # the named effect's kappa intervals belong to the diagnosis stage, not to "write"
             result = dataclasses.replace(result, kappa_choice=kappa_after_verdict(result, diagnosis))
             t_diag = time.perf_counter() - t_diag
-            written = _extended_column(result)
+            written = result.kappa_choice.column if result.kappa_choice.fitted else None  # kappa_<effect>, or None
             view = cli_wording_json(diagnosis_for_viz(diagnosis, result), written)
             if live:
                 live.diagnosis(view)
@@ -151,7 +151,7 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
     t.update({"imports": t["imports"] - t_track, "track": t_track, **{k: t.pop(k) for k in list(t)[1:]}})
     print(format_summary(result))
     print()
-    print(cli_wording(diagnosis.report(), _extended_column(result)))
+    print(cli_wording(diagnosis.report(), written))
     print("\n" + read_together(result, diagnosis))
     if text_3d:
         print("\n" + text_3d)
@@ -160,12 +160,6 @@ def _run(args, worker, Steps, process_seconds, show: str | None) -> int:
         print(f"\nwrote Rerun recording {args.rerun} (open it with: {open_command(args.rerun)})")
     print(f"\nwrote {len(files)} files to {args.out}/")
     return quality_exit_code(result, "run")
-
-
-def _extended_column(result) -> str | None:
-    """The compliance_summary.csv column holding the named effect's kappa this run fitted, or None."""
-    choice = getattr(result, "kappa_choice", None)
-    return choice.column if choice is not None and choice.effect is not None and choice.kappa is not None else None
 
 
 def read_together(result, diagnosis) -> str:

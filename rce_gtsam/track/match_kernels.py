@@ -46,6 +46,7 @@ from .kernels_segment import segment_ncc, segment_search
 __all__ = ["sample_patch", "weighted_lk", "weighted_ncc", "match_node", "articulated_template", "match_articulated",
            "segment_ncc", "segment_search", "chromaticity", "chroma_mask", "compiled_on_this_machine", "kernels_called"]
 
+
 def kernels_called(with_graph: bool = True, colour_mask: bool = True) -> tuple:
     """The kernels a default track calls from Python on every clip (each compiles its callees into its own cached
     code): with a branch graph (and ``LKConfig.mask_to_branch``) the articulated match and the segment search, plus the

@@ -423,11 +423,6 @@ def fig_kappa_to_report(result):
     return fig
 
 
-def _has_kappa_to_report(result) -> bool:
-    choice = getattr(result, "kappa_choice", None)
-    return choice is not None and choice.effect is not None and choice.kappa is not None
-
-
 def write_diagnosis_figures(diagnosis, out_dir: str | Path, result=None) -> dict[str, Path]:
     """Write ``heldout_error.png`` and, when the diagnosis carries them, ``residuals_diagnosis.png``
     (``residuals`` (E, T) degrees), ``effect_before_after.png`` (``after_prediction`` (E, T), with
@@ -471,6 +466,6 @@ def write_diagnosis_figures(diagnosis, out_dir: str | Path, result=None) -> dict
                   else [str(i) for i in range(ra.xcorr.shape[0])])
         written["residual_analysis.png"] = _save(fig_residual_analysis(ra, labels, fps=30.0),
                                                  out / "residual_analysis.png")
-    if result is not None and _has_kappa_to_report(result):
+    if result is not None and getattr(result, "kappa_choice", None) is not None and result.kappa_choice.fitted:
         written["kappa_to_report.png"] = _save(fig_kappa_to_report(result), out / "kappa_to_report.png")
     return written
