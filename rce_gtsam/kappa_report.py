@@ -27,7 +27,9 @@ class KappaChoice:
     effect: the named effect's candidate (e.g. ``"delay"``; None: the rank-1 κ is the one to report);
     model: the model that κ comes from ("rank-1" or "rank-1 + delay"); reason: one sentence;
     kappa, ci_low, ci_high: (E,) the extended model's κ and its 95 % interval (relative, geometric mean 1;
-    None without an effect); edges: the response rows' (joint, child) edges."""
+    None without an effect); edges: the response rows' (joint, child) edges; prediction: (E, T) the extended
+    model's prediction of the bending (deg; its R^2 judges ``poor_fit`` of that κ,
+    :func:`rce_gtsam.quality.assess_reported_quality`)."""
 
     effect: str | None
     model: str
@@ -36,6 +38,7 @@ class KappaChoice:
     kappa: np.ndarray | None = None
     ci_low: np.ndarray | None = None
     ci_high: np.ndarray | None = None
+    prediction: np.ndarray | None = None
 
     @property
     def column(self) -> str:
@@ -87,12 +90,15 @@ def kappa_after_verdict(result, diagnosis) -> KappaChoice:
     return KappaChoice(effect=name, model=f"rank-1 + {name}", reason=why, edges=tuple(result.response.edges),
                        kappa=np.asarray(fit.kappa, float),
                        ci_low=None if ci is None else np.asarray(ci.low, float),
-                       ci_high=None if ci is None else np.asarray(ci.high, float))
+                       ci_high=None if ci is None else np.asarray(ci.high, float),
+                       prediction=np.asarray(fit.predict(), float))
 
 
-def add_to_summary(df, choice: KappaChoice):
+def add_to_summary(df, choice: KappaChoice, quality: dict | None = None):
     """``compliance_summary`` with the extended model's κ columns (``kappa_<effect>``, ``..._ci_low``,
-    ``..._ci_high``) beside the rank-1 ``kappa`` and a ``report`` column naming the κ column to read."""
+    ``..._ci_high``, ``..._quality``: :func:`rce_gtsam.quality.assess_reported_quality`) beside the rank-1
+    ``kappa`` and a ``report`` column naming the κ column to read. ``quality``: {edge: quality string} of the
+    extended κ (None: the quality column is left out)."""
     df = df.copy()
     if choice.kappa is not None:
         col = choice.column
@@ -106,5 +112,9 @@ def add_to_summary(df, choice: KappaChoice):
         for j, (name, values) in enumerate(((col, pick(choice.kappa)), (f"{col}_ci_low", pick(choice.ci_low)),
                                             (f"{col}_ci_high", pick(choice.ci_high)))):
             df.insert(at + j, name, values)
+        if quality is not None:
+            # a segment without a bend row (the root edge, one dropped with a lost node) keeps its rank-1 word
+            df.insert(at + 3, f"{col}_quality", [quality.get((int(p), int(c)), q) for p, c, q in
+                                                 zip(df["parent"], df["child"], df["quality"])])
     df["report"] = choice.column
     return df

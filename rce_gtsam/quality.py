@@ -54,6 +54,7 @@ figures are where it shows.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -236,9 +237,10 @@ def assess_quality(result) -> dict[tuple[int, int], SegmentQuality]:
         r2_needed = POOR_FIT_SHARE * (1.0 - 1.0 / snr) if np.isfinite(snr) and snr > 1 else 0.0
         if not r2 >= r2_needed:
             reasons.append("poor_fit")
-        if _wide(result, i, cfg):
+        interval = _interval(result.ci, i)
+        if _wide(interval, cfg):
             reasons.append("wide_ci")
-        informative = _informative(result, i)
+        informative = _informative(interval)
         if informative is False:
             reasons.append("uninformative")
         out[edge] = SegmentQuality(edge=edge, reasons=tuple(reasons), bend_var_deg2=var, noise_var_deg2=noise,
@@ -252,26 +254,76 @@ def _turning(xy: np.ndarray, rows) -> np.ndarray:
     return bend_angles(xy[rows[0]], xy[rows[1]], xy[rows[2]], True)
 
 
-def _wide(result, i: int, cfg) -> bool:
-    ci = result.ci
+def _interval(ci, i: int) -> tuple[float, float] | None:
+    """Segment ``i``'s 95 % interval (low, high) of a :class:`~rce_gtsam.model.uncertainty.BootstrapCI`, None
+    without one (no bootstrap)."""
     if ci is None:
+        return None
+    return float(ci.low[i]), float(ci.high[i])
+
+
+def _wide(interval: tuple[float, float] | None, cfg) -> bool:
+    """``wide_ci``: the interval is at least as wide (log kappa) as the shrinkage prior's own 95 % interval."""
+    if interval is None:
         return False  # no bootstrap: no interval to judge
-    lo, hi = float(ci.low[i]), float(ci.high[i])
+    lo, hi = interval
     if not (np.isfinite(lo) and np.isfinite(hi)) or lo <= 0:
         return True
     return bool(np.log(hi / lo) >= 2 * Z95 * cfg.prior_sd_log)
 
 
-def _informative(result, i: int) -> bool | None:
-    """Whether segment ``i``'s 95 % interval tells stiff from compliant (see ``uninformative``); None without
-    an interval (no bootstrap)."""
-    ci = result.ci
-    if ci is None:
+def _informative(interval: tuple[float, float] | None) -> bool | None:
+    """Whether a 95 % interval tells stiff from compliant (see ``uninformative``); None without an interval (no
+    bootstrap)."""
+    if interval is None:
         return None
-    lo, hi = float(ci.low[i]), float(ci.high[i])
+    lo, hi = interval
     if not (np.isfinite(lo) and np.isfinite(hi)):
         return False
     return not (lo < STIFF_BELOW and hi > COMPLIANT_ABOVE)
+
+
+#: The reasons that judge the data behind a segment, not the model fitted to it: they hold for the κ of any model
+#: fitted to the same bends (the rank-1 κ and that of the model with a named effect).
+DATA_REASONS = ("off_structure", "tracking_lost", "calm_support", "low_support", "single_bend", "no_signal")
+
+
+def assess_reported_quality(result, rank1: dict | None = None) -> dict[tuple[int, int], SegmentQuality]:
+    """The verdict on every segment's κ *to report* (``result.kappa_choice``; see :mod:`rce_gtsam.kappa_report`).
+
+    Without a fitted named effect that κ is the rank-1 κ, and this is :func:`assess_quality`. With one, the data's
+    reasons (:data:`DATA_REASONS`) are the rank-1 verdict's (``rank1``, computed when None), and the model's are
+    judged again on the model with the effect: ``poor_fit`` from the R^2 of its prediction (same rule and noise
+    floor), ``wide_ci`` and ``uninformative`` from its own 95 % interval."""
+    rank1 = assess_quality(result) if rank1 is None else rank1
+    choice = getattr(result, "kappa_choice", None)
+    if choice is None or not choice.fitted:
+        return rank1
+
+    at = {tuple(e): i for i, e in enumerate(choice.edges)}
+    has_ci = choice.ci_low is not None and choice.ci_high is not None
+    cfg = result.preset.compliance
+    out = {}
+    for r, (edge, q) in enumerate(rank1.items()):
+        i = at.get(tuple(edge))
+        reasons = [x for x in q.reasons if x in DATA_REASONS]
+        r2, informative = float("nan"), None
+        if i is None or not np.isfinite(choice.kappa[i]):
+            reasons.append("poor_fit")
+        else:
+            if choice.prediction is not None:
+                r2 = _r2(result.response.Y[r], choice.prediction[i])
+                if not r2 >= q.r2_needed:
+                    reasons.append("poor_fit")
+            interval = (float(choice.ci_low[i]), float(choice.ci_high[i])) if has_ci else None
+            if _wide(interval, cfg):
+                reasons.append("wide_ci")
+            informative = _informative(interval)
+            if informative is False:
+                reasons.append("uninformative")
+        out[edge] = dataclasses.replace(q, reasons=tuple(x for x in REASONS if x in reasons), r2=r2,
+                                        informative=informative)
+    return out
 
 
 def informative_line(qualities: dict) -> str | None:

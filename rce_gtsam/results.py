@@ -86,7 +86,10 @@ def compliance_summary(result) -> pd.DataFrame:
     df = pd.DataFrame.from_records(records)
     if getattr(result, "kappa_choice", None) is not None:
         from .kappa_report import add_to_summary
-        df = add_to_summary(df, result.kappa_choice)
+        from .quality import assess_reported_quality
+        reported = assess_reported_quality(result, quality) if result.kappa_choice.fitted else None
+        df = add_to_summary(df, result.kappa_choice,
+                            None if reported is None else {e: q.quality for e, q in reported.items()})
     return df
 
 
@@ -146,9 +149,23 @@ def report_dict(result) -> dict:
         "quality": quality_report(result),
         "kappa_floor": None if getattr(result, "kappa_floor", None) is None else result.kappa_floor.as_dict(),
         **({"effects": result.effects_report()} if getattr(result, "effects", None) else {}),
-        **({"kappa_to_report": result.kappa_choice.as_dict()}
+        **({"kappa_to_report": _kappa_to_report(result)}
            if getattr(result, "kappa_choice", None) is not None else {}),
     })
+
+
+def _kappa_to_report(result) -> dict:
+    """report.json's ``kappa_to_report``: which κ to read and why, and, for the κ of a model with a named effect,
+    each segment's quality (:func:`rce_gtsam.quality.assess_reported_quality`) and how many are ok and
+    informative."""
+    out = result.kappa_choice.as_dict()
+    if result.kappa_choice.fitted:
+        from .quality import assess_reported_quality
+        q = assess_reported_quality(result)
+        out["quality"] = {f"{p}->{c}": v.quality for (p, c), v in q.items()}
+        out["n_ok"] = sum(v.ok for v in q.values())
+        out["n_informative"] = sum(v.informative is True for v in q.values())
+    return out
 
 
 CSV_CHUNK_ROWS = 20_000  # rows formatted at a time by write_csv (bounded memory; the bytes do not depend on it)

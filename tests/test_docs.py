@@ -69,11 +69,11 @@ def test_site_builds_strict_with_every_page_and_generated_content(site):
     assert "<!-- output:" not in results and "rce analyze data/sample_delay" in results
     # the extended kappa rce run writes after a verdict, generated on sample_delay (the diagnosis names delay)
     assert "<!-- kappa-to-report -->" not in results and "Read together: the diagnosis names delay" in results
-    assert "<code>kappa_delay</code> [95 % CI]" in results
+    assert "<code>kappa_delay</code> [95 % CI]" in results and "<code>kappa_delay_quality</code>" in results
     assert (site / "img" / "review.png").is_file() and "img/review.png" in (site / "own-video.html").read_text()
     for fig in ("compliance", "kappa_overlay", "residuals", "heldout_error", "variance_budget", "residual_analysis",
                 "effect_before_after", "smoothing", "motion", "excitation", "bending_fit", "uncertainty_overlay",
-                "residuals_diagnosis", "kappa_to_report"):
+                "residuals_diagnosis", "kappa_to_report", "kappa_to_report_overlay"):
         assert f"generated/analysis/{fig}.png" in results and (site / "generated" / "analysis" / f"{fig}.png").is_file()
     for effect in ("delay", "dynamics", "second_mode", "offset", "nonlinear"):
         assert (site / "generated" / "signatures" / f"{effect}.png").is_file()

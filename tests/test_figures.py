@@ -75,6 +75,45 @@ def test_overlays_with_and_without_frame(analysis, tmp_path):
             _png_ok(p, min_bytes=5_000)
 
 
+def test_after_a_verdict_the_overlays_draw_the_kappa_to_report_on_one_scale(analysis, tmp_path, monkeypatch):
+    """With the κ of a model with a named effect (``kappa_choice.fitted``), write_overlays also draws it on the
+    frame (kappa_to_report_overlay.png, its own quality's flags), the rank-1 overlay's title says it is not the κ
+    to report, and both use one colour scale spanning both κ (here the extended κ reaches 3x further)."""
+    import dataclasses
+
+    from rce_gtsam.kappa_report import KappaChoice
+    from rce_gtsam.viz import overlays
+    _, result = analysis
+    k = np.asarray(result.fit.kappa, float)
+    ext = k.copy()
+    ext[0] = 3.0 * k.max()
+    choice = KappaChoice("delay", "rank-1 + delay", "named", tuple(result.response.edges), ext, ext / 1.1, ext * 1.1,
+                         np.nan_to_num(result.response.Y))
+    drawn = {}
+    real = overlays.fig_overlay
+
+    def spy(res, values, label, cmap, first_frame=None, **kw):
+        fig = real(res, values, label, cmap, first_frame, **kw)
+        coloured = [c for c in fig.axes[0].collections if c.get_array() is not None]  # the κ-coloured segments
+        drawn[kw.get("title", "")] = coloured[0].norm if kw.get("log") else None
+        return fig
+    monkeypatch.setattr(overlays, "fig_overlay", spy)
+    files = overlays.write_overlays(dataclasses.replace(result, kappa_choice=choice), tmp_path)
+    assert set(files) == {"kappa_overlay.png", "uncertainty_overlay.png", overlays.REPORTED_OVERLAY}
+    _png_ok(files[overlays.REPORTED_OVERLAY], min_bytes=5_000)
+    rank1_title = next(t for t in drawn if t.startswith("rank-1"))
+    reported_title = next(t for t in drawn if t.startswith("κ to report"))
+    assert "not the κ to report (kappa_delay is)" in rank1_title and "kappa_delay" in reported_title
+    a, b = drawn[rank1_title], drawn[reported_title]
+    assert (a.vmin, a.vmax) == pytest.approx((b.vmin, b.vmax)) and a.vmax >= ext[0] * 0.999
+    # no verdict: the two overlays, the rank-1 one titled as before
+    drawn.clear()
+    plain = overlays.write_overlays(dataclasses.replace(result, kappa_choice=KappaChoice(None, "rank-1", "none")),
+                                    tmp_path / "plain")
+    assert set(plain) == {"kappa_overlay.png", "uncertainty_overlay.png"}
+    assert any(t.startswith("κ per segment on the") for t in drawn)
+
+
 def test_diagnosis_figures(analysis, tmp_path):
     from rce_gtsam.viz import write_diagnosis_figures
     _, result = analysis
@@ -180,3 +219,42 @@ def test_heldout_figure_labels_do_not_overlap_and_stay_inside():
             assert bb.x0 >= page.x0 - 1 and bb.x1 <= page.x1 + 1, t.get_text()
     import matplotlib.pyplot as plt
     plt.close(fig)
+
+
+def test_rce_runs_background_figures_redraw_the_rank1_overlay_after_a_verdict(analysis, tmp_path):
+    """``rce run`` draws the overlays in a worker process before the diagnosis; after a verdict whose κ was fitted
+    its diagnosis job adds kappa_to_report_overlay.png and draws kappa_overlay.png again (on the shared scale, titled
+    as not the κ to report), and the collected figures hold that second draw."""
+    import dataclasses
+
+    from PIL import Image
+
+    from rce_gtsam.cli.analyze import FiguresInBackground
+    from rce_gtsam.cli.figure_worker import FigureWorker
+    from rce_gtsam.kappa_report import KappaChoice
+    from rce_gtsam.viz.overlays import REPORTED_OVERLAY, write_overlays
+    _, result = analysis
+    k = np.asarray(result.fit.kappa, float)
+    choice = KappaChoice("delay", "rank-1 + delay", "named", tuple(result.response.edges), k[::-1].copy(), k / 2, k * 2,
+                         np.nan_to_num(result.response.Y))
+    named = dataclasses.replace(result, kappa_choice=choice)
+    view = {"baseline": {"heldout_rmse": 1.0}, "verdict": "delay",
+            "candidates": [{"effect": "delay", "heldout_rmse": 0.7}]}
+    out = tmp_path / "out"
+    out.mkdir()
+    with FigureWorker() as worker:
+        figs = FiguresInBackground(worker)
+        figs.before_bootstrap(result)
+        figs.after_bootstrap(result)
+        figs.diagnosis(view, named)
+        files = figs.writer(type("Bar", (), {"start": lambda self, s: None})())(named, out)
+    assert {"figures/kappa_overlay.png", f"figures/{REPORTED_OVERLAY}", "figures/kappa_to_report.png"} <= set(files)
+    before = write_overlays(result, tmp_path / "before", names=["kappa_overlay.png"])["kappa_overlay.png"]
+    after = write_overlays(named, tmp_path / "after", names=["kappa_overlay.png"])["kappa_overlay.png"]
+
+    def pixels(p):
+        with Image.open(p) as im:
+            return np.asarray(im.convert("RGB"), dtype=np.int16)
+    got = pixels(out / "figures" / "kappa_overlay.png")
+    assert got.shape == pixels(after).shape and np.abs(got - pixels(after)).max() == 0
+    assert got.shape != pixels(before).shape or np.abs(got - pixels(before)).max() > 0

@@ -145,3 +145,53 @@ def test_nothing_usable_left_is_still_refused(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1 and "tracks.csv" in err, err
     assert not (tmp_path / "o").exists()
+
+
+def test_the_kappa_to_report_is_judged_on_its_own_model(tmp_path):
+    """After a verdict the κ to report is the model with the effect's: its quality keeps the rank-1 verdict's flags
+    about the data (tracking_lost here, from a node lost in most frames) and judges the model's again, poor_fit from
+    that model's prediction and uninformative from its own interval. A segment the rank-1 model fits poorly but
+    the extended model explains is not poor_fit; one the extended model explains worse is."""
+    from rce_gtsam.kappa_report import KappaChoice
+    from rce_gtsam.quality import DATA_REASONS, assess_reported_quality
+    F = 600
+    z = _sway(F)
+    bends = np.exp(np.linspace(-0.6, 0.6, 10))[:, None] * z[None, :]
+    bends[3] += 8.0 * np.sin(2 * np.pi * np.arange(F) / 41.0 + 0.3)  # joint 3 (node 4): its own sway
+    tracks, graph = _chain_tracks(tmp_path, n_nodes=12, bends=bends)
+    r = analyze(tracks, graph, n_boot=20)
+    rank1 = assess_quality(r)
+    edges = list(r.response.edges)
+    own = next(b.edge for b in r.bending.bends if b.joint == 4)
+    assert "poor_fit" in rank1[own].reasons
+    calm = [edges[-1]]  # as if its tip node had been lost in most frames (a flag about the data)
+    rank1[calm[0]] = dataclasses.replace(rank1[calm[0]], reasons=("tracking_lost", "poor_fit"))
+    E = len(edges)
+    prediction = np.nan_to_num(r.response.Y).copy()  # the extended model explains every bend...
+    worse = next(e for e in edges if e != own and not rank1[e].reasons)
+    prediction[edges.index(worse)] = 0.0  # ...but one, which it does not explain at all (R^2 = 0)
+    low, high = np.full(E, 0.9), np.full(E, 1.1)
+    wide = next(e for e in edges if e not in (own, worse) and e not in calm)
+    low[edges.index(wide)], high[edges.index(wide)] = 0.5, 1.5
+    choice = KappaChoice("delay", "rank-1 + delay", "named", tuple(edges), np.asarray(r.fit.kappa, float), low, high,
+                         prediction)
+    q = assess_reported_quality(dataclasses.replace(r, kappa_choice=choice), rank1)
+    for e in edges:
+        assert {x for x in rank1[e].reasons if x in DATA_REASONS} <= set(q[e].reasons), e
+    assert all("tracking_lost" in q[e].reasons for e in calm)
+    assert "poor_fit" not in q[own].reasons and "poor_fit" in q[worse].reasons
+    assert "uninformative" in q[wide].reasons and q[wide].informative is False
+    assert sum(v.informative is True for v in q.values()) == E - 1
+    # without a fitted effect the κ to report is the rank-1 κ, and so is its quality
+    none = dataclasses.replace(r, kappa_choice=KappaChoice(None, "rank-1", "no verdict"))
+    assert assess_reported_quality(none, rank1) is rank1
+    # compliance_summary.csv carries it beside the rank-1 quality, report.json counts it
+    with_choice = dataclasses.replace(r, kappa_choice=choice)
+    q = assess_reported_quality(with_choice)
+    df = with_choice.summary().dropna(subset=["kappa"])
+    by_edge = {(int(p), int(c)): s for p, c, s in zip(df.parent, df.child, df.kappa_delay_quality)}
+    assert by_edge[own] == q[own].quality == "ok" and "poor_fit" in by_edge[worse]
+    from rce_gtsam.results import report_dict
+    rep = report_dict(with_choice)["kappa_to_report"]
+    assert rep["n_informative"] == E - 1 and rep["quality"][f"{own[0]}->{own[1]}"] == "ok"
+    assert rep["n_ok"] == sum(v.ok for v in q.values())

@@ -116,20 +116,23 @@ def kappa_to_report_example(data: Path, candidates: str = "delay,offset,second_m
     result = dataclasses.replace(result, kappa_choice=kappa_after_verdict(result, diagnosis))
     if figure_dir is not None:
         from rce_gtsam.viz.figures import fig_kappa_to_report
+        from rce_gtsam.viz.overlays import REPORTED_OVERLAY, write_overlays
         from rce_gtsam.viz.style import save_png
         figure_dir.mkdir(parents=True, exist_ok=True)
         save_png(fig_kappa_to_report(result), figure_dir / "kappa_to_report.png")
+        write_overlays(result, figure_dir, names=[REPORTED_OVERLAY])
     col = result.kappa_choice.column
     df = result.summary().dropna(subset=["kappa"]).head(n_rows)
     ci = lambda lo, hi: f"[{lo:.2f}, {hi:.2f}]"  # noqa: E731
-    head = ["segment", "`kappa` [95 % CI]"] + ([] if col == "kappa" else [f"`{col}` [95 % CI]"]) + ["`quality`",
-                                                                                                   "`report`"]
+    extended = [] if col == "kappa" else [f"`{col}` [95 % CI]", f"`{col}_quality`"]
+    head = ["segment", "`kappa` [95 % CI]", "`quality`", *extended, "`report`"]
     rows = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for r in df.to_dict("records"):
-        cells = [f"{r['parent']}→{r['child']}", f"{r['kappa']:.3f} {ci(r['kappa_ci_low'], r['kappa_ci_high'])}"]
+        cells = [f"{r['parent']}→{r['child']}", f"{r['kappa']:.3f} {ci(r['kappa_ci_low'], r['kappa_ci_high'])}",
+                 _cell(r["quality"])]
         if col != "kappa":
-            cells.append(f"{r[col]:.3f} {ci(r[col + '_ci_low'], r[col + '_ci_high'])}")
-        cells += [_cell(r["quality"]), _cell(r["report"])]
+            cells += [f"{r[col]:.3f} {ci(r[col + '_ci_low'], r[col + '_ci_high'])}", _cell(r[col + "_quality"])]
+        cells.append(_cell(r["report"]))
         rows.append("| " + " | ".join(cells) + " |")
     line = textwrap.fill(read_together(result, diagnosis), 100)
     return "\n".join([*rows, "", f"(the first {len(df)} segments)", "", "```text", line, "```"])

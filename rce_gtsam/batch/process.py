@@ -130,14 +130,16 @@ def run_pipeline(recording: Recording, options: BatchOptions, folder: Path) -> l
     diagnosis = diagnose_result(result, effects=options.effects, seed=options.seed or 0)
     # the kappa to report after the verdict, beside the rank-1 kappa, as `rce run` writes it
     result = dataclasses.replace(result, kappa_choice=kappa_after_verdict(result, diagnosis))
-    # a command-line tool: the advice in command-line words, as `rce diagnose` / `rce run` write it
-    view = cli_wording_json(diagnosis_for_viz(diagnosis, result)) if options.figures else None
+    # a command-line tool: the advice in command-line words, as `rce run` writes it (the named effect's kappa is
+    # already in compliance_summary.csv, kappa_<effect>: no second command to run)
+    written = result.kappa_choice.column if result.kappa_choice.fitted else None
+    view = cli_wording_json(diagnosis_for_viz(diagnosis, result), written) if options.figures else None
 
     def write_inputs_and_diagnosis(_result, tmp: Path) -> dict:
         if table is not None:
             table.to_csv(tmp / "tracks.csv", index=False)
         (tmp / "diagnosis.json").write_text(
-            json.dumps(cli_wording_json(diagnosis_json(diagnosis, result)), indent=1) + "\n")
+            json.dumps(cli_wording_json(diagnosis_json(diagnosis, result), written), indent=1) + "\n")
         return {}
 
     written = result.write(folder, extra_writers=[write_inputs_and_diagnosis, *extra_writers(

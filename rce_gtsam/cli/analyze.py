@@ -196,9 +196,16 @@ class FiguresInBackground:
                            self.first_frame, self.processes)
 
     def diagnosis(self, view, result) -> None:
-        """Also draw the diagnosis figures (``view``: :func:`~rce_gtsam.diagnosis.io.diagnosis_for_viz`)."""
+        """Also draw the diagnosis figures (``view``: :func:`~rce_gtsam.diagnosis.io.diagnosis_for_viz`) and, when
+        ``result`` carries the κ of a model with a named effect, its overlay, and the rank-1 overlay again on the
+        same colour scale, titled as not the κ to report (this job runs after the first draw and replaces it)."""
         from ..viz.figures import write_diagnosis_figures
+        from ..viz.overlays import REPORTED_OVERLAY
+        from .figure_worker import draw_analysis_figures
         self.worker.submit(write_diagnosis_figures, view, self.dir, result)
+        if getattr(result, "kappa_choice", None) is not None and result.kappa_choice.fitted:
+            self.worker.submit(draw_analysis_figures, result, self.dir, [], ["kappa_overlay.png", REPORTED_OVERLAY],
+                               self.first_frame, self.processes)
 
     def writer(self, bar):
         def collect(_result, tmp: Path) -> dict:

@@ -177,11 +177,18 @@ def read_together(result, diagnosis) -> str:
         n_poor = sum("poor_fit" in v.reasons for v in q.values())
         poor = (f"; poor_fit marks the {n_poor} it fits worst" if n_poor else
                 "; ok there means the rank-1 checks pass, not that the effect is absent")
-        column = getattr(result.kappa_choice, "column", None) or f"kappa_{eff}"
+        choice = getattr(result, "kappa_choice", None)
+        column = getattr(choice, "column", None) or f"kappa_{eff}"
+        own = ""
+        if choice is not None and choice.fitted:
+            from ..quality import assess_reported_quality
+            qr = assess_reported_quality(result, q)
+            own = (f"; of its segments {sum(v.ok for v in qr.values())} of {n} are ok and "
+                   f"{sum(v.informative is True for v in qr.values())} informative ({column}_quality)")
         return (f"Read together: the diagnosis names {diagnosis.verdict}, an effect the rank-1 model leaves out, so "
                 f"the rank-1 kappa above is not the one to report ({counts}{poor}); report {column} of "
                 f"compliance_summary.csv, the model with {eff} with its own intervals, written beside the rank-1 "
-                f"kappa by this run (report.json: kappa_to_report). "
+                f"kappa by this run (report.json: kappa_to_report{own}). "
                 f"{remainder_text(diagnosis.budget, eff).capitalize()}.")
     if status == "adequate":
         advice = "the rank-1 model is adequate: report the kappa above whose quality is ok"

@@ -32,9 +32,11 @@ def first_frame_skeleton(result) -> tuple[np.ndarray, list[tuple[int, int]], np.
 
 
 def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.ndarray | None = None,
-                log: bool = False, title: str = "", flags: dict | None = None):
+                log: bool = False, title: str = "", flags: dict | None = None, scale_with=()):
     """Draw the first-frame skeleton with each edge coloured by ``values[edge]`` (NaN/missing = grey);
-    ``flags``: {edge: quality string} of the segments whose kappa is not ``ok``, hatched and labelled."""
+    ``flags``: {edge: quality string} of the segments whose kappa is not ``ok``, hatched and labelled;
+    ``scale_with``: more values the colour scale must span (with ``log``: another κ of the same segments, so
+    that two overlays share one scale)."""
     from matplotlib.collections import LineCollection
     from matplotlib.colors import LogNorm, Normalize
     xy, edges, ids = first_frame_skeleton(result)
@@ -53,6 +55,10 @@ def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.nda
     y0, y1 = max(0, np.nanmin(xy[:, 1]) - MARGIN_PX), min(H, np.nanmax(xy[:, 1]) + MARGIN_PX)
     if ok.any():
         lo, hi = float(v[ok].min()), float(v[ok].max())
+        extra = np.asarray(list(scale_with), dtype=float)
+        extra = extra[np.isfinite(extra) & (extra > 0)] if log else extra[np.isfinite(extra)]
+        if extra.size:
+            lo, hi = min(lo, float(extra.min())), max(hi, float(extra.max()))
         if log:
             m = max(hi, 1.0 / lo)  # symmetric around kappa = 1 on a log scale
             norm = LogNorm(1.0 / m, m) if m > 1 else LogNorm(0.5, 2.0)
@@ -66,7 +72,7 @@ def fig_overlay(result, values: dict, label: str, cmap: str, first_frame: np.nda
         aspect = (x1 - x0) / max(y1 - y0, 1)
         h = 4.2
         fig, ax = plt.subplots(figsize=(min(7.16, h * aspect + 1.4), h))
-        fixed_margins(fig, left=0.5, right=0.6, top=0.28, bottom=0.4)
+        fixed_margins(fig, left=0.5, right=0.6, top=0.28 + 0.16 * title.count("\n"), bottom=0.4)
         # only the cropped part of the photo, faded toward white once here (two full-frame images, one of
         # them a float RGBA veil, were most of an overlay's drawing time)
         r0, r1 = int(max(0, np.floor(y0))), int(min(H, np.ceil(y1) + 1))
@@ -196,29 +202,48 @@ def _label_nodes(ax, xy: np.ndarray, ids, edges, row) -> list:
 #: interval's, wide_ci and uninformative).
 OVERLAY_FILES = ("kappa_overlay.png", "uncertainty_overlay.png")
 CI_OVERLAYS = ("kappa_overlay.png", "uncertainty_overlay.png")
+#: Drawn besides, when the diagnosis named an effect and its model's κ was fitted (``result.kappa_choice``):
+#: that κ, the one to report, on the same colour scale as ``kappa_overlay.png``'s rank-1 κ.
+REPORTED_OVERLAY = "kappa_to_report_overlay.png"
 
 
 def write_overlays(result, out_dir: str | Path, first_frame: np.ndarray | None = None,
                    names=None) -> dict[str, Path]:
-    """Write ``kappa_overlay.png`` and ``uncertainty_overlay.png`` into ``out_dir``.
+    """Write ``kappa_overlay.png`` (the rank-1 κ), ``uncertainty_overlay.png`` and, when ``result`` carries the κ
+    of a model with a named effect (``kappa_choice.fitted``, as ``rce run`` and ``rce batch`` fit it),
+    :data:`REPORTED_OVERLAY` into ``out_dir``.
 
     ``first_frame``: (H, W, 3) uint8 RGB first video frame, or None for a neutral background.
-    ``names``: only these files (default: both). Usable as an ``extra_writer`` through
+    ``names``: only these files (default: all that apply). Usable as an ``extra_writer`` through
     ``lambda r, d: write_overlays(r, d, frame)``."""
-    from ..quality import assess_quality
+    from ..quality import assess_quality, assess_reported_quality
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    flags = {e: q.quality for e, q in assess_quality(result).items() if not q.ok}
+    rank1 = assess_quality(result)
+    flags = {e: q.quality for e, q in rank1.items() if not q.ok}
     kappa = result.kappa
     U = result.uncertainty
     unc = {} if U is None else {e: float(u) for e, u in zip(result.response.edges, U)}
     where = "first video frame" if first_frame is not None else "first-frame skeleton"
+    choice = getattr(result, "kappa_choice", None)
+    named = choice is not None and choice.fitted
     makers = {
-        "kappa_overlay.png": lambda: fig_overlay(result, kappa, "relative compliance κ (log scale)", KAPPA_CMAP,
-                                                 first_frame, log=True, title=f"κ per segment on the {where}",
-                                                 flags=flags),
+        "kappa_overlay.png": lambda: fig_overlay(
+            result, kappa, "relative compliance κ (log scale)", KAPPA_CMAP, first_frame, log=True, flags=flags,
+            title=(f"rank-1 κ, not the κ to report ({choice.column} is),\non the {where}" if named
+                   else f"κ per segment on the {where}"),
+            scale_with=choice.kappa if named else ()),
         "uncertainty_overlay.png": lambda: fig_overlay(result, unc, "U_e = CI width / κ", UNCERTAINTY_CMAP,
                                                        first_frame, title=f"Uncertainty U_e on the {where}",
                                                        flags=flags),
     }
+    if named:
+        def reported():
+            quality = assess_reported_quality(result, rank1)
+            values = {tuple(e): float(k) for e, k in zip(choice.edges, choice.kappa)}
+            return fig_overlay(result, values, "relative compliance κ (log scale)", KAPPA_CMAP, first_frame,
+                               log=True, flags={e: q.quality for e, q in quality.items() if not q.ok},
+                               title=f"κ to report: {choice.column}\n(the model with {choice.effect}) on the {where}",
+                               scale_with=list(kappa.values()))
+        makers[REPORTED_OVERLAY] = reported
     return {name: _save(make(), out / name) for name, make in makers.items() if names is None or name in names}
