@@ -195,3 +195,12 @@ def test_the_kappa_to_report_is_judged_on_its_own_model(tmp_path):
     rep = report_dict(with_choice)["kappa_to_report"]
     assert rep["n_informative"] == E - 1 and rep["quality"][f"{own[0]}->{own[1]}"] == "ok"
     assert rep["n_ok"] == sum(v.ok for v in q.values())
+    # the printed summary lists it under the rank-1 table, each segment with its own quality
+    from rce_gtsam.cli.analyze import format_summary
+    text = format_summary(with_choice)
+    assert "kappa to report: kappa_delay, the model with delay" in text
+    table = text.split("kappa to report: kappa_delay", 1)[1]
+    row = next(ln for ln in table.splitlines() if ln.strip().startswith(f"{worse[0]}->{worse[1]} "))
+    assert row.endswith(q[worse].quality) and "poor_fit" in row
+    assert f"quality: {rep['n_ok']} of {E} segments of kappa_delay ok" in table
+    assert "kappa to report:" not in format_summary(r)  # no verdict, no second table

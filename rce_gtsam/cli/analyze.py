@@ -257,9 +257,11 @@ def format_summary(result) -> str:
                  "'The quality flags'; z seen: the share of the excitation's variance in the frames where "
                  "the segment's nodes were all tracked, what its kappa rests on)")
     from ..quality import assess_quality, informative_line
-    info = informative_line(assess_quality(result))
+    rank1 = assess_quality(result)
+    info = informative_line(rank1)
     if info:
         lines.append(info)
+    lines += _reported_table(result, df, rank1)
     floor = getattr(result, "kappa_floor", None)
     if floor is not None and floor.line():
         lines.append(floor.line())
@@ -268,6 +270,34 @@ def format_summary(result) -> str:
     lines.append(f"\ntotal {tot:.2f} s{waited} (" + ", ".join(f"{k} {v:.2f}" for k, v in result.timings_s.items()
                                                               if k != "total") + ")")
     return "\n".join(lines)
+
+
+def _reported_table(result, df, rank1) -> list[str]:
+    """After a verdict whose model was fitted (``result.kappa_choice.fitted``, ``rce run``): the κ to report, one
+    line per segment with its 95 % CI and its own quality (:func:`rce_gtsam.quality.assess_reported_quality`),
+    under the rank-1 table; nothing otherwise."""
+    choice = getattr(result, "kappa_choice", None)
+    if choice is None or not choice.fitted:
+        return []
+    from ..quality import assess_reported_quality, informative_line
+    col = choice.column
+    q = assess_reported_quality(result, rank1)
+    lines = ["", f"kappa to report: {col}, the model with {choice.effect} (the rank-1 kappa above is not the one "
+                 "to report; compliance_summary.csv has both)",
+             f"{'edge':>10} {'zone':>8} {'kappa':>7} {'95% CI':>17}  quality"]
+    for r in df.itertuples():
+        k = getattr(r, col)
+        if k != k:
+            continue
+        lo, hi = getattr(r, f"{col}_ci_low"), getattr(r, f"{col}_ci_high")
+        lines.append(f"{r.parent:>4}->{r.child:<5} {r.zone:>8} {k:7.3f} [{lo:6.3f}, {hi:6.3f}]  "
+                     f"{q[(int(r.parent), int(r.child))].quality}")
+    lines.append(f"quality: {sum(v.ok for v in q.values())} of {len(q)} segments of {col} ok (its own fit and "
+                 "interval; the data's flags as above)")
+    info = informative_line(q)
+    if info:
+        lines.append(info)
+    return lines
 
 
 def lower_or_higher(reduction_pct: float) -> str:
