@@ -151,3 +151,52 @@ def test_diagnosis_and_view_command(analysis, tmp_path):
     assert temporal["/image/tracks/raw"] == 0  # the simulation's tracks were never a file
     _verify(tmp_path / "v.rrd")
     assert main(["view", str(tmp_path / "nope")]) == 2
+
+
+def test_after_a_verdict_the_recording_shows_the_kappa_to_report(analysis, tmp_path, monkeypatch):
+    """With the κ of a model with a named effect (``kappa_choice.fitted``), the recording adds the skeleton coloured by
+    it (every frame), its bar chart and its columns in the table, and the default layout hides the rank-1 skeleton;
+    ``rce view`` on the written folder rebuilds the same κ from compliance_summary.csv's ``report`` column."""
+    import dataclasses
+
+    from rce_gtsam.kappa_report import KappaChoice
+    from rce_gtsam.viz import save_recording
+    from rce_gtsam.viz.blueprint import build_blueprint
+    from rce_gtsam.viz.rerun_log import summary_markdown
+    from rce_gtsam.viz.scene import AnalysisView
+    monkeypatch.setenv("RERUN_STRICT", "1")
+    _, result = analysis
+    k = np.asarray(result.fit.kappa, float)
+    choice = KappaChoice("delay", "rank-1 + delay", "named", tuple(result.response.edges), k[::-1].copy(), k / 2, k * 2,
+                         np.nan_to_num(result.response.Y))
+    named = dataclasses.replace(result, kappa_choice=choice)
+    path = save_recording(named, tmp_path / "a.rrd")
+    temporal, static = _rows(path)
+    assert temporal["/image/skeleton/kappa_to_report"] == temporal["/image/skeleton/kappa"] == result.tracks.n_frames
+    assert static["/summary/kappa_to_report"] == 1
+    view = AnalysisView.from_result(named)
+    assert view.report_column == "kappa_delay" and np.allclose(view.kappa_report, k[::-1])
+    table = summary_markdown(view)
+    first = next(ln for ln in table.splitlines() if ln.startswith(f"| {view.edges[0][0]}→{view.edges[0][1]} |"))
+    assert "**Report `kappa_delay`**" in table and "`kappa_delay` | 95 % CI |" in table
+    assert first.endswith(f" {k[-1]:.3f} | [{k[0] / 2:.3f}, {k[0] * 2:.3f}] |"), first  # its κ and CI, last columns
+    seen = {}
+    import rerun.blueprint as rrb
+    real = rrb.Spatial2DView
+
+    def spy(*a, **kw):
+        seen.update(kw)
+        return real(*a, **kw)
+    monkeypatch.setattr(rrb, "Spatial2DView", spy)
+    build_blueprint(view)
+    assert "- $origin/skeleton/kappa" in seen["contents"]
+    build_blueprint(AnalysisView.from_result(result))
+    assert "- $origin/skeleton/kappa" not in seen["contents"]
+    plain = AnalysisView.from_result(result)
+    assert plain.kappa_report is None and "Report" not in summary_markdown(plain)
+    _verify(path)
+    # the output folder: compliance_summary.csv's report column names kappa_delay, and the view reads it back
+    named.write(tmp_path / "out")
+    back = AnalysisView.from_folder(tmp_path / "out")
+    assert back.report_column == "kappa_delay" and np.allclose(back.kappa_report, view.kappa_report)
+    assert np.allclose(back.ci_high_report, view.ci_high_report)

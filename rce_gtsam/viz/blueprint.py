@@ -16,7 +16,10 @@ def build_blueprint(view: AnalysisView, diagnosis=None, video: bool = False, n_e
     """Blueprint for a recording of ``view`` (and ``diagnosis``). ``n_edges``: how many of the worst-fitted
     edges the bending and residual plots show first (every edge is in the recording)."""
     worst = [view.edge_name(e) for e in worst_edges(view, n_edges)]
-    image = rrb.Spatial2DView(origin="image", name="Video, tracks and skeletons" if video else "Tracks and skeletons")
+    # after a verdict the skeleton coloured by the kappa to report replaces the rank-1 one (both are recorded)
+    hide = [] if view.kappa_report is None else ["- $origin/skeleton/kappa"]
+    image = rrb.Spatial2DView(origin="image", name="Video, tracks and skeletons" if video else "Tracks and skeletons",
+                              contents=["+ $origin/**", *hide])
     series = rrb.Vertical(
         rrb.TimeSeriesView(origin="excitation", name="Excitation z_t (deg)"),
         rrb.TimeSeriesView(origin="bending", contents=[f"$origin/{n}/**" for n in worst],
@@ -31,7 +34,11 @@ def build_blueprint(view: AnalysisView, diagnosis=None, video: bool = False, n_e
         docs.append(rrb.BarChartView(origin="diagnosis/budget/unexplained_deg2",
                                      name="Unexplained variance per segment (deg², root → tip)"))
         docs.append(rrb.TimeSeriesView(origin="diagnosis/after", name="Before / after adding the effect"))
-    docs.append(rrb.BarChartView(origin="summary/kappa", name="κ per edge (root → tip)"))
+    if view.kappa_report is not None:
+        docs.append(rrb.BarChartView(origin="summary/kappa_to_report",
+                                     name=f"{view.report_column}, the κ to report, per edge (root → tip)"))
+    docs.append(rrb.BarChartView(origin="summary/kappa", name="κ per edge (root → tip)"
+                                 + (", rank-1" if view.kappa_report is not None else "")))
     return rrb.Blueprint(
         rrb.Vertical(rrb.Horizontal(image, series, column_shares=[3, 2]), rrb.Tabs(*docs), row_shares=[3, 1]),
         rrb.TimePanel(state="collapsed"),

@@ -14,6 +14,9 @@ Entities (timelines ``frame`` = video frame index, and ``time`` = seconds into t
   the observed value +- 2 sigma of the propagated angle uncertainty (Rerun has no confidence bands);
 * ``residuals/<edge>`` — observed minus predicted, degrees;
 * ``summary/kappa`` (bar chart) and ``summary/table`` (markdown table of kappa, CI, U_e);
+* after a verdict whose model was fitted (``rce run``, ``rce batch``): ``image/skeleton/kappa_to_report``, the
+  skeleton coloured by the κ to report (``kappa_<effect>``, on the rank-1 skeleton's colour scale; the default
+  layout shows it and hides the rank-1 one), ``summary/kappa_to_report`` (bar chart) and its columns in the table;
 * from :func:`log_diagnosis`: ``diagnosis/report`` (markdown), ``diagnosis/heldout`` (bar chart of
   held-out RMSE: baseline then each candidate), ``diagnosis/budget/{total,rank1,noise_floor,unexplained}_deg2``
   (the variance budget per segment, bar charts root -> tip), and ``diagnosis/after/<edge>`` (observed, rank-1 and
@@ -154,11 +157,20 @@ def log_analysis(result, rec: rr.RecordingStream, video_path: str | Path | None 
     seg = _segments(view, view.xy)  # (F, n_edges, 2, 2)
     kappa_of = {e: k for e, k in zip(view.edges, view.kappa)}
     edge_kappa = np.array([kappa_of.get(e, np.nan) for e in view.graph.edges])
-    kmax = float(np.nanmax(view.kappa)) if np.isfinite(view.kappa).any() else 1.0
-    # colour scale 0..max(kappa) (at least 0..1): kappa is relative, so the scale is per branch
+    both = np.r_[view.kappa, [] if view.kappa_report is None else view.kappa_report]
+    kmax = float(np.nanmax(both)) if np.isfinite(both).any() else 1.0
+    # colour scale 0..max(kappa) (at least 0..1; one scale for the rank-1 kappa and the kappa to report): kappa is
+    # relative, so the scale is per branch
     kcol = cmap_rgb(edge_kappa, KAPPA_CMAP, 0.0, max(kmax, 1.0))
     klabels = [f"κ={k:.2f}" if np.isfinite(k) else "root edge" for k in edge_kappa]
     _send_strips(rec, "image/skeleton/kappa", frames_all, sec, seg, kcol, radius=1.6, labels=klabels)
+    if view.kappa_report is not None:
+        report_of = {e: k for e, k in zip(view.edges, view.kappa_report)}
+        edge_report = np.array([report_of.get(e, np.nan) for e in view.graph.edges])
+        _send_strips(rec, "image/skeleton/kappa_to_report", frames_all, sec, seg,
+                     cmap_rgb(edge_report, KAPPA_CMAP, 0.0, max(kmax, 1.0)), radius=1.6,
+                     labels=[f"{view.report_column}={k:.2f}" if np.isfinite(k) else "root edge"
+                             for k in edge_report])
 
     res = view.residual
     lim = robust_abs_max(res)
@@ -196,6 +208,8 @@ def log_analysis(result, rec: rr.RecordingStream, video_path: str | Path | None 
 
     # --- summary -------------------------------------------------------------------------------
     rec.log("summary/kappa", rr.BarChart(np.nan_to_num(view.kappa)), static=True)
+    if view.kappa_report is not None:
+        rec.log("summary/kappa_to_report", rr.BarChart(np.nan_to_num(view.kappa_report)), static=True)
     rec.log("summary/table", rr.TextDocument(summary_markdown(view), media_type=rr.MediaType.MARKDOWN), static=True)
     return view
 
@@ -207,6 +221,13 @@ def summary_markdown(view: AnalysisView) -> str:
              f"Response: `{view.response}` bending; {len(view.edges)} edges, {len(view.frames)} frames. "
              "κ is relative (geometric mean 1); U_e = CI width / κ.", "",
              "| edge | zone | κ | 95 % CI | U_e | residual RMS (deg) | floor (×) |", "|---|---|---|---|---|---|---|"]
+    rep = view.kappa_report
+    if rep is not None:
+        lines[3:3] = [f"**Report `{view.report_column}`** (the model with the named effect; skeleton "
+                      "`image/skeleton/kappa_to_report`), not the rank-1 κ: the diagnosis names an effect the rank-1 "
+                      "model leaves out.", ""]
+        lines[-2] = lines[-2][:-1] + f" `{view.report_column}` | 95 % CI |"
+        lines[-1] += "---|---|"
     floor = view.floor_log_rmse
     for i, e in enumerate(view.edges):
         r = res[i][np.isfinite(res[i])]
@@ -214,7 +235,9 @@ def summary_markdown(view: AnalysisView) -> str:
         u = (view.ci_high[i] - view.ci_low[i]) / view.kappa[i] if view.kappa[i] > 1e-9 else float("nan")
         f = f"{np.exp(floor[i]):.2f}" if floor is not None and np.isfinite(floor[i]) else "–"
         lines.append(f"| {e[0]}→{e[1]} | {view.zone[i]} | {view.kappa[i]:.3f} | "
-                     f"[{view.ci_low[i]:.3f}, {view.ci_high[i]:.3f}] | {u:.3f} | {rms:.3f} | {f} |")
+                     f"[{view.ci_low[i]:.3f}, {view.ci_high[i]:.3f}] | {u:.3f} | {rms:.3f} | {f} |"
+                     + ("" if rep is None else
+                        f" {rep[i]:.3f} | [{view.ci_low_report[i]:.3f}, {view.ci_high_report[i]:.3f}] |"))
     if view.floor_text:  # what limits kappa: floor (x) is the factor either way the tracker's error alone allows
         lines += ["", "floor (×): the factor either way the tracker's error alone allows κ. " + view.floor_text]
     return "\n".join(lines) + "\n"

@@ -39,7 +39,9 @@ class AnalysisView:
     predicted_xy (N, F, 2): predicted skeleton (NaN outside ``frames``). response: "signed" | "abs".
     title: a short description (input file or "simulation"). floor_log_rmse (E,): what the tracker's error alone
     allows each segment's kappa (log-RMSE, :mod:`rce_gtsam.kappa_floor`) or None; floor_text: the summary's "what
-    limits kappa" lines ("" without them).
+    limits kappa" lines ("" without them). report_column: the ``compliance_summary.csv`` column of the κ to report
+    ("kappa", or ``kappa_<effect>`` after a verdict whose model was fitted, :mod:`rce_gtsam.kappa_report`);
+    kappa_report, ci_low_report, ci_high_report (E,): that κ and its 95 % CI, or None when it is the rank-1 κ.
     """
 
     node_ids: np.ndarray
@@ -64,6 +66,10 @@ class AnalysisView:
     title: str = ""
     floor_log_rmse: np.ndarray | None = None
     floor_text: str = ""
+    report_column: str = "kappa"
+    kappa_report: np.ndarray | None = None
+    ci_low_report: np.ndarray | None = None
+    ci_high_report: np.ndarray | None = None
 
     @property
     def residual(self) -> np.ndarray:
@@ -101,7 +107,7 @@ class AnalysisView:
                    root_distance_px=resp.root_distance_px, z=fit.z, predicted_xy=pxy,
                    response=result.preset.compliance.response,
                    title=str(result.inputs.get("tracks", result.tracks.source)),
-                   **_floor_fields(getattr(result, "kappa_floor", None)))
+                   **_floor_fields(getattr(result, "kappa_floor", None)), **_reported_fields(result))
 
     @classmethod
     def from_folder(cls, folder: str | Path, tracks: str | Path | None = None) -> "AnalysisView":
@@ -195,7 +201,32 @@ class AnalysisView:
                    zone=fitted.zone.to_numpy().astype(str), root_distance_px=fitted.root_distance_px.to_numpy(float),
                    z=z, predicted_xy=pxy, response=response, title=str(folder),
                    **_floor_fields(report.get("kappa_floor"),
-                                   fitted.floor_log_rmse.to_numpy(float) if "floor_log_rmse" in fitted else None))
+                                   fitted.floor_log_rmse.to_numpy(float) if "floor_log_rmse" in fitted else None),
+                   **_reported_columns(fitted))
+
+
+def _reported_fields(result) -> dict:
+    """The view's κ-to-report fields from ``result.kappa_choice`` (none unless an effect's κ was fitted)."""
+    choice = getattr(result, "kappa_choice", None)
+    if choice is None or not choice.fitted:
+        return {}
+    at = {tuple(e): i for i, e in enumerate(choice.edges)}
+    idx = [at.get(tuple(e)) for e in result.response.edges]
+
+    def pick(a):
+        return np.array([np.nan if i is None or a is None else float(a[i]) for i in idx])
+    return {"report_column": choice.column, "kappa_report": pick(choice.kappa), "ci_low_report": pick(choice.ci_low),
+            "ci_high_report": pick(choice.ci_high)}
+
+
+def _reported_columns(fitted) -> dict:
+    """The view's κ-to-report fields from compliance_summary.csv's rows (``report`` names the column)."""
+    col = str(fitted["report"].iloc[0]) if "report" in fitted and len(fitted) else "kappa"
+    if col == "kappa" or col not in fitted:
+        return {}
+    get = lambda c: fitted[c].to_numpy(float) if c in fitted else np.full(len(fitted), np.nan)  # noqa: E731
+    return {"report_column": col, "kappa_report": get(col), "ci_low_report": get(f"{col}_ci_low"),
+            "ci_high_report": get(f"{col}_ci_high")}
 
 
 def _floor_fields(floor, per_segment=None) -> dict:
