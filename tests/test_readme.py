@@ -154,8 +154,8 @@ HISTORY = ("since the", "seed 1", "revision", "an earlier stop", "this stop", "b
 def test_readme_is_a_short_introduction():
     lines = README.splitlines()
     assert len(lines) <= 200, f"README.md has {len(lines)} lines; the details belong in docs/"
-    assert "make demo" in README and "make test" in README and "docs/img/kappa_overlay.png" in README
-    assert (REPO / "docs" / "img" / "kappa_overlay.png").is_file()
+    assert "make demo" in README and "make test" in README and "docs/img/kappa_to_report_overlay.png" in README
+    assert (REPO / "docs" / "img" / "kappa_to_report_overlay.png").is_file()
     found = [h for h in HISTORY if h in README]
     assert not found, f"development history in README.md: {found}"
 
