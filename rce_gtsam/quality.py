@@ -294,7 +294,8 @@ def assess_reported_quality(result, rank1: dict | None = None) -> dict[tuple[int
     Without a fitted named effect that κ is the rank-1 κ, and this is :func:`assess_quality`. With one, the data's
     reasons (:data:`DATA_REASONS`) are the rank-1 verdict's (``rank1``, computed when None), and the model's are
     judged again on the model with the effect: ``poor_fit`` from the R^2 of its prediction (same rule and noise
-    floor), ``wide_ci`` and ``uninformative`` from its own 95 % interval."""
+    floor; the rank-1 flag where the choice carries no prediction), ``wide_ci`` and ``uninformative`` from its own
+    95 % interval."""
     rank1 = assess_quality(result) if rank1 is None else rank1
     choice = getattr(result, "kappa_choice", None)
     if choice is None or not choice.fitted:
@@ -315,6 +316,8 @@ def assess_reported_quality(result, rank1: dict | None = None) -> dict[tuple[int
                 r2 = _r2(result.response.Y[r], choice.prediction[i])
                 if not r2 >= q.r2_needed:
                     reasons.append("poor_fit")
+            elif "poor_fit" in q.reasons:  # no prediction to judge the model with the effect by: keep the rank-1 flag
+                reasons.append("poor_fit")
             interval = (float(choice.ci_low[i]), float(choice.ci_high[i])) if has_ci else None
             if _wide(interval, cfg):
                 reasons.append("wide_ci")

@@ -182,6 +182,9 @@ def test_the_kappa_to_report_is_judged_on_its_own_model(tmp_path):
     assert "poor_fit" not in q[own].reasons and "poor_fit" in q[worse].reasons
     assert "uninformative" in q[wide].reasons and q[wide].informative is False
     assert sum(v.informative is True for v in q.values()) == E - 1
+    # a choice without the model's prediction cannot judge its fit: the rank-1 poor_fit stays
+    blind = dataclasses.replace(choice, prediction=None)
+    assert "poor_fit" in assess_reported_quality(dataclasses.replace(r, kappa_choice=blind), rank1)[own].reasons
     # without a fitted effect the κ to report is the rank-1 κ, and so is its quality
     none = dataclasses.replace(r, kappa_choice=KappaChoice(None, "rank-1", "no verdict"))
     assert assess_reported_quality(none, rank1) is rank1
