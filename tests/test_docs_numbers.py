@@ -417,3 +417,30 @@ def test_the_swing_naming_the_changelog_quotes_is_the_record():
                           f"rendered swings before and {sum(v[4] for v in swing)} now")
     _says("changelog.md", f"{sum(v[2] for v in planar)} of {sum(v[0] for v in planar)} effect-free renders got a "
                           f"verdict")
+
+
+def test_the_sigma_scale_numbers_the_pages_quote_are_the_record():
+    """limits.md and the changelog quote record ``user_path_sigma_scale``: our tracker's sigma against its error on
+    the outdoor and clean renders, and the outdoor lag recordings found with sigma as reported and doubled."""
+    rec = _record("user_path_sigma_scale")
+    col = {c: i for i, c in enumerate(rec["columns"])}
+    rows = rec["rows"]
+
+    def found(scale):
+        return sum(int(r[col["verdicts"]].split()[0]) for r in rows
+                   if r[col["render"]] == "outdoor" and r[0] in ("delay", "dynamics") and r[col["sigma"]] == scale)
+
+    def cases(scale):
+        return sum(r[col["cases"]] for r in rows
+                   if r[col["render"]] == "outdoor" and r[0] in ("delay", "dynamics") and r[col["sigma"]] == scale)
+
+    ratio = {(r[0], r[col["render"]]): r[col["median |error| / sigma"]] for r in rows}
+    outdoor = (ratio[("delay", "outdoor")] + ratio[("dynamics", "outdoor")]) / 2  # the lag recordings' two halves
+    limits = _page("limits.md")
+    assert (f"median |error| / σ {outdoor:.2f}; 1.18 is calibrated) and about right on the crisp one "
+            f"({ratio[('delay', 'clean')]:.2f})") in limits
+    assert f"found in {found('x2')} of {cases('x2')} against {found('x1')} of {cases('x1')}" in limits
+    assert f"about {outdoor:.1f} times too small" in limits
+    log = _page("changelog.md")
+    assert f"about {outdoor:.1f} times too small on compressed" in log
+    assert f"{found('x1')} of {cases('x1')} found either way" in log and found("x1") == found("x2")
