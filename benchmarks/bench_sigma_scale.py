@@ -78,7 +78,8 @@ def calibration(case: Path) -> tuple[float, float]:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cache", required=True, help="bench_user_path.py's cache folder")
-    ap.add_argument("--cases", required=True, help="case folders, e.g. delay_outdoor_f450_s100-119,none_clean_f450_s160")
+    ap.add_argument("--cases", required=True,
+                    help="case folders, e.g. delay_outdoor_f450_s100-119,none_clean_f450_s160")
     ap.add_argument("--scales", default="1,2", help="sigma multipliers; the first is the reference")
     ap.add_argument("--workers", type=int, default=max(1, os.cpu_count() or 2))
     ap.add_argument("--record", default=None, metavar="NAME", help="save docs/validation/NAME.json")

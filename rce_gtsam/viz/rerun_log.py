@@ -224,8 +224,8 @@ def summary_markdown(view: AnalysisView) -> str:
     rep = view.kappa_report
     if rep is not None:
         lines[3:3] = [f"**Report `{view.report_column}`** (the model with the named effect; skeleton "
-                      "`image/skeleton/kappa_to_report`), not the rank-1 κ: the diagnosis names an effect the rank-1 "
-                      "model leaves out.", ""]
+                      "`image/skeleton/kappa_to_report`), not the rank-1 κ: the diagnosis names an effect the "
+                      "rank-1 model leaves out.", ""]
         lines[-2] = lines[-2][:-1] + f" `{view.report_column}` | 95 % CI |"
         lines[-1] += "---|---|"
     floor = view.floor_log_rmse
