@@ -232,3 +232,40 @@ def test_local_cluster_workers_run_without_the_statistical_profiler():
     with start_local_cluster(1) as cluster, Client(cluster) as c:
         profiling = c.run(lambda dask_worker: "profile" in dask_worker.periodic_callbacks)
     assert list(profiling.values()) == [False]
+
+
+def test_recordings_compare_in_the_kappa_each_one_reports(tmp_path):
+    """After a verdict a recording's kappa to report is kappa_<effect>: summary.csv's kappa_to_report columns copy
+    the column its ``report`` names, and kappa_by_zone.png plots those (the recording's label starred), not the rank-1
+    kappa its own run says not to report."""
+    from rce_gtsam.batch import figures
+    from rce_gtsam.batch.summary import TO_REPORT, RecordingSummary, with_kappa_to_report
+    base = pd.DataFrame({"parent": [0, 1], "child": [1, 2], "zone": ["proximal", "distal"], "kappa": [0.5, 2.0],
+                         "kappa_ci_low": [0.4, 1.5], "kappa_ci_high": [0.6, 2.5], "quality": ["ok", "poor_fit"]})
+    plain = with_kappa_to_report(base.assign(report="kappa"))
+    assert plain["kappa_to_report"].tolist() == [0.5, 2.0] and plain["kappa_to_report_quality"].tolist() == ["ok",
+                                                                                                            "poor_fit"]
+    named = with_kappa_to_report(base.assign(report="kappa_delay", kappa_delay=[0.8, 1.25],
+                                             kappa_delay_ci_low=[0.7, 1.1], kappa_delay_ci_high=[0.9, 1.4],
+                                             kappa_delay_quality=["ok", "ok"]))
+    assert named[list(TO_REPORT)].values.tolist() == [[0.8, 0.7, 0.9, "ok"], [1.25, 1.1, 1.4, "ok"]]
+    assert with_kappa_to_report(base) is base  # no report column (an older folder): unchanged
+
+    def rec(i, segs):
+        return RecordingSummary(id=f"r{i}", status="ok", kind="tracks", preset="default", metadata={}, outcome=None,
+                                segments=segs, diagnosis={"verdict": None}, folder=tmp_path)
+    plotted = []
+    import matplotlib.axes
+    orig = matplotlib.axes.Axes.errorbar
+
+    def spy(self, x, y, *a, **kw):
+        plotted.extend(np.asarray(y, float).tolist())
+        return orig(self, x, y, *a, **kw)
+    matplotlib.axes.Axes.errorbar = spy
+    try:
+        fig = figures.fig_kappa_by_zone([rec(0, plain), rec(1, named)])
+    finally:
+        matplotlib.axes.Axes.errorbar = orig
+    assert sorted(plotted) == [0.5, 0.8, 1.25, 2.0]
+    labels = [t.get_text() for t in fig.axes[0].get_xticklabels()]
+    assert labels == ["r0", "r1 *"] and "κ of the model with the named effect" in fig._suptitle.get_text()

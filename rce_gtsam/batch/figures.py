@@ -1,13 +1,14 @@
 """Figures that compare the recordings of a batch (PNG, the look of :mod:`rce_gtsam.viz.style`).
 
-* ``kappa_by_zone.png`` — one panel per zone (proximal, mid, distal): every segment's kappa with its 95 %
-  CI, one column per recording (log scale; kappa = 1, each branch's geometric mean, dashed);
+* ``kappa_by_zone.png`` — one panel per zone (proximal, mid, distal): every segment's kappa to report with its
+  95 % CI (the rank-1 kappa, or after a verdict that of the model with the named effect: its recording's label
+  ends in ``*``), one column per recording (log scale; kappa = 1, each branch's geometric mean, dashed);
 * ``verdicts.png`` — (a) how many recordings got each diagnosis verdict (``none (adequate)``: no effect
   beats the rank-1 model and the rest is at the noise floor; ``none (misses)``: more than noise is left;
   ``none (inconclusive)``; ``failed``: the recording did not run); (b) per recording, the held-out RMSE
   (deg) of the rank-1 baseline and of the model with the verdict's effect;
-* ``uncertainty.png`` — U_e = CI width / kappa of every segment per recording, coloured by zone, with
-  each recording's median.
+* ``uncertainty.png`` — U_e = CI width / kappa of every segment's kappa to report per recording, coloured by zone,
+  with each recording's median.
 
 Recordings are labelled by id, followed by the first metadata column's value when the manifest has one.
 """
@@ -29,7 +30,26 @@ VERDICT_COLORS = {"none (adequate)": "#9e9e9e", "none (inconclusive)": "#cfcfcf"
 
 def _label(r: RecordingSummary) -> str:
     first = next(iter(r.metadata.values()), "")
-    return f"{r.id}\n{first}" if first else r.id
+    star = " *" if _extended(r) else ""  # the kappa shown is that of the model with the named effect
+    return f"{r.id}{star}\n{first}" if first else f"{r.id}{star}"
+
+
+def _extended(r: RecordingSummary) -> bool:
+    """Whether the recording's kappa to report is that of a model with a named effect (not the rank-1 kappa)."""
+    return "report" in r.segments and not r.segments.empty and str(r.segments["report"].iloc[0]) != "kappa"
+
+
+def _to_report(r: RecordingSummary) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(kappa, CI low, CI high) to report of every segment of ``r``: the ``kappa_to_report`` columns where the summary
+    has them (:func:`rce_gtsam.batch.summary.with_kappa_to_report`), else the rank-1 columns."""
+    s = r.segments
+    cols = ("kappa_to_report", "kappa_to_report_ci_low", "kappa_to_report_ci_high") \
+        if "kappa_to_report" in s else ("kappa", "kappa_ci_low", "kappa_ci_high")
+    return tuple(pd_float(s[c]) for c in cols)
+
+
+def pd_float(col) -> np.ndarray:
+    return np.asarray(col.astype("Float64").to_numpy(dtype=float, na_value=np.nan), dtype=float)
 
 
 def _verdict(r: RecordingSummary) -> str:
@@ -51,7 +71,7 @@ def fig_kappa_by_zone(recordings: list[RecordingSummary]):
     with plt.rc_context(RC):
         fig, axes = plt.subplots(1, 3, figsize=(FIG_WIDTH_IN, 2.4 + 0.1 * max(0, n - 8)), sharey=True,
                                  constrained_layout=True)
-        vals = np.concatenate([r.segments["kappa"].to_numpy(float) for r in recordings if not r.segments.empty]
+        vals = np.concatenate([_to_report(r)[0] for r in recordings if not r.segments.empty]
                               or [np.array([1.0])])
         vals = vals[np.isfinite(vals) & (vals > 0)]
         for ax, zone in zip(axes, ZONES):
@@ -60,9 +80,8 @@ def fig_kappa_by_zone(recordings: list[RecordingSummary]):
                 if r.segments.empty:
                     ax.text(i, 1.0, "failed", rotation=90, ha="center", va="center", fontsize=6, color="0.3")
                     continue
-                s = r.segments[r.segments["zone"] == zone]
-                k = s["kappa"].to_numpy(float)
-                lo, hi = s["kappa_ci_low"].to_numpy(float), s["kappa_ci_high"].to_numpy(float)
+                here = (r.segments["zone"] == zone).to_numpy()
+                k, lo, hi = (a[here] for a in _to_report(r))
                 x = i + (np.linspace(-0.25, 0.25, len(k)) if len(k) > 1 else np.zeros(len(k)))
                 yerr = np.vstack([np.clip(k - lo, 0, None), np.clip(hi - k, 0, None)])
                 ok = np.isfinite(k) & (k > 0)
@@ -81,7 +100,10 @@ def fig_kappa_by_zone(recordings: list[RecordingSummary]):
         axes[0].yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
         axes[0].yaxis.set_minor_formatter(NullFormatter())
         axes[0].set_ylabel("κ (log scale), 95 % CI")
-        fig.suptitle("κ by zone across recordings", fontsize=9, fontweight="bold", x=0.01, ha="left")
+        star = ("; *: after a verdict, κ of the model with the named effect" if any(_extended(r) for r in recordings)
+                else "")
+        fig.suptitle(f"κ to report by zone across recordings{star}", fontsize=9, fontweight="bold", x=0.01,
+                     ha="left")
     return fig
 
 
@@ -151,7 +173,8 @@ def fig_uncertainty(recordings: list[RecordingSummary]):
             if r.segments.empty:
                 ax.text(i, 0.0, "failed", rotation=90, ha="center", va="bottom", fontsize=6, color="0.3")
                 continue
-            u = r.segments["uncertainty"].to_numpy(float)
+            k, lo, hi = _to_report(r)
+            u = np.where(k > 1e-9, (hi - lo) / np.where(k > 1e-9, k, 1.0), np.nan)
             z = r.segments["zone"].astype(str).to_numpy()
             x = i + np.linspace(-0.25, 0.25, len(u)) if len(u) > 1 else np.full(len(u), float(i))
             ok = np.isfinite(u)

@@ -8,7 +8,11 @@ verdict; diagnosis.json's ``status``), ``tracker_error_px`` and ``kappa_floor`` 
 error across the branch estimated from the residuals, px, and the kappa log-RMSE that error alone allows;
 report.json's ``kappa_floor``, empty without one), then every column of the recording's ``compliance_summary.csv`` for
 each segment with a bend (parent, child, depth, zone, root_distance_px, rest_length_px, kappa, kappa_ci_low,
-kappa_ci_high, uncertainty = U_e, a ``quality`` column when the analysis writes one, ..., fit_rmse_deg), and ``error``.
+kappa_ci_high, uncertainty = U_e, a ``quality`` column when the analysis writes one, ..., fit_rmse_deg; after a
+verdict whose model was fitted also ``kappa_<effect>`` and its CI and quality), then ``kappa_to_report``,
+``kappa_to_report_ci_low``, ``kappa_to_report_ci_high`` and ``kappa_to_report_quality``: the κ each recording's
+``report`` column names (the rank-1 ``kappa`` or ``kappa_<effect>``), so recordings compare in one column; and
+``error``.
 A failed recording has one row with its error and empty segment columns.
 
 ``summary.json``: ``{"batch": {...counts, timing, manifest, options...}, "recordings": [{id, status,
@@ -61,6 +65,26 @@ class RecordingSummary:
         return None if self.diagnosis is None else self.diagnosis.get("status")
 
 
+#: The columns :func:`with_kappa_to_report` adds: the κ to report, its 95 % CI and quality, whichever model it is from.
+TO_REPORT = ("kappa_to_report", "kappa_to_report_ci_low", "kappa_to_report_ci_high", "kappa_to_report_quality")
+
+
+def with_kappa_to_report(segments: pd.DataFrame) -> pd.DataFrame:
+    """``segments`` (compliance_summary.csv rows) with :data:`TO_REPORT` copied from the columns its ``report`` column
+    names (``kappa``, or ``kappa_<effect>`` after a verdict whose model was fitted), so the recordings of a batch
+    compare in one set of columns whatever each one's diagnosis named; unchanged without a ``report`` column."""
+    if "report" not in segments or segments.empty:
+        return segments
+    col = str(segments["report"].iloc[0])
+    if col not in segments:
+        return segments
+    out = segments.copy()
+    quality = f"{col}_quality" if col != "kappa" else "quality"
+    for name, src in zip(TO_REPORT, (col, f"{col}_ci_low", f"{col}_ci_high", quality)):
+        out[name] = out[src] if src in out else pd.NA
+    return out
+
+
 def read_recordings(manifest: Manifest, out: Path, outcomes: dict[str, Outcome], options) -> list[RecordingSummary]:
     """Read every recording's outputs back from ``out/<id>/`` (manifest order)."""
     rows = []
@@ -70,7 +94,7 @@ def read_recordings(manifest: Manifest, out: Path, outcomes: dict[str, Outcome],
         segments, diagnosis, preset, floor = pd.DataFrame(), None, None, None
         if oc.status != "failed":
             comp = pd.read_csv(folder / "compliance_summary.csv")
-            segments = comp[comp["kappa"].notna() | (comp["n_frames"] > 0)].reset_index(drop=True)
+            segments = with_kappa_to_report(comp[comp["kappa"].notna() | (comp["n_frames"] > 0)].reset_index(drop=True))
             diagnosis = json.loads((folder / "diagnosis.json").read_text())
             report = json.loads((folder / "report.json").read_text())
             preset, floor = report["preset"]["name"], report.get("kappa_floor")
