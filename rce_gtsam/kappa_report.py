@@ -7,8 +7,10 @@ then describes the branch, and its κ is the one to report. Without a verdict th
 
 :func:`kappa_after_verdict` fits the extended model's κ intervals from the diagnosis' own fit of the named
 candidate (the same fit the held-out comparison scored) with the extended bootstrap
-(:func:`rce_gtsam.extended_fit.bootstrap_extended`); ``rce run`` and ``rce diagnose --out`` put both κ side by
-side in ``compliance_summary.csv`` and say once in ``report.json`` and the printed report which one to read.
+(:func:`rce_gtsam.extended_fit.bootstrap_extended`); ``rce run`` and ``rce batch`` put both κ side by side in
+``compliance_summary.csv`` (with the extended κ's own quality, :func:`rce_gtsam.quality.assess_reported_quality`)
+and say once in ``report.json`` and the printed report which one to read; the figures, overlays and the Rerun
+recording draw it.
 """
 
 from __future__ import annotations
