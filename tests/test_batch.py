@@ -239,9 +239,16 @@ def test_recordings_compare_in_the_kappa_each_one_reports(tmp_path):
     the column its ``report`` names, and kappa_by_zone.png plots those (the recording's label starred), not the rank-1
     kappa its own run says not to report."""
     from rce_gtsam.batch import figures
-    from rce_gtsam.batch.summary import TO_REPORT, RecordingSummary, with_kappa_to_report
+    from types import SimpleNamespace
+
+    from rce_gtsam.batch.summary import TO_REPORT, RecordingSummary, summary_table, with_kappa_to_report
     base = pd.DataFrame({"parent": [0, 1], "child": [1, 2], "zone": ["proximal", "distal"], "kappa": [0.5, 2.0],
                          "kappa_ci_low": [0.4, 1.5], "kappa_ci_high": [0.6, 2.5], "quality": ["ok", "poor_fit"]})
+
+    def rec(i, segs):
+        return RecordingSummary(id=f"r{i}", status="ok", kind="tracks", preset="default", metadata={},
+                                outcome=SimpleNamespace(error=None), segments=segs, diagnosis={"verdict": None},
+                                folder=tmp_path)
     plain = with_kappa_to_report(base.assign(report="kappa"))
     assert plain["kappa_to_report"].tolist() == [0.5, 2.0] and plain["kappa_to_report_quality"].tolist() == ["ok",
                                                                                                             "poor_fit"]
@@ -250,10 +257,8 @@ def test_recordings_compare_in_the_kappa_each_one_reports(tmp_path):
                                              kappa_delay_quality=["ok", "ok"]))
     assert named[list(TO_REPORT)].values.tolist() == [[0.8, 0.7, 0.9, "ok"], [1.25, 1.1, 1.4, "ok"]]
     assert with_kappa_to_report(base) is base  # no report column (an older folder): unchanged
-
-    def rec(i, segs):
-        return RecordingSummary(id=f"r{i}", status="ok", kind="tracks", preset="default", metadata={}, outcome=None,
-                                segments=segs, diagnosis={"verdict": None}, folder=tmp_path)
+    table = summary_table(SimpleNamespace(metadata_columns=[]), [rec(0, plain), rec(1, named)])
+    assert list(table.columns)[-5:] == [*TO_REPORT, "error"]  # last, whichever recording brought them
     plotted = []
     import matplotlib.axes
     orig = matplotlib.axes.Axes.errorbar

@@ -113,6 +113,8 @@ def summary_table(manifest: Manifest, recordings: list[RecordingSummary]) -> pd.
         for c in r.segments.columns:
             if c not in seg_cols:
                 seg_cols.append(c)
+    # the kappa each recording reports last (before error), whichever recording first brought the columns
+    seg_cols = [c for c in seg_cols if c not in TO_REPORT] + [c for c in TO_REPORT if c in seg_cols]
     for r in recordings:
         floor = r.kappa_floor or {}
         head = {"id": r.id, **r.metadata, "status": r.status, "kind": r.kind, "preset": r.preset,
