@@ -179,6 +179,8 @@ def test_after_a_verdict_the_recording_shows_the_kappa_to_report(analysis, tmp_p
     table = summary_markdown(view)
     first = next(ln for ln in table.splitlines() if ln.startswith(f"| {view.edges[0][0]}→{view.edges[0][1]} |"))
     assert "**Report `kappa_delay`**" in table and "`kappa_delay` | 95 % CI |" in table
+    rows = [ln for ln in table.splitlines() if ln.startswith("|")]
+    assert len({ln.count("|") for ln in rows}) == 1, rows[:3]  # header, rule and rows have the same cells
     assert first.endswith(f" {k[-1]:.3f} | [{k[0] / 2:.3f}, {k[0] * 2:.3f}] |"), first  # its κ and CI, last columns
     seen = {}
     import rerun.blueprint as rrb

@@ -217,17 +217,17 @@ def log_analysis(result, rec: rr.RecordingStream, video_path: str | Path | None 
 def summary_markdown(view: AnalysisView) -> str:
     """Markdown table of kappa, 95 % CI, U_e and residual RMS per edge, root to tip."""
     res = view.residual
+    rep = view.kappa_report
+    columns = ["edge", "zone", "κ", "95 % CI", "U_e", "residual RMS (deg)", "floor (×)"]
     lines = [f"# Relative compliance — {view.title}", "",
              f"Response: `{view.response}` bending; {len(view.edges)} edges, {len(view.frames)} frames. "
-             "κ is relative (geometric mean 1); U_e = CI width / κ.", "",
-             "| edge | zone | κ | 95 % CI | U_e | residual RMS (deg) | floor (×) |", "|---|---|---|---|---|---|---|"]
-    rep = view.kappa_report
+             "κ is relative (geometric mean 1); U_e = CI width / κ.", ""]
     if rep is not None:
-        lines[3:3] = [f"**Report `{view.report_column}`** (the model with the named effect; skeleton "
-                      "`image/skeleton/kappa_to_report`), not the rank-1 κ: the diagnosis names an effect the "
-                      "rank-1 model leaves out.", ""]
-        lines[-2] = lines[-2][:-1] + f" `{view.report_column}` | 95 % CI |"
-        lines[-1] += "---|---|"
+        columns += [f"`{view.report_column}`", "95 % CI"]
+        lines += [f"**Report `{view.report_column}`** (the model with the named effect; skeleton "
+                  "`image/skeleton/kappa_to_report`), not the rank-1 κ: the diagnosis names an effect the "
+                  "rank-1 model leaves out.", ""]
+    lines += ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     floor = view.floor_log_rmse
     for i, e in enumerate(view.edges):
         r = res[i][np.isfinite(res[i])]
