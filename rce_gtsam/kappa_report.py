@@ -52,6 +52,16 @@ class KappaChoice:
         """Whether an effect is named and its model's κ was fitted (the ``kappa_<effect>`` columns hold it)."""
         return self.effect is not None and self.kappa is not None
 
+    def aligned(self, edges) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(kappa, ci_low, ci_high) of the extended model in the order of ``edges`` ((joint, child) pairs), NaN for an
+        edge it has no row for (the root edge, a segment dropped with a lost node) or without intervals."""
+        at = {tuple(e): i for i, e in enumerate(self.edges)}
+        idx = [at.get((int(p), int(c))) for p, c in edges]
+
+        def pick(a):
+            return np.array([np.nan if i is None or a is None else float(a[i]) for i in idx])
+        return pick(self.kappa), pick(self.ci_low), pick(self.ci_high)
+
     def as_dict(self) -> dict:
         out = {"model": self.model, "column": self.column, "reason": self.reason, "effect": self.effect}
         if self.kappa is not None:
@@ -104,16 +114,10 @@ def add_to_summary(df, choice: KappaChoice, quality: dict | None = None):
     df = df.copy()
     if choice.kappa is not None:
         col = choice.column
-        by_edge = {e: i for i, e in enumerate(choice.edges)}
-        rows = [by_edge.get((int(p), int(c))) for p, c in zip(df["parent"], df["child"])]
-
-        def pick(a):
-            return [np.nan if i is None or a is None else float(a[i]) for i in rows]
-
         at = list(df.columns).index("kappa_ci_high") + 1 if "kappa_ci_high" in df.columns else len(df.columns)
-        for j, (name, values) in enumerate(((col, pick(choice.kappa)), (f"{col}_ci_low", pick(choice.ci_low)),
-                                            (f"{col}_ci_high", pick(choice.ci_high)))):
-            df.insert(at + j, name, values)
+        values = choice.aligned(zip(df["parent"], df["child"]))
+        for j, (name, v) in enumerate(zip((col, f"{col}_ci_low", f"{col}_ci_high"), values)):
+            df.insert(at + j, name, v)
         if quality is not None:
             # a segment without a bend row (the root edge, one dropped with a lost node) keeps its rank-1 word
             df.insert(at + 3, f"{col}_quality", [quality.get((int(p), int(c)), q) for p, c, q in

@@ -381,10 +381,7 @@ def fig_kappa_to_report(result):
 
     choice, resp = result.kappa_choice, result.response
     E = len(resp.edges)
-    at = {tuple(e): i for i, e in enumerate(choice.edges)}
-    idx = [at.get(tuple(e)) for e in resp.edges]
-    pick = lambda a: np.array([np.nan if (i is None or a is None) else a[i] for i in idx], float)  # noqa: E731
-    k_ext, lo_ext, hi_ext = pick(choice.kappa), pick(choice.ci_low), pick(choice.ci_high)
+    k_ext, lo_ext, hi_ext = choice.aligned(resp.edges)
     lo1 = result.ci.low if result.ci is not None else np.full(E, np.nan)
     hi1 = result.ci.high if result.ci is not None else np.full(E, np.nan)
     zones = np.array([result.geometry.zone[c] for _, c in resp.edges])

@@ -210,13 +210,8 @@ def _reported_fields(result) -> dict:
     choice = getattr(result, "kappa_choice", None)
     if choice is None or not choice.fitted:
         return {}
-    at = {tuple(e): i for i, e in enumerate(choice.edges)}
-    idx = [at.get(tuple(e)) for e in result.response.edges]
-
-    def pick(a):
-        return np.array([np.nan if i is None or a is None else float(a[i]) for i in idx])
-    return {"report_column": choice.column, "kappa_report": pick(choice.kappa), "ci_low_report": pick(choice.ci_low),
-            "ci_high_report": pick(choice.ci_high)}
+    kappa, low, high = choice.aligned(result.response.edges)
+    return {"report_column": choice.column, "kappa_report": kappa, "ci_low_report": low, "ci_high_report": high}
 
 
 def _reported_columns(fitted) -> dict:
