@@ -45,11 +45,7 @@ def _to_report(r: RecordingSummary) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     s = r.segments
     cols = ("kappa_to_report", "kappa_to_report_ci_low", "kappa_to_report_ci_high") \
         if "kappa_to_report" in s else ("kappa", "kappa_ci_low", "kappa_ci_high")
-    return tuple(pd_float(s[c]) for c in cols)
-
-
-def pd_float(col) -> np.ndarray:
-    return np.asarray(col.astype("Float64").to_numpy(dtype=float, na_value=np.nan), dtype=float)
+    return tuple(s[c].to_numpy(float) for c in cols)
 
 
 def _verdict(r: RecordingSummary) -> str:

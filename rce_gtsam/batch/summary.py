@@ -26,6 +26,7 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 
 from .manifest import Manifest
@@ -81,7 +82,7 @@ def with_kappa_to_report(segments: pd.DataFrame) -> pd.DataFrame:
     out = segments.copy()
     quality = f"{col}_quality" if col != "kappa" else "quality"
     for name, src in zip(TO_REPORT, (col, f"{col}_ci_low", f"{col}_ci_high", quality)):
-        out[name] = out[src] if src in out else pd.NA
+        out[name] = out[src] if src in out else np.nan
     return out
 
 
