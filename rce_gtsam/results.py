@@ -35,7 +35,7 @@ import pandas as pd
 from .fileio import temp_dir_beside
 from .version import __version__
 from .jsonutil import jsonable as _jsonable
-from .quality import assess_quality, quality_report
+from .quality import assess_quality, assess_reported_quality, quality_report
 
 
 def compliance_summary(result) -> pd.DataFrame:
@@ -86,7 +86,6 @@ def compliance_summary(result) -> pd.DataFrame:
     df = pd.DataFrame.from_records(records)
     if getattr(result, "kappa_choice", None) is not None:
         from .kappa_report import add_to_summary
-        from .quality import assess_reported_quality
         reported = assess_reported_quality(result, quality) if result.kappa_choice.fitted else None
         df = add_to_summary(df, result.kappa_choice,
                             None if reported is None else {e: q.quality for e, q in reported.items()})
@@ -123,6 +122,7 @@ def smoothed_table(result) -> pd.DataFrame:
 def report_dict(result) -> dict:
     """The machine-readable report (``report.json``)."""
     fit, ci, sm = result.fit, result.ci, result.smoothed.report
+    qualities = assess_quality(result)  # the rank-1 verdicts, read by the quality section and the kappa to report
     return _jsonable({
         "rce_gtsam_version": __version__,
         "inputs": {**result.inputs, "n_nodes": result.tracks.n_nodes, "n_frames": result.tracks.n_frames,
@@ -146,22 +146,21 @@ def report_dict(result) -> dict:
         "smoothing_metrics": result.smoothing.as_dict(),
         "excitation_rms_deg": float(np.sqrt(np.mean(fit.z**2))),
         "timings_s": result.timings_s,
-        "quality": quality_report(result),
+        "quality": quality_report(result, qualities),
         "kappa_floor": None if getattr(result, "kappa_floor", None) is None else result.kappa_floor.as_dict(),
         **({"effects": result.effects_report()} if getattr(result, "effects", None) else {}),
-        **({"kappa_to_report": _kappa_to_report(result)}
+        **({"kappa_to_report": _kappa_to_report(result, qualities)}
            if getattr(result, "kappa_choice", None) is not None else {}),
     })
 
 
-def _kappa_to_report(result) -> dict:
+def _kappa_to_report(result, rank1: dict) -> dict:
     """report.json's ``kappa_to_report``: which κ to read and why, and, for the κ of a model with a named effect,
-    each segment's quality (:func:`rce_gtsam.quality.assess_reported_quality`) and how many are ok and
-    informative."""
+    each segment's quality (:func:`rce_gtsam.quality.assess_reported_quality` from the rank-1 verdicts ``rank1``)
+    and how many are ok and informative."""
     out = result.kappa_choice.as_dict()
     if result.kappa_choice.fitted:
-        from .quality import assess_reported_quality
-        q = assess_reported_quality(result)
+        q = assess_reported_quality(result, rank1)
         out["quality"] = {f"{p}->{c}": v.quality for (p, c), v in q.items()}
         out["n_ok"] = sum(v.ok for v in q.values())
         out["n_informative"] = sum(v.informative is True for v in q.values())
